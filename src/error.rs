@@ -1,0 +1,81 @@
+//! The library's error type: every failure a user can cause names the file, the place
+//! (line and column where known) and the problem in one line, and maps to an exit code.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// Where in an input file a problem is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Location {
+    /// 1-based line.
+    pub line: usize,
+    /// 1-based column.
+    pub column: usize,
+}
+
+/// Every error the toolkit reports to a user.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// An input file is malformed or holds an invalid value.
+    #[error("{}", fmt_input(path, location, message))]
+    Input {
+        /// The file.
+        path: PathBuf,
+        /// Line and column, where known.
+        location: Option<Location>,
+        /// What is wrong, without the file name.
+        message: String,
+    },
+    /// A file could not be read or written.
+    #[error("{}: {message}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+    /// The command line asks for something impossible (e.g. a resolution of 0).
+    #[error("{0}")]
+    Usage(String),
+}
+
+fn fmt_input(path: &Path, location: &Option<Location>, message: &str) -> String {
+    match location {
+        Some(l) => format!("{}:{}:{}: {message}", path.display(), l.line, l.column),
+        None => format!("{}: {message}", path.display()),
+    }
+}
+
+impl Error {
+    /// An input error at an optional location.
+    pub fn input(
+        path: impl Into<PathBuf>,
+        location: Option<Location>,
+        message: impl fmt::Display,
+    ) -> Self {
+        Error::Input {
+            path: path.into(),
+            location,
+            message: message.to_string(),
+        }
+    }
+
+    /// An I/O error on `path`.
+    pub fn io(path: impl Into<PathBuf>, err: impl fmt::Display) -> Self {
+        Error::Io {
+            path: path.into(),
+            message: err.to_string(),
+        }
+    }
+
+    /// The process exit code for this error: 2 for bad input or usage, 1 for I/O failures.
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            Error::Input { .. } | Error::Usage(_) => 2,
+            Error::Io { .. } => 2,
+        }
+    }
+}
+
+/// The library's result type.
+pub type Result<T, E = Error> = std::result::Result<T, E>;

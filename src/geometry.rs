@@ -1,0 +1,161 @@
+//! The one geometry interface the tracer sees: rays, hits, work counters and the
+//! [`Geometry`] trait that every representation (closed form, analytic SDF, SDF grid,
+//! triangle mesh) implements. The tracer never learns which representation it traces.
+
+use glam::{Vec3, Vec3A};
+pub use obvhs::aabb::Aabb;
+
+/// Index of a material in [`crate::scene::Scene::materials`].
+pub type MaterialId = u32;
+
+/// A ray `origin + t * dir`. World-space rays have a unit `dir`, so `t` is a distance in
+/// scene units; rays transformed into an object's local frame keep the same `t`
+/// (their direction is not renormalised).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    /// Start point, scene units.
+    pub origin: Vec3,
+    /// Direction; unit length for world-space rays.
+    pub dir: Vec3,
+}
+
+impl Ray {
+    /// A ray from `origin` along `dir` (not normalised here).
+    #[inline]
+    pub fn new(origin: Vec3, dir: Vec3) -> Self {
+        Ray { origin, dir }
+    }
+
+    /// The point at parameter `t`.
+    #[inline]
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.origin + self.dir * t
+    }
+
+    /// The parametric interval `[t0, t1]` in which the ray is inside `b` (clipped to
+    /// `[t_min, t_max]`), or `None`. Robust to zero direction components: a ray parallel
+    /// to a slab is inside it for all `t` or for none, never NaN.
+    #[inline]
+    pub fn clip_to_box(&self, b: &Aabb, t_min: f32, t_max: f32) -> Option<(f32, f32)> {
+        let mut t0 = t_min;
+        let mut t1 = t_max;
+        for axis in 0..3 {
+            let o = self.origin[axis];
+            let d = self.dir[axis];
+            let (lo, hi) = (b.min[axis], b.max[axis]);
+            if d == 0.0 {
+                if o < lo || o > hi {
+                    return None;
+                }
+                continue;
+            }
+            let inv = 1.0 / d;
+            let (mut ta, mut tb) = ((lo - o) * inv, (hi - o) * inv);
+            if ta > tb {
+                std::mem::swap(&mut ta, &mut tb);
+            }
+            // max/min written so that a NaN (inf * 0 cannot occur here, but be safe) never widens.
+            if ta > t0 {
+                t0 = ta;
+            }
+            if tb < t1 {
+                t1 = tb;
+            }
+            if t0 > t1 {
+                return None;
+            }
+        }
+        Some((t0, t1))
+    }
+}
+
+/// A ray/surface intersection in world space.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Ray parameter of the hit (distance along a unit world ray).
+    pub t: f32,
+    /// Hit point, world space.
+    pub point: Vec3,
+    /// Unit surface normal pointing out of the solid (for open surfaces such as a
+    /// triangle, an arbitrary but consistent side). The tracer flips it to face the ray.
+    pub normal: Vec3,
+    /// Material of the surface at the hit.
+    pub material: MaterialId,
+    /// Absolute bound on the error of `point` (scene units). Spawned rays start at least
+    /// this far off the surface so they do not hit it again.
+    pub error: f32,
+}
+
+/// Work counters, one per thread, summed at the end of a frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RayStats {
+    /// Rays cast of every kind (camera, shadow, reflection, refraction).
+    pub rays: u64,
+    /// Shadow rays among `rays`.
+    pub shadow_rays: u64,
+    /// Distance-function evaluations made while sphere tracing / ray marching.
+    pub march_steps: u64,
+    /// Rays that started a march (so `march_steps / marched_rays` is steps per marched ray).
+    pub marched_rays: u64,
+    /// Marches that ended because they ran out of steps (reported, never hidden).
+    pub step_limit_hits: u64,
+    /// BVH nodes visited (top-level and per-mesh).
+    pub bvh_nodes: u64,
+    /// Closed-form primitive intersection tests.
+    pub prim_tests: u64,
+}
+
+impl RayStats {
+    /// Adds `other` into `self`.
+    pub fn add(&mut self, other: &RayStats) {
+        self.rays += other.rays;
+        self.shadow_rays += other.shadow_rays;
+        self.march_steps += other.march_steps;
+        self.marched_rays += other.marched_rays;
+        self.step_limit_hits += other.step_limit_hits;
+        self.bvh_nodes += other.bvh_nodes;
+        self.prim_tests += other.prim_tests;
+    }
+}
+
+/// The interface every representation implements. All methods take world-space rays
+/// with unit directions and report world-space results.
+pub trait Geometry: Send + Sync {
+    /// A conservative world-space bounding box, or `None` for unbounded geometry
+    /// (infinite planes, unbounded repetition).
+    fn bounds(&self) -> Option<Aabb>;
+
+    /// The closest hit with `t` in `[t_min, t_max]`, if any.
+    fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit>;
+
+    /// Whether any surface is hit with `t` in `[t_min, t_max]` (shadow rays). May stop at
+    /// the first hit found.
+    fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
+        self.closest_hit(ray, t_min, t_max, stats).is_some()
+    }
+
+    /// Bytes of memory this geometry holds (its own struct and everything it owns).
+    fn bytes_used(&self) -> usize;
+
+    /// A short human-readable description of how this geometry is traced, e.g.
+    /// `"closed form"` or `"sphere traced (no closed form for union)"`.
+    fn describe(&self) -> String;
+}
+
+/// Converts a glam `Vec3` into obvhs's `Vec3A`.
+#[inline]
+pub fn to_a(v: Vec3) -> Vec3A {
+    Vec3A::from(v)
+}
+
+/// An empty-or-not box from two corners.
+#[inline]
+pub fn aabb(min: Vec3, max: Vec3) -> Aabb {
+    Aabb::new(to_a(min), to_a(max))
+}
+
+/// The largest absolute coordinate of `p`: the magnitude that f32 rounding error scales with.
+#[inline]
+pub fn max_abs(p: Vec3) -> f32 {
+    p.abs().max_element()
+}

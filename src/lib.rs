@@ -1,0 +1,11 @@
+//! sdfmesh: measures when ray marching signed distance fields is a more efficient way to
+//! render than ray tracing polygon meshes. One Whitted tracer renders every
+//! representation through the [`geometry::Geometry`] interface.
+
+pub mod analytic;
+pub mod error;
+pub mod geometry;
+pub mod scene;
+pub mod sdf;
+pub mod shape;
+pub mod transform;

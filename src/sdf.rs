@@ -1,0 +1,469 @@
+//! Signed distance functions: exact distances for every closed-form primitive where one
+//! exists, CSG (sharp and smooth), domain repetition and transforms, compiled into a tree
+//! that is evaluated without allocating. Each node knows whether it returns the exact
+//! Euclidean distance or only a Lipschitz-1 lower bound (safe for sphere tracing).
+
+use glam::{DVec3, UVec3, Vec2, Vec3};
+
+use crate::geometry::MaterialId;
+use crate::shape::{CsgOp, Object, ObjectKind, Primitive};
+use crate::transform::Transform;
+
+/// Signed distance from local point `p` to `prim`: negative inside. Exact except for the
+/// ellipsoid (a Lipschitz-1 lower bound) and the triangle (unsigned, since it has no inside).
+pub fn primitive_distance(prim: &Primitive, p: Vec3) -> f32 {
+    match *prim {
+        Primitive::Sphere { radius } => {
+            // f64: a radius-5000 sphere seen from near its surface loses all precision in f32.
+            (DVec3::from(p).length() - radius as f64) as f32
+        }
+        Primitive::Plane { normal, offset } => {
+            (DVec3::from(normal).dot(DVec3::from(p)) - offset as f64) as f32
+        }
+        Primitive::Box { half } => {
+            let q = p.abs() - half;
+            q.max(Vec3::ZERO).length() + q.max_element().min(0.0)
+        }
+        Primitive::Ellipsoid { radii } => {
+            // |p/r| - 1 has gradient at most 1/min(r); scaling by min(r) makes it a bound.
+            ((p / radii).length() - 1.0) * radii.min_element()
+        }
+        Primitive::Cylinder {
+            radius,
+            half_height,
+        } => {
+            let d = Vec2::new(
+                Vec2::new(p.x, p.z).length() - radius,
+                p.y.abs() - half_height,
+            );
+            d.max_element().min(0.0) + d.max(Vec2::ZERO).length()
+        }
+        Primitive::Cone {
+            radius_bottom,
+            radius_top,
+            half_height,
+        } => capped_cone(p, half_height, radius_bottom, radius_top),
+        Primitive::Torus { major, minor } => {
+            let q = Vec2::new(Vec2::new(p.x, p.z).length() - major, p.y);
+            q.length() - minor
+        }
+        Primitive::Triangle { a, b, c } => triangle_distance(p, a, b, c),
+        Primitive::Capsule { a, b, radius } => {
+            let pa = p - a;
+            let ba = b - a;
+            let h = (pa.dot(ba) / ba.dot(ba)).clamp(0.0, 1.0);
+            (pa - ba * h).length() - radius
+        }
+    }
+}
+
+/// Whether [`primitive_distance`] is the exact Euclidean distance for `prim`.
+pub fn primitive_is_exact(prim: &Primitive) -> bool {
+    !matches!(prim, Primitive::Ellipsoid { radii } if radii.max_element() != radii.min_element())
+}
+
+/// Exact distance to a capped cone around y (Quilez): radius `r1` at `y = -h`, `r2` at `y = h`.
+fn capped_cone(p: Vec3, h: f32, r1: f32, r2: f32) -> f32 {
+    let q = Vec2::new(Vec2::new(p.x, p.z).length(), p.y);
+    let k1 = Vec2::new(r2, h);
+    let k2 = Vec2::new(r2 - r1, 2.0 * h);
+    let ca = Vec2::new(
+        q.x - q.x.min(if q.y < 0.0 { r1 } else { r2 }),
+        q.y.abs() - h,
+    );
+    let cb = q - k1 + k2 * ((k1 - q).dot(k2) / k2.dot(k2)).clamp(0.0, 1.0);
+    let s = if cb.x < 0.0 && ca.y < 0.0 { -1.0 } else { 1.0 };
+    s * ca.length_squared().min(cb.length_squared()).sqrt()
+}
+
+/// Exact unsigned distance from `p` to the triangle `abc`.
+pub fn triangle_distance(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> f32 {
+    let ba = b - a;
+    let pa = p - a;
+    let cb = c - b;
+    let pb = p - b;
+    let ac = a - c;
+    let pc = p - c;
+    let nor = ba.cross(ac);
+    let inside = ba.cross(nor).dot(pa).signum()
+        + cb.cross(nor).dot(pb).signum()
+        + ac.cross(nor).dot(pc).signum()
+        >= 2.0;
+    let d2 = if inside {
+        nor.dot(pa) * nor.dot(pa) / nor.length_squared()
+    } else {
+        let e = |v: Vec3, w: Vec3| {
+            (v * (v.dot(w) / v.length_squared()).clamp(0.0, 1.0) - w).length_squared()
+        };
+        e(ba, pa).min(e(cb, pb)).min(e(ac, pc))
+    };
+    d2.sqrt()
+}
+
+/// Polynomial smooth minimum (Quilez) of blend radius `k`; Lipschitz 1 when `a` and `b` are.
+/// Returns the value and the blend weight of `a` (1 = all `a`).
+#[inline]
+fn smooth_min(a: f32, b: f32, k: f32) -> (f32, f32) {
+    let h = (0.5 + 0.5 * (b - a) / k).clamp(0.0, 1.0);
+    let d = b + (a - b) * h - k * h * (1.0 - h);
+    (d, h)
+}
+
+/// A compiled SDF node. Distances are in the frame of the node's parent.
+#[derive(Clone, Debug)]
+pub enum SdfNode {
+    /// A primitive under a transform.
+    Primitive {
+        prim: Primitive,
+        transform: Transform,
+        material: MaterialId,
+    },
+    /// A CSG operation under a transform.
+    Csg {
+        op: CsgOp,
+        children: Vec<SdfNode>,
+        transform: Transform,
+    },
+    /// Domain repetition under a transform (see [`ObjectKind::Repeat`]).
+    Repeat {
+        period: Vec3,
+        count: Option<UVec3>,
+        child: Box<SdfNode>,
+        transform: Transform,
+    },
+}
+
+/// A compiled object tree with its distance bound kind.
+#[derive(Clone, Debug)]
+pub struct SdfTree {
+    /// The root node.
+    pub root: SdfNode,
+    /// True when `distance` is the exact Euclidean distance everywhere; false when it is
+    /// only a Lipschitz-1 lower bound (ellipsoids, smooth blends, non-uniform scale, repetition).
+    pub exact: bool,
+    /// Number of nodes in the tree (for bytes used).
+    pub node_count: usize,
+}
+
+impl SdfTree {
+    /// Compiles an object tree.
+    pub fn new(object: &Object) -> Self {
+        let mut exact = true;
+        let mut node_count = 0;
+        let root = compile(object, &mut exact, &mut node_count);
+        SdfTree {
+            root,
+            exact,
+            node_count,
+        }
+    }
+
+    /// Signed distance (or a Lipschitz-1 lower bound of it) at world point `p`.
+    #[inline]
+    pub fn distance(&self, p: Vec3) -> f32 {
+        self.root.eval(p).0
+    }
+
+    /// Signed distance and the material of the surface nearest to `p`.
+    #[inline]
+    pub fn distance_material(&self, p: Vec3) -> (f32, MaterialId) {
+        self.root.eval(p)
+    }
+
+    /// Approximate bytes held by the tree.
+    pub fn bytes_used(&self) -> usize {
+        std::mem::size_of::<Self>() + self.node_count * std::mem::size_of::<SdfNode>()
+    }
+}
+
+fn compile(object: &Object, exact: &mut bool, count: &mut usize) -> SdfNode {
+    *count += 1;
+    let transform = object.compiled_transform();
+    if !transform.is_uniform() {
+        *exact = false;
+    }
+    match &object.kind {
+        ObjectKind::Primitive(prim) => {
+            if !primitive_is_exact(prim) {
+                *exact = false;
+            }
+            SdfNode::Primitive {
+                prim: *prim,
+                transform,
+                material: object.material,
+            }
+        }
+        ObjectKind::Csg { op, children } => {
+            // Sharp union, intersection and subtraction of exact SDFs are exact outside and
+            // bounds inside; treat all CSG as a bound except a plain union.
+            if !matches!(op, CsgOp::Union) {
+                *exact = false;
+            }
+            let children = children.iter().map(|c| compile(c, exact, count)).collect();
+            SdfNode::Csg {
+                op: *op,
+                children,
+                transform,
+            }
+        }
+        ObjectKind::Repeat {
+            period,
+            count: reps,
+            child,
+        } => {
+            *exact = false;
+            let child = Box::new(compile(child, exact, count));
+            SdfNode::Repeat {
+                period: *period,
+                count: *reps,
+                child,
+                transform,
+            }
+        }
+    }
+}
+
+impl SdfNode {
+    fn transform(&self) -> &Transform {
+        match self {
+            SdfNode::Primitive { transform, .. }
+            | SdfNode::Csg { transform, .. }
+            | SdfNode::Repeat { transform, .. } => transform,
+        }
+    }
+
+    /// Distance at `p` (parent frame) and the material of the nearest surface.
+    pub fn eval(&self, p: Vec3) -> (f32, MaterialId) {
+        let t = self.transform();
+        let q = t.point_to_local(p);
+        let (d, m) = match self {
+            SdfNode::Primitive { prim, material, .. } => (primitive_distance(prim, q), *material),
+            SdfNode::Csg { op, children, .. } => eval_csg(*op, children, q),
+            SdfNode::Repeat {
+                period,
+                count,
+                child,
+                ..
+            } => eval_repeat(*period, *count, child, q),
+        };
+        // Rotation and translation keep distances; scale multiplies them. The smallest scale
+        // factor keeps the result a lower bound under non-uniform scale.
+        (d * t.min_scale, m)
+    }
+}
+
+fn eval_csg(op: CsgOp, children: &[SdfNode], q: Vec3) -> (f32, MaterialId) {
+    let (mut d, mut m) = children[0].eval(q);
+    for c in &children[1..] {
+        let (e, cm) = c.eval(q);
+        match op {
+            CsgOp::Union => {
+                if e < d {
+                    (d, m) = (e, cm);
+                }
+            }
+            CsgOp::Intersection => {
+                if e > d {
+                    (d, m) = (e, cm);
+                }
+            }
+            CsgOp::Subtraction => {
+                if -e > d {
+                    (d, m) = (-e, cm);
+                }
+            }
+            CsgOp::SmoothUnion { k } => {
+                let (v, h) = smooth_min(d, e, k);
+                d = v;
+                if h < 0.5 {
+                    m = cm;
+                }
+            }
+            CsgOp::SmoothIntersection { k } => {
+                let (v, h) = smooth_min(-d, -e, k);
+                d = -v;
+                if h < 0.5 {
+                    m = cm;
+                }
+            }
+            CsgOp::SmoothSubtraction { k } => {
+                let (v, h) = smooth_min(-d, e, k);
+                d = -v;
+                if h < 0.5 {
+                    m = cm;
+                }
+            }
+        }
+    }
+    (d, m)
+}
+
+/// Repetition: the child is evaluated in the cell that holds `q` and in the neighbouring cell
+/// on the nearer side along each repeated axis, so a child that reaches into its neighbours
+/// is still seen. The result is a lower bound when the child stays within one period of its
+/// cell centre.
+fn eval_repeat(period: Vec3, count: Option<UVec3>, child: &SdfNode, q: Vec3) -> (f32, MaterialId) {
+    let mut base = [0.0f32; 3];
+    let mut other = [0.0f32; 3];
+    let mut repeated = [false; 3];
+    for axis in 0..3 {
+        let s = period[axis];
+        if s <= 0.0 {
+            continue;
+        }
+        repeated[axis] = true;
+        let x = q[axis] / s;
+        let (lo, hi, shift) = match count {
+            Some(c) => {
+                let half = (c[axis] as f32 - 1.0) * 0.5;
+                (-half, half, half.fract())
+            }
+            None => (f32::NEG_INFINITY, f32::INFINITY, 0.0),
+        };
+        // Cell centres sit at (k + shift) * s for integer k (shift 0.5 for even counts).
+        let id = ((x - shift).round() + shift).clamp(lo, hi);
+        let next = (id + if x > id { 1.0 } else { -1.0 }).clamp(lo, hi);
+        base[axis] = id * s;
+        other[axis] = next * s;
+    }
+    let mut best = (f32::INFINITY, 0);
+    for corner in 0..8u32 {
+        let mut offset = Vec3::ZERO;
+        let mut skip = false;
+        for axis in 0..3 {
+            let use_other = corner & (1 << axis) != 0;
+            if use_other && (!repeated[axis] || other[axis] == base[axis]) {
+                skip = true;
+                break;
+            }
+            offset[axis] = if use_other { other[axis] } else { base[axis] };
+        }
+        if skip {
+            continue;
+        }
+        let r = child.eval(q - offset);
+        if r.0 < best.0 {
+            best = r;
+        }
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::transform::TransformDesc;
+
+    fn obj(kind: ObjectKind) -> Object {
+        Object {
+            kind,
+            transform: TransformDesc::default(),
+            material: 0,
+            label: "t".into(),
+        }
+    }
+
+    #[test]
+    fn primitive_distances_at_known_points() {
+        let s = Primitive::Sphere { radius: 2.0 };
+        assert!((primitive_distance(&s, Vec3::new(3.0, 0.0, 0.0)) - 1.0).abs() < 1e-6);
+        let b = Primitive::Box {
+            half: Vec3::new(1.0, 2.0, 3.0),
+        };
+        assert!((primitive_distance(&b, Vec3::new(2.0, 3.0, 0.0)) - 2f32.sqrt()).abs() < 1e-6);
+        assert!((primitive_distance(&b, Vec3::ZERO) + 1.0).abs() < 1e-6);
+        let c = Primitive::Cylinder {
+            radius: 1.0,
+            half_height: 1.0,
+        };
+        assert!((primitive_distance(&c, Vec3::new(0.0, 3.0, 0.0)) - 2.0).abs() < 1e-6);
+        let t = Primitive::Torus {
+            major: 2.0,
+            minor: 0.5,
+        };
+        assert!((primitive_distance(&t, Vec3::new(2.0, 1.0, 0.0)) - 0.5).abs() < 1e-6);
+        let cone = Primitive::Cone {
+            radius_bottom: 1.0,
+            radius_top: 0.0,
+            half_height: 1.0,
+        };
+        assert!((primitive_distance(&cone, Vec3::new(0.0, 2.0, 0.0)) - 1.0).abs() < 1e-6);
+        assert!(primitive_distance(&cone, Vec3::new(0.0, -0.5, 0.0)) < 0.0);
+        let tri = Primitive::Triangle {
+            a: Vec3::ZERO,
+            b: Vec3::X,
+            c: Vec3::Y,
+        };
+        assert!((primitive_distance(&tri, Vec3::new(0.2, 0.2, -0.5)) - 0.5).abs() < 1e-6);
+        assert!((primitive_distance(&tri, Vec3::new(2.0, 0.0, 0.0)) - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn huge_sphere_is_precise_near_its_surface() {
+        let s = Primitive::Sphere { radius: 5000.0 };
+        let d = primitive_distance(&s, Vec3::new(3.0, 5000.001, 4.0));
+        let exact = ((9.0f64 + 5000.001f64 * 5000.001 + 16.0).sqrt() - 5000.0) as f32;
+        assert!((d - exact).abs() < 1e-4, "{d} vs {exact}");
+    }
+
+    #[test]
+    fn csg_and_materials() {
+        let a = Object {
+            material: 1,
+            ..obj(ObjectKind::Primitive(Primitive::Sphere { radius: 1.0 }))
+        };
+        let mut b = Object {
+            material: 2,
+            ..obj(ObjectKind::Primitive(Primitive::Sphere { radius: 1.0 }))
+        };
+        b.transform.translate = Vec3::new(1.5, 0.0, 0.0);
+        let u = SdfTree::new(&obj(ObjectKind::Csg {
+            op: CsgOp::Union,
+            children: vec![a.clone(), b.clone()],
+        }));
+        assert_eq!(u.distance_material(Vec3::new(-2.0, 0.0, 0.0)), (1.0, 1));
+        assert_eq!(u.distance_material(Vec3::new(3.5, 0.0, 0.0)).1, 2);
+        assert!(u.exact);
+        let s = SdfTree::new(&obj(ObjectKind::Csg {
+            op: CsgOp::Subtraction,
+            children: vec![a.clone(), b.clone()],
+        }));
+        assert!(s.distance(Vec3::new(0.75, 0.0, 0.0)) > 0.0);
+        assert!(s.distance(Vec3::new(-0.5, 0.0, 0.0)) < 0.0);
+        assert!(!s.exact);
+        let i = SdfTree::new(&obj(ObjectKind::Csg {
+            op: CsgOp::Intersection,
+            children: vec![a.clone(), b.clone()],
+        }));
+        assert!(i.distance(Vec3::new(0.75, 0.0, 0.0)) < 0.0);
+        assert!(i.distance(Vec3::new(-0.5, 0.0, 0.0)) > 0.0);
+        let su = SdfTree::new(&obj(ObjectKind::Csg {
+            op: CsgOp::SmoothUnion { k: 0.5 },
+            children: vec![a, b],
+        }));
+        // The smooth union fills the waist between the spheres.
+        assert!(su.distance(Vec3::new(0.75, 0.75, 0.0)) < u.distance(Vec3::new(0.75, 0.75, 0.0)));
+    }
+
+    #[test]
+    fn repetition_finite_and_infinite() {
+        let s = obj(ObjectKind::Primitive(Primitive::Sphere { radius: 0.5 }));
+        let inf = SdfTree::new(&obj(ObjectKind::Repeat {
+            period: Vec3::new(2.0, 0.0, 0.0),
+            count: None,
+            child: Box::new(s.clone()),
+        }));
+        assert!((inf.distance(Vec3::new(100.0, 0.0, 0.0)) + 0.5).abs() < 1e-4);
+        assert!((inf.distance(Vec3::new(101.0, 0.0, 0.0)) - 0.5).abs() < 1e-4);
+        let fin = SdfTree::new(&obj(ObjectKind::Repeat {
+            period: Vec3::new(2.0, 0.0, 0.0),
+            count: Some(UVec3::new(2, 1, 1)),
+            child: Box::new(s),
+        }));
+        // Two copies at x = -1 and x = 1.
+        assert!((fin.distance(Vec3::new(1.0, 0.0, 0.0)) + 0.5).abs() < 1e-5);
+        assert!((fin.distance(Vec3::new(-1.0, 0.0, 0.0)) + 0.5).abs() < 1e-5);
+        assert!((fin.distance(Vec3::new(5.0, 0.0, 0.0)) - 3.5).abs() < 1e-5);
+        assert!((fin.distance(Vec3::ZERO) - 0.5).abs() < 1e-5);
+    }
+}
