@@ -3,9 +3,18 @@
 //! representation through the [`geometry::Geometry`] interface.
 
 pub mod analytic;
+pub mod bvh;
+pub mod camera;
+pub mod commands;
 pub mod error;
 pub mod geometry;
+pub mod march;
+pub mod mesh;
+pub mod render;
+pub mod repr;
 pub mod scene;
 pub mod sdf;
 pub mod shape;
+pub mod tracer;
 pub mod transform;
+pub mod triangle;

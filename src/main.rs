@@ -1,1 +1,146 @@
-fn main() {}
+//! `toolkit`: parses the command line, calls the library, maps errors to exit codes.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use sdfmesh::commands::{self, Overrides, ReprChoice};
+use sdfmesh::march::MarchParams;
+
+#[derive(Parser)]
+#[command(
+    name = "toolkit",
+    version,
+    about = "Ray marching SDFs versus ray tracing meshes: render, convert, compare"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene file to a PNG with one representation.
+    Render {
+        /// Scene file (TOML, see docs/scene-format.md).
+        scene: PathBuf,
+        /// Output PNG.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Representation of the objects.
+        #[arg(long, value_enum, default_value_t = Repr::Analytic)]
+        repr: Repr,
+        #[command(flatten)]
+        settings: SettingArgs,
+        #[command(flatten)]
+        march: MarchArgs,
+    },
+    /// Render every scene of a folder in every representation into an output folder.
+    Gallery {
+        /// Folder of scene files.
+        #[arg(default_value = "data/scenes")]
+        scenes: PathBuf,
+        /// Output folder.
+        #[arg(short, long, default_value = "reports/gallery")]
+        output: PathBuf,
+        #[command(flatten)]
+        settings: SettingArgs,
+        #[command(flatten)]
+        march: MarchArgs,
+    },
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Repr {
+    /// Closed-form intersection where it exists (CSG and repetition are sphere traced).
+    Analytic,
+    /// Sphere tracing of the analytic signed distance functions.
+    Sdf,
+}
+
+#[derive(Args)]
+struct SettingArgs {
+    /// Image width in pixels (overrides the scene).
+    #[arg(long)]
+    width: Option<u32>,
+    /// Image height in pixels (overrides the scene).
+    #[arg(long)]
+    height: Option<u32>,
+    /// Maximum reflection/refraction depth (overrides the scene).
+    #[arg(long)]
+    depth: Option<u32>,
+}
+
+#[derive(Args)]
+struct MarchArgs {
+    /// Over-relaxation factor for sphere tracing, in [1, 2); 1 = plain sphere tracing.
+    #[arg(long, default_value_t = 1.0)]
+    relax: f64,
+    /// Relative hit tolerance of sphere tracing (times the distance travelled).
+    #[arg(long, default_value_t = 1e-4)]
+    epsilon: f64,
+    /// Step limit per sphere-traced ray.
+    #[arg(long, default_value_t = 512)]
+    max_steps: u32,
+}
+
+impl SettingArgs {
+    fn overrides(&self) -> Overrides {
+        Overrides {
+            width: self.width,
+            height: self.height,
+            depth: self.depth,
+        }
+    }
+}
+
+impl MarchArgs {
+    fn params(&self) -> MarchParams {
+        MarchParams {
+            epsilon: self.epsilon,
+            max_steps: self.max_steps,
+            relaxation: self.relax,
+            ..MarchParams::default()
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Render {
+            scene,
+            output,
+            repr,
+            settings,
+            march,
+        } => {
+            let repr = match repr {
+                Repr::Analytic => ReprChoice::Analytic,
+                Repr::Sdf => ReprChoice::Sdf,
+            };
+            let opts = commands::RenderOptions {
+                scene,
+                output,
+                repr,
+                march: march.params(),
+                overrides: settings.overrides(),
+            };
+            commands::render_command(&opts).map(|r| print!("{}", r.text))
+        }
+        Command::Gallery {
+            scenes,
+            output,
+            settings,
+            march,
+        } => commands::gallery_command(&scenes, &output, march.params(), settings.overrides())
+            .map(|t| print!("{t}")),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(e.exit_code() as u8)
+        }
+    }
+}

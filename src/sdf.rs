@@ -3,7 +3,7 @@
 //! that is evaluated without allocating. Each node knows whether it returns the exact
 //! Euclidean distance or only a Lipschitz-1 lower bound (safe for sphere tracing).
 
-use glam::{DVec3, UVec3, Vec2, Vec3};
+use glam::{DVec2, DVec3, UVec3, Vec3};
 
 use crate::geometry::MaterialId;
 use crate::shape::{CsgOp, Object, ObjectKind, Primitive};
@@ -12,47 +12,57 @@ use crate::transform::Transform;
 /// Signed distance from local point `p` to `prim`: negative inside. Exact except for the
 /// ellipsoid (a Lipschitz-1 lower bound) and the triangle (unsigned, since it has no inside).
 pub fn primitive_distance(prim: &Primitive, p: Vec3) -> f32 {
+    primitive_distance_f64(prim, p.as_dvec3()) as f32
+}
+
+/// [`primitive_distance`] in f64. The tracer evaluates distances in f64: a radius-5000
+/// sphere seen from near its surface has no precision left in f32 local coordinates.
+pub fn primitive_distance_f64(prim: &Primitive, p: DVec3) -> f64 {
     match *prim {
-        Primitive::Sphere { radius } => {
-            // f64: a radius-5000 sphere seen from near its surface loses all precision in f32.
-            (DVec3::from(p).length() - radius as f64) as f32
-        }
-        Primitive::Plane { normal, offset } => {
-            (DVec3::from(normal).dot(DVec3::from(p)) - offset as f64) as f32
-        }
+        Primitive::Sphere { radius } => p.length() - radius as f64,
+        Primitive::Plane { normal, offset } => normal.as_dvec3().dot(p) - offset as f64,
         Primitive::Box { half } => {
-            let q = p.abs() - half;
-            q.max(Vec3::ZERO).length() + q.max_element().min(0.0)
+            let q = p.abs() - half.as_dvec3();
+            q.max(DVec3::ZERO).length() + q.max_element().min(0.0)
         }
         Primitive::Ellipsoid { radii } => {
             // |p/r| - 1 has gradient at most 1/min(r); scaling by min(r) makes it a bound.
-            ((p / radii).length() - 1.0) * radii.min_element()
+            let r = radii.as_dvec3();
+            ((p / r).length() - 1.0) * r.min_element()
         }
         Primitive::Cylinder {
             radius,
             half_height,
         } => {
-            let d = Vec2::new(
-                Vec2::new(p.x, p.z).length() - radius,
-                p.y.abs() - half_height,
+            let d = DVec2::new(
+                DVec2::new(p.x, p.z).length() - radius as f64,
+                p.y.abs() - half_height as f64,
             );
-            d.max_element().min(0.0) + d.max(Vec2::ZERO).length()
+            d.max_element().min(0.0) + d.max(DVec2::ZERO).length()
         }
         Primitive::Cone {
             radius_bottom,
             radius_top,
             half_height,
-        } => capped_cone(p, half_height, radius_bottom, radius_top),
+        } => capped_cone(
+            p,
+            half_height as f64,
+            radius_bottom as f64,
+            radius_top as f64,
+        ),
         Primitive::Torus { major, minor } => {
-            let q = Vec2::new(Vec2::new(p.x, p.z).length() - major, p.y);
-            q.length() - minor
+            let q = DVec2::new(DVec2::new(p.x, p.z).length() - major as f64, p.y);
+            q.length() - minor as f64
         }
-        Primitive::Triangle { a, b, c } => triangle_distance(p, a, b, c),
+        Primitive::Triangle { a, b, c } => {
+            triangle_distance(p, a.as_dvec3(), b.as_dvec3(), c.as_dvec3())
+        }
         Primitive::Capsule { a, b, radius } => {
+            let (a, b) = (a.as_dvec3(), b.as_dvec3());
             let pa = p - a;
             let ba = b - a;
             let h = (pa.dot(ba) / ba.dot(ba)).clamp(0.0, 1.0);
-            (pa - ba * h).length() - radius
+            (pa - ba * h).length() - radius as f64
         }
     }
 }
@@ -63,11 +73,11 @@ pub fn primitive_is_exact(prim: &Primitive) -> bool {
 }
 
 /// Exact distance to a capped cone around y (Quilez): radius `r1` at `y = -h`, `r2` at `y = h`.
-fn capped_cone(p: Vec3, h: f32, r1: f32, r2: f32) -> f32 {
-    let q = Vec2::new(Vec2::new(p.x, p.z).length(), p.y);
-    let k1 = Vec2::new(r2, h);
-    let k2 = Vec2::new(r2 - r1, 2.0 * h);
-    let ca = Vec2::new(
+fn capped_cone(p: DVec3, h: f64, r1: f64, r2: f64) -> f64 {
+    let q = DVec2::new(DVec2::new(p.x, p.z).length(), p.y);
+    let k1 = DVec2::new(r2, h);
+    let k2 = DVec2::new(r2 - r1, 2.0 * h);
+    let ca = DVec2::new(
         q.x - q.x.min(if q.y < 0.0 { r1 } else { r2 }),
         q.y.abs() - h,
     );
@@ -77,7 +87,7 @@ fn capped_cone(p: Vec3, h: f32, r1: f32, r2: f32) -> f32 {
 }
 
 /// Exact unsigned distance from `p` to the triangle `abc`.
-pub fn triangle_distance(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> f32 {
+pub fn triangle_distance(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> f64 {
     let ba = b - a;
     let pa = p - a;
     let cb = c - b;
@@ -92,7 +102,7 @@ pub fn triangle_distance(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> f32 {
     let d2 = if inside {
         nor.dot(pa) * nor.dot(pa) / nor.length_squared()
     } else {
-        let e = |v: Vec3, w: Vec3| {
+        let e = |v: DVec3, w: DVec3| {
             (v * (v.dot(w) / v.length_squared()).clamp(0.0, 1.0) - w).length_squared()
         };
         e(ba, pa).min(e(cb, pb)).min(e(ac, pc))
@@ -103,7 +113,7 @@ pub fn triangle_distance(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> f32 {
 /// Polynomial smooth minimum (Quilez) of blend radius `k`; Lipschitz 1 when `a` and `b` are.
 /// Returns the value and the blend weight of `a` (1 = all `a`).
 #[inline]
-fn smooth_min(a: f32, b: f32, k: f32) -> (f32, f32) {
+fn smooth_min(a: f64, b: f64, k: f64) -> (f64, f64) {
     let h = (0.5 + 0.5 * (b - a) / k).clamp(0.0, 1.0);
     let d = b + (a - b) * h - k * h * (1.0 - h);
     (d, h)
@@ -141,6 +151,9 @@ pub struct SdfTree {
     /// True when `distance` is the exact Euclidean distance everywhere; false when it is
     /// only a Lipschitz-1 lower bound (ellipsoids, smooth blends, non-uniform scale, repetition).
     pub exact: bool,
+    /// False when the tree holds a triangle: its distance is unsigned (it has no inside),
+    /// so the gradient is undefined on the surface itself.
+    pub signed: bool,
     /// Number of nodes in the tree (for bytes used).
     pub node_count: usize,
 }
@@ -151,28 +164,33 @@ impl SdfTree {
         let mut exact = true;
         let mut node_count = 0;
         let root = compile(object, &mut exact, &mut node_count);
-        SdfTree {
-            root,
-            exact,
-            node_count,
-        }
+        let signed = !contains_triangle(object);
+        SdfTree { root, exact, signed, node_count }
     }
 
     /// Signed distance (or a Lipschitz-1 lower bound of it) at world point `p`.
     #[inline]
-    pub fn distance(&self, p: Vec3) -> f32 {
+    pub fn distance(&self, p: DVec3) -> f64 {
         self.root.eval(p).0
     }
 
     /// Signed distance and the material of the surface nearest to `p`.
     #[inline]
-    pub fn distance_material(&self, p: Vec3) -> (f32, MaterialId) {
+    pub fn distance_material(&self, p: DVec3) -> (f64, MaterialId) {
         self.root.eval(p)
     }
 
     /// Approximate bytes held by the tree.
     pub fn bytes_used(&self) -> usize {
         std::mem::size_of::<Self>() + self.node_count * std::mem::size_of::<SdfNode>()
+    }
+}
+
+fn contains_triangle(object: &Object) -> bool {
+    match &object.kind {
+        ObjectKind::Primitive(p) => matches!(p, Primitive::Triangle { .. }),
+        ObjectKind::Csg { children, .. } => children.iter().any(contains_triangle),
+        ObjectKind::Repeat { child, .. } => contains_triangle(child),
     }
 }
 
@@ -233,11 +251,13 @@ impl SdfNode {
     }
 
     /// Distance at `p` (parent frame) and the material of the nearest surface.
-    pub fn eval(&self, p: Vec3) -> (f32, MaterialId) {
+    pub fn eval(&self, p: DVec3) -> (f64, MaterialId) {
         let t = self.transform();
-        let q = t.point_to_local(p);
+        let q = t.point_to_local_f64(p);
         let (d, m) = match self {
-            SdfNode::Primitive { prim, material, .. } => (primitive_distance(prim, q), *material),
+            SdfNode::Primitive { prim, material, .. } => {
+                (primitive_distance_f64(prim, q), *material)
+            }
             SdfNode::Csg { op, children, .. } => eval_csg(*op, children, q),
             SdfNode::Repeat {
                 period,
@@ -248,11 +268,11 @@ impl SdfNode {
         };
         // Rotation and translation keep distances; scale multiplies them. The smallest scale
         // factor keeps the result a lower bound under non-uniform scale.
-        (d * t.min_scale, m)
+        (d * t.min_scale as f64, m)
     }
 }
 
-fn eval_csg(op: CsgOp, children: &[SdfNode], q: Vec3) -> (f32, MaterialId) {
+fn eval_csg(op: CsgOp, children: &[SdfNode], q: DVec3) -> (f64, MaterialId) {
     let (mut d, mut m) = children[0].eval(q);
     for c in &children[1..] {
         let (e, cm) = c.eval(q);
@@ -273,21 +293,21 @@ fn eval_csg(op: CsgOp, children: &[SdfNode], q: Vec3) -> (f32, MaterialId) {
                 }
             }
             CsgOp::SmoothUnion { k } => {
-                let (v, h) = smooth_min(d, e, k);
+                let (v, h) = smooth_min(d, e, k as f64);
                 d = v;
                 if h < 0.5 {
                     m = cm;
                 }
             }
             CsgOp::SmoothIntersection { k } => {
-                let (v, h) = smooth_min(-d, -e, k);
+                let (v, h) = smooth_min(-d, -e, k as f64);
                 d = -v;
                 if h < 0.5 {
                     m = cm;
                 }
             }
             CsgOp::SmoothSubtraction { k } => {
-                let (v, h) = smooth_min(-d, e, k);
+                let (v, h) = smooth_min(-d, e, k as f64);
                 d = -v;
                 if h < 0.5 {
                     m = cm;
@@ -302,12 +322,12 @@ fn eval_csg(op: CsgOp, children: &[SdfNode], q: Vec3) -> (f32, MaterialId) {
 /// on the nearer side along each repeated axis, so a child that reaches into its neighbours
 /// is still seen. The result is a lower bound when the child stays within one period of its
 /// cell centre.
-fn eval_repeat(period: Vec3, count: Option<UVec3>, child: &SdfNode, q: Vec3) -> (f32, MaterialId) {
-    let mut base = [0.0f32; 3];
-    let mut other = [0.0f32; 3];
+fn eval_repeat(period: Vec3, count: Option<UVec3>, child: &SdfNode, q: DVec3) -> (f64, MaterialId) {
+    let mut base = [0.0f64; 3];
+    let mut other = [0.0f64; 3];
     let mut repeated = [false; 3];
     for axis in 0..3 {
-        let s = period[axis];
+        let s = period[axis] as f64;
         if s <= 0.0 {
             continue;
         }
@@ -315,10 +335,10 @@ fn eval_repeat(period: Vec3, count: Option<UVec3>, child: &SdfNode, q: Vec3) -> 
         let x = q[axis] / s;
         let (lo, hi, shift) = match count {
             Some(c) => {
-                let half = (c[axis] as f32 - 1.0) * 0.5;
+                let half = (c[axis] as f64 - 1.0) * 0.5;
                 (-half, half, half.fract())
             }
-            None => (f32::NEG_INFINITY, f32::INFINITY, 0.0),
+            None => (f64::NEG_INFINITY, f64::INFINITY, 0.0),
         };
         // Cell centres sit at (k + shift) * s for integer k (shift 0.5 for even counts).
         let id = ((x - shift).round() + shift).clamp(lo, hi);
@@ -326,9 +346,9 @@ fn eval_repeat(period: Vec3, count: Option<UVec3>, child: &SdfNode, q: Vec3) -> 
         base[axis] = id * s;
         other[axis] = next * s;
     }
-    let mut best = (f32::INFINITY, 0);
+    let mut best = (f64::INFINITY, 0);
     for corner in 0..8u32 {
-        let mut offset = Vec3::ZERO;
+        let mut offset = DVec3::ZERO;
         let mut skip = false;
         for axis in 0..3 {
             let use_other = corner & (1 << axis) != 0;
@@ -400,10 +420,14 @@ mod tests {
 
     #[test]
     fn huge_sphere_is_precise_near_its_surface() {
-        let s = Primitive::Sphere { radius: 5000.0 };
-        let d = primitive_distance(&s, Vec3::new(3.0, 5000.001, 4.0));
-        let exact = ((9.0f64 + 5000.001f64 * 5000.001 + 16.0).sqrt() - 5000.0) as f32;
-        assert!((d - exact).abs() < 1e-4, "{d} vs {exact}");
+        // World point just above the top of a radius-5000 sphere centred at (0, -5001, 0).
+        let mut o = obj(ObjectKind::Primitive(Primitive::Sphere { radius: 5000.0 }));
+        o.transform.translate = Vec3::new(0.0, -5001.0, 0.0);
+        let tree = SdfTree::new(&o);
+        for h in [1e-3, 1e-4, 1e-5] {
+            let d = tree.distance(DVec3::new(0.0, -1.0 + h, 0.0));
+            assert!((d - h).abs() < 1e-8, "{d} vs {h}");
+        }
     }
 
     #[test]
@@ -421,28 +445,28 @@ mod tests {
             op: CsgOp::Union,
             children: vec![a.clone(), b.clone()],
         }));
-        assert_eq!(u.distance_material(Vec3::new(-2.0, 0.0, 0.0)), (1.0, 1));
-        assert_eq!(u.distance_material(Vec3::new(3.5, 0.0, 0.0)).1, 2);
+        assert_eq!(u.distance_material(DVec3::new(-2.0, 0.0, 0.0)), (1.0, 1));
+        assert_eq!(u.distance_material(DVec3::new(3.5, 0.0, 0.0)).1, 2);
         assert!(u.exact);
         let s = SdfTree::new(&obj(ObjectKind::Csg {
             op: CsgOp::Subtraction,
             children: vec![a.clone(), b.clone()],
         }));
-        assert!(s.distance(Vec3::new(0.75, 0.0, 0.0)) > 0.0);
-        assert!(s.distance(Vec3::new(-0.5, 0.0, 0.0)) < 0.0);
+        assert!(s.distance(DVec3::new(0.75, 0.0, 0.0)) > 0.0);
+        assert!(s.distance(DVec3::new(-0.5, 0.0, 0.0)) < 0.0);
         assert!(!s.exact);
         let i = SdfTree::new(&obj(ObjectKind::Csg {
             op: CsgOp::Intersection,
             children: vec![a.clone(), b.clone()],
         }));
-        assert!(i.distance(Vec3::new(0.75, 0.0, 0.0)) < 0.0);
-        assert!(i.distance(Vec3::new(-0.5, 0.0, 0.0)) > 0.0);
+        assert!(i.distance(DVec3::new(0.75, 0.0, 0.0)) < 0.0);
+        assert!(i.distance(DVec3::new(-0.5, 0.0, 0.0)) > 0.0);
         let su = SdfTree::new(&obj(ObjectKind::Csg {
             op: CsgOp::SmoothUnion { k: 0.5 },
             children: vec![a, b],
         }));
         // The smooth union fills the waist between the spheres.
-        assert!(su.distance(Vec3::new(0.75, 0.75, 0.0)) < u.distance(Vec3::new(0.75, 0.75, 0.0)));
+        assert!(su.distance(DVec3::new(0.75, 0.75, 0.0)) < u.distance(DVec3::new(0.75, 0.75, 0.0)));
     }
 
     #[test]
@@ -453,17 +477,17 @@ mod tests {
             count: None,
             child: Box::new(s.clone()),
         }));
-        assert!((inf.distance(Vec3::new(100.0, 0.0, 0.0)) + 0.5).abs() < 1e-4);
-        assert!((inf.distance(Vec3::new(101.0, 0.0, 0.0)) - 0.5).abs() < 1e-4);
+        assert!((inf.distance(DVec3::new(100.0, 0.0, 0.0)) + 0.5).abs() < 1e-4);
+        assert!((inf.distance(DVec3::new(101.0, 0.0, 0.0)) - 0.5).abs() < 1e-4);
         let fin = SdfTree::new(&obj(ObjectKind::Repeat {
             period: Vec3::new(2.0, 0.0, 0.0),
             count: Some(UVec3::new(2, 1, 1)),
             child: Box::new(s),
         }));
         // Two copies at x = -1 and x = 1.
-        assert!((fin.distance(Vec3::new(1.0, 0.0, 0.0)) + 0.5).abs() < 1e-5);
-        assert!((fin.distance(Vec3::new(-1.0, 0.0, 0.0)) + 0.5).abs() < 1e-5);
-        assert!((fin.distance(Vec3::new(5.0, 0.0, 0.0)) - 3.5).abs() < 1e-5);
-        assert!((fin.distance(Vec3::ZERO) - 0.5).abs() < 1e-5);
+        assert!((fin.distance(DVec3::new(1.0, 0.0, 0.0)) + 0.5).abs() < 1e-5);
+        assert!((fin.distance(DVec3::new(-1.0, 0.0, 0.0)) + 0.5).abs() < 1e-5);
+        assert!((fin.distance(DVec3::new(5.0, 0.0, 0.0)) - 3.5).abs() < 1e-5);
+        assert!((fin.distance(DVec3::ZERO) - 0.5).abs() < 1e-5);
     }
 }

@@ -2,7 +2,7 @@
 //! compiled into the matrices the representations need (to world, to local, normals)
 //! and the scale bounds sphere tracing needs to keep distances conservative.
 
-use glam::{Affine3A, Mat3, Mat3A, Vec3, Vec3A};
+use glam::{Affine3A, DAffine3, DMat3, DVec3, Mat3, Mat3A, Vec3, Vec3A};
 
 use crate::geometry::{Aabb, Ray};
 
@@ -36,6 +36,9 @@ pub struct Transform {
     pub to_world: Affine3A,
     /// World (or parent) to local.
     pub to_local: Affine3A,
+    /// World (or parent) to local in f64, for distance evaluation far from the origin
+    /// (a radius-5000 sphere needs f64 local coordinates to resolve its surface).
+    pub to_local_f64: DAffine3,
     /// Maps local normals to world normals (inverse transpose of the linear part).
     pub normal_to_world: Mat3A,
     /// Smallest scale factor: a local distance times this is a lower bound on the world distance.
@@ -51,6 +54,7 @@ impl Transform {
     pub const IDENTITY: Transform = Transform {
         to_world: Affine3A::IDENTITY,
         to_local: Affine3A::IDENTITY,
+        to_local_f64: DAffine3::IDENTITY,
         normal_to_world: Mat3A::IDENTITY,
         min_scale: 1.0,
         max_scale: 1.0,
@@ -59,17 +63,24 @@ impl Transform {
 
     /// Compiles a scene-file transform.
     pub fn new(desc: &TransformDesc) -> Self {
-        let r = desc.rotate_deg * (std::f32::consts::PI / 180.0);
+        let r = desc.rotate_deg.as_dvec3() * (std::f64::consts::PI / 180.0);
         let rot =
-            Mat3::from_rotation_z(r.z) * Mat3::from_rotation_y(r.y) * Mat3::from_rotation_x(r.x);
-        let linear = rot * Mat3::from_diagonal(desc.scale);
+            DMat3::from_rotation_z(r.z) * DMat3::from_rotation_y(r.y) * DMat3::from_rotation_x(r.x);
+        let linear64 = rot * DMat3::from_diagonal(desc.scale.as_dvec3());
+        let to_world64 = DAffine3::from_mat3_translation(linear64, desc.translate.as_dvec3());
+        let to_local_f64 = to_world64.inverse();
+        let linear: Mat3 = linear64.as_mat3();
         let to_world = Affine3A::from_mat3_translation(linear, desc.translate);
-        let to_local = to_world.inverse();
+        let to_local = Affine3A::from_mat3_translation(
+            to_local_f64.matrix3.as_mat3(),
+            to_local_f64.translation.as_vec3(),
+        );
         let normal_to_world = Mat3A::from(linear.inverse().transpose());
         let identity = *desc == TransformDesc::default();
         Transform {
             to_world,
             to_local,
+            to_local_f64,
             normal_to_world,
             min_scale: desc.scale.min_element(),
             max_scale: desc.scale.max_element(),
@@ -89,6 +100,30 @@ impl Transform {
             p
         } else {
             self.to_local.transform_point3(p)
+        }
+    }
+
+    /// Maps a world point into local space in f64.
+    #[inline]
+    pub fn point_to_local_f64(&self, p: DVec3) -> DVec3 {
+        if self.identity {
+            p
+        } else {
+            self.to_local_f64.transform_point3(p)
+        }
+    }
+
+    /// Maps a world ray into local space in f64 (origin and direction); `t` keeps its meaning.
+    #[inline]
+    pub fn ray_to_local_f64(&self, ray: &Ray) -> (DVec3, DVec3) {
+        let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
+        if self.identity {
+            (o, d)
+        } else {
+            (
+                self.to_local_f64.transform_point3(o),
+                self.to_local_f64.transform_vector3(d),
+            )
         }
     }
 

@@ -1,0 +1,213 @@
+//! The toolkit's commands as library functions: `render` (one scene, one representation)
+//! and `gallery` (every scene of a folder in every representation). `main.rs` only parses
+//! arguments into these options and maps errors to exit codes.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use crate::error::{Error, Result};
+use crate::geometry::Geometry;
+use crate::march::MarchParams;
+use crate::render::{Frame, render, write_png};
+use crate::repr::{Representation, build_scene};
+use crate::scene::{Scene, load_scene};
+
+/// Which representation to render with (the command-line choice).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ReprChoice {
+    /// Closed form where it exists.
+    Analytic,
+    /// Sphere tracing of analytic SDFs.
+    Sdf,
+}
+
+/// Overrides of a scene's settings from the command line.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Overrides {
+    /// Image width, pixels.
+    pub width: Option<u32>,
+    /// Image height, pixels.
+    pub height: Option<u32>,
+    /// Maximum recursion depth.
+    pub depth: Option<u32>,
+}
+
+/// Largest image edge accepted, pixels.
+pub const MAX_IMAGE_EDGE: u32 = 16384;
+/// Largest recursion depth accepted.
+pub const MAX_DEPTH: u32 = 64;
+
+impl Overrides {
+    /// Applies the overrides to `scene`, rejecting absurd values.
+    pub fn apply(&self, scene: &mut Scene) -> Result<()> {
+        for (name, v) in [("--width", self.width), ("--height", self.height)] {
+            if let Some(v) = v
+                && (v == 0 || v > MAX_IMAGE_EDGE)
+            {
+                return Err(Error::Usage(format!(
+                    "{name} must be between 1 and {MAX_IMAGE_EDGE}, got {v}"
+                )));
+            }
+        }
+        if let Some(d) = self.depth
+            && d > MAX_DEPTH
+        {
+            return Err(Error::Usage(format!(
+                "--depth must be at most {MAX_DEPTH}, got {d}"
+            )));
+        }
+        if let Some(w) = self.width {
+            scene.camera.width = w;
+        }
+        if let Some(h) = self.height {
+            scene.camera.height = h;
+        }
+        if let Some(d) = self.depth {
+            scene.settings.max_depth = d;
+        }
+        Ok(())
+    }
+}
+
+/// Checks sphere-tracing parameters given on the command line.
+pub fn check_march(p: &MarchParams) -> Result<()> {
+    if !(1.0..2.0).contains(&p.relaxation) {
+        return Err(Error::Usage(format!(
+            "--relax must be in [1, 2), got {}",
+            p.relaxation
+        )));
+    }
+    if !(p.epsilon > 0.0 && p.epsilon < 1.0) {
+        return Err(Error::Usage(format!(
+            "--epsilon must be in (0, 1), got {}",
+            p.epsilon
+        )));
+    }
+    if p.max_steps == 0 || p.max_steps > 1_000_000 {
+        return Err(Error::Usage(format!(
+            "--max-steps must be between 1 and 1000000, got {}",
+            p.max_steps
+        )));
+    }
+    Ok(())
+}
+
+/// The representation for a choice and march parameters.
+pub fn representation(choice: ReprChoice, march: MarchParams) -> Representation {
+    match choice {
+        ReprChoice::Analytic => Representation::Analytic { march },
+        ReprChoice::Sdf => Representation::Sdf { march },
+    }
+}
+
+/// Options of `toolkit render`.
+#[derive(Clone, Debug)]
+pub struct RenderOptions {
+    /// Scene file.
+    pub scene: PathBuf,
+    /// Output PNG.
+    pub output: PathBuf,
+    /// Representation.
+    pub repr: ReprChoice,
+    /// Sphere-tracing parameters.
+    pub march: MarchParams,
+    /// Setting overrides.
+    pub overrides: Overrides,
+}
+
+/// A rendered scene with a printable summary.
+pub struct RenderReport {
+    /// The frame.
+    pub frame: Frame,
+    /// Bytes used by the geometry (objects, BVH).
+    pub geometry_bytes: usize,
+    /// Human-readable report: how each object is traced, time, rays/s, steps per ray.
+    pub text: String,
+}
+
+/// Renders a loaded scene in a representation and describes the result.
+pub fn render_scene(scene: &Scene, repr: Representation) -> RenderReport {
+    let geometry = build_scene(scene, repr);
+    let frame = render(scene, &geometry);
+    let mut text = String::new();
+    for o in geometry.objects() {
+        let _ = writeln!(text, "  {}", o.describe());
+    }
+    let s = &frame.stats;
+    let _ = writeln!(
+        text,
+        "{}x{} depth {} repr {}: frame {:.1} ms, {} rays ({} shadow), {:.2} Mrays/s, {:.2} march steps/ray, \
+         {:.2} steps/marched ray, {:.2} BVH nodes/ray, {} step-limit misses, geometry {} bytes",
+        scene.camera.width,
+        scene.camera.height,
+        scene.settings.max_depth,
+        repr.name(),
+        frame.time.as_secs_f64() * 1e3,
+        s.rays,
+        s.shadow_rays,
+        frame.mrays_per_s(),
+        frame.steps_per_ray(),
+        s.march_steps as f64 / s.marched_rays.max(1) as f64,
+        frame.nodes_per_ray(),
+        s.step_limit_hits,
+        geometry.bytes_used(),
+    );
+    RenderReport {
+        geometry_bytes: geometry.bytes_used(),
+        frame,
+        text,
+    }
+}
+
+/// `toolkit render`: loads, renders and writes one PNG.
+pub fn render_command(opts: &RenderOptions) -> Result<RenderReport> {
+    check_march(&opts.march)?;
+    let mut scene = load_scene(&opts.scene)?;
+    opts.overrides.apply(&mut scene)?;
+    let report = render_scene(&scene, representation(opts.repr, opts.march));
+    write_png(&report.frame.image, &opts.output)?;
+    Ok(report)
+}
+
+/// `toolkit gallery`: renders every `*.toml` scene in `scenes` in both representations into
+/// `out` as `NAME.analytic.png` and `NAME.sdf.png`. Returns the report text.
+pub fn gallery_command(
+    scenes: &Path,
+    out: &Path,
+    march: MarchParams,
+    overrides: Overrides,
+) -> Result<String> {
+    check_march(&march)?;
+    let mut files: Vec<PathBuf> = std::fs::read_dir(scenes)
+        .map_err(|e| Error::io(scenes, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(Error::io(scenes, "no .toml scene files in this folder"));
+    }
+    // Load and check everything before writing anything.
+    let mut loaded = Vec::new();
+    for f in &files {
+        let mut scene = load_scene(f)?;
+        overrides.apply(&mut scene)?;
+        loaded.push((f, scene));
+    }
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    let mut text = String::new();
+    for (f, scene) in &loaded {
+        let stem = f
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        for choice in [ReprChoice::Analytic, ReprChoice::Sdf] {
+            let repr = representation(choice, march);
+            let report = render_scene(scene, repr);
+            let path = out.join(format!("{stem}.{}.png", repr.name()));
+            write_png(&report.frame.image, &path)?;
+            let _ = write!(text, "{}\n{}", path.display(), report.text);
+        }
+    }
+    Ok(text)
+}

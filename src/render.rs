@@ -1,0 +1,126 @@
+//! Frame rendering: image tiles traced in parallel with rayon, deterministic output,
+//! frame statistics (time, rays per second, steps and nodes per ray), and PNG writing
+//! through a temporary file so a failed write never leaves a partial image.
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use image::RgbImage;
+use rayon::prelude::*;
+
+use crate::camera::RayGenerator;
+use crate::error::{Error, Result};
+use crate::geometry::{Geometry, RayStats};
+use crate::scene::Scene;
+use crate::tracer::Tracer;
+
+/// Tile edge, pixels.
+const TILE: u32 = 16;
+
+/// A rendered frame and what it cost.
+pub struct Frame {
+    /// The image, 8-bit RGB (linear colour clamped to [0, 1]).
+    pub image: RgbImage,
+    /// Wall-clock time of the frame.
+    pub time: Duration,
+    /// Work counters summed over all threads.
+    pub stats: RayStats,
+}
+
+impl Frame {
+    /// Rays (all kinds) per second, millions.
+    pub fn mrays_per_s(&self) -> f64 {
+        self.stats.rays as f64 / self.time.as_secs_f64() / 1e6
+    }
+
+    /// Mean distance evaluations per ray (all kinds of rays).
+    pub fn steps_per_ray(&self) -> f64 {
+        self.stats.march_steps as f64 / self.stats.rays.max(1) as f64
+    }
+
+    /// Mean BVH nodes visited per ray.
+    pub fn nodes_per_ray(&self) -> f64 {
+        self.stats.bvh_nodes as f64 / self.stats.rays.max(1) as f64
+    }
+}
+
+/// Converts a linear colour to 8 bits (clamped, rounded).
+#[inline]
+pub fn to_rgb8(c: Vec3) -> [u8; 3] {
+    let q = |x: f32| (x.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+    [q(c.x), q(c.y), q(c.z)]
+}
+
+/// Renders `scene` through `geometry` at the camera's resolution.
+pub fn render(scene: &Scene, geometry: &dyn Geometry) -> Frame {
+    let cam = &scene.camera;
+    let (w, h) = (cam.width, cam.height);
+    let rays = RayGenerator::new(cam);
+    let tracer = Tracer::new(scene, geometry);
+    let tiles_x = w.div_ceil(TILE);
+    let tiles_y = h.div_ceil(TILE);
+    let start = Instant::now();
+    let tiles: Vec<(u32, Vec<[u8; 3]>, RayStats)> = (0..tiles_x * tiles_y)
+        .into_par_iter()
+        .map(|tile| {
+            let (tx, ty) = (tile % tiles_x, tile / tiles_x);
+            let mut stats = RayStats::default();
+            let mut px = Vec::with_capacity((TILE * TILE) as usize);
+            for y in ty * TILE..((ty + 1) * TILE).min(h) {
+                for x in tx * TILE..((tx + 1) * TILE).min(w) {
+                    px.push(to_rgb8(tracer.trace(&rays.ray(x, y), &mut stats)));
+                }
+            }
+            (tile, px, stats)
+        })
+        .collect();
+    let time = start.elapsed();
+    let mut image = RgbImage::new(w, h);
+    let mut stats = RayStats::default();
+    for (tile, px, s) in tiles {
+        stats.add(&s);
+        let (tx, ty) = (tile % tiles_x, tile / tiles_x);
+        let mut i = 0;
+        for y in ty * TILE..((ty + 1) * TILE).min(h) {
+            for x in tx * TILE..((tx + 1) * TILE).min(w) {
+                image.put_pixel(x, y, image::Rgb(px[i]));
+                i += 1;
+            }
+        }
+    }
+    Frame { image, time, stats }
+}
+
+/// Writes `image` as PNG to `path` via a temporary file in the same directory, renamed into
+/// place only when complete: a failure leaves any existing file untouched.
+pub fn write_png(image: &RgbImage, path: &Path) -> Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        return Err(Error::io(
+            path,
+            "cannot write: the directory does not exist",
+        ));
+    }
+    let name = path
+        .file_name()
+        .ok_or_else(|| Error::io(path, "not a file name"))?;
+    let tmp = dir.join(format!(
+        ".{}.tmp{}",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
+    let result = image
+        .save_with_format(&tmp, image::ImageFormat::Png)
+        .map_err(|e| Error::io(path, format!("cannot write: {e}")))
+        .and_then(|_| {
+            std::fs::rename(&tmp, path).map_err(|e| Error::io(path, format!("cannot write: {e}")))
+        });
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}

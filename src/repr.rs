@@ -1,0 +1,381 @@
+//! Representations of scene objects behind the [`Geometry`] interface: closed-form
+//! primitives, sphere-traced analytic SDFs, and the scene's top-level BVH over objects
+//! (itself a `Geometry`, so the tracer sees one geometry whatever the representation).
+
+use glam::{DVec3, Vec3};
+use obvhs::BvhBuildParams;
+use obvhs::bvh2::Bvh2;
+
+use crate::analytic;
+use crate::bvh;
+use crate::geometry::{Aabb, Geometry, Hit, MaterialId, Ray, RayStats, max_abs};
+use crate::march::{MarchParams, gradient_normal, sphere_trace};
+use crate::scene::Scene;
+use crate::sdf::SdfTree;
+use crate::shape::{Object, ObjectKind, Primitive, grow};
+use crate::transform::Transform;
+
+/// How the scene's objects are represented for tracing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Representation {
+    /// Closed-form ray/primitive intersection; objects without one (CSG, repetition) are
+    /// sphere traced with `march`.
+    Analytic { march: MarchParams },
+    /// Sphere tracing of the analytic signed distance functions.
+    Sdf { march: MarchParams },
+}
+
+impl Representation {
+    /// The command-line name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Representation::Analytic { .. } => "analytic",
+            Representation::Sdf { .. } => "sdf",
+        }
+    }
+}
+
+/// Floor on the absolute error of an f32 point of magnitude `m` after a few operations.
+#[inline]
+fn f32_error(m: f32) -> f32 {
+    32.0 * f32::EPSILON * m.max(1e-3)
+}
+
+/// A closed-form primitive under a transform.
+pub struct AnalyticObject {
+    prim: Primitive,
+    transform: Transform,
+    material: MaterialId,
+    bounds: Option<Aabb>,
+    label: String,
+}
+
+impl AnalyticObject {
+    /// A closed-form object for `prim` with the object's transform and material.
+    pub fn new(prim: Primitive, object: &Object) -> Self {
+        AnalyticObject {
+            prim,
+            transform: object.compiled_transform(),
+            material: object.material,
+            bounds: object.bounds(),
+            label: object.label.clone(),
+        }
+    }
+}
+
+impl Geometry for AnalyticObject {
+    fn bounds(&self) -> Option<Aabb> {
+        self.bounds
+    }
+
+    fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
+        stats.prim_tests += 1;
+        // f64 local rays: a radius-5000 sphere centred 5001 away has no f32 precision left
+        // for the small offsets that keep shadow rays off its surface.
+        let (o, d) = self.transform.ray_to_local_f64(ray);
+        let (t, n) = analytic::intersect_f64(&self.prim, o, d, t_min, t_max)?;
+        let point = ray.at(t);
+        Some(Hit {
+            t,
+            point,
+            normal: self.transform.normal_to_world(n),
+            material: self.material,
+            error: f32_error(max_abs(point).max(max_abs(ray.origin))),
+        })
+    }
+
+    fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
+        stats.prim_tests += 1;
+        let (o, d) = self.transform.ray_to_local_f64(ray);
+        analytic::occluded_f64(&self.prim, o, d, t_min, t_max)
+    }
+
+    fn bytes_used(&self) -> usize {
+        std::mem::size_of::<Self>() + self.label.capacity()
+    }
+
+    fn describe(&self) -> String {
+        format!("{} '{}': closed form", self.prim.kind_name(), self.label)
+    }
+}
+
+/// An object tree rendered by sphere tracing its signed distance function.
+pub struct SdfObject {
+    tree: SdfTree,
+    bounds: Option<Aabb>,
+    /// Characteristic size (bounds diagonal, or 1 when unbounded) for tolerances.
+    size: f64,
+    march: MarchParams,
+    why: String,
+}
+
+impl SdfObject {
+    /// Compiles `object` for sphere tracing; `why` says why it is sphere traced.
+    pub fn new(object: &Object, march: MarchParams, why: String) -> Self {
+        let tree = SdfTree::new(object);
+        let bounds = object.bounds();
+        let size = bounds.map_or(1.0, |b| b.diagonal().length() as f64);
+        // March a little beyond the bounds so a hit on the box face is not lost.
+        let bounds = bounds.map(|b| {
+            grow(
+                &b,
+                (march.tolerance(0.0, size) * 4.0) as f32
+                    + f32_error(max_abs(b.max.into()).max(max_abs(b.min.into()))),
+            )
+        });
+        SdfObject {
+            tree,
+            bounds,
+            size,
+            march,
+            why,
+        }
+    }
+
+    /// Whether the distance is exact (false: a Lipschitz-1 bound).
+    pub fn is_exact(&self) -> bool {
+        self.tree.exact
+    }
+
+    fn march(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<f64> {
+        let (t0, t1) = match &self.bounds {
+            Some(b) => ray.clip_to_box(b, t_min, t_max)?,
+            None => (t_min, t_max),
+        };
+        let f = |p: DVec3| self.tree.distance(p);
+        let t = sphere_trace(
+            &f,
+            ray.origin.as_dvec3(),
+            ray.dir.as_dvec3(),
+            t0 as f64,
+            t1 as f64,
+            self.size,
+            &self.march,
+            self.tree.signed,
+            stats,
+        )?;
+        (t >= t_min as f64 && t <= t_max as f64).then_some(t)
+    }
+}
+
+impl Geometry for SdfObject {
+    fn bounds(&self) -> Option<Aabb> {
+        self.bounds
+    }
+
+    fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
+        let t = self.march(ray, t_min, t_max, stats)?;
+        let p = ray.origin.as_dvec3() + ray.dir.as_dvec3() * t;
+        let eps = self.march.tolerance(t, self.size);
+        let f = |q: DVec3| self.tree.distance(q);
+        let floor = 1e-9 * (1.0 + p.abs().max_element());
+        // An unsigned field (a triangle) has no gradient on the surface: sample closer than
+        // the point's own distance so every sample lies on the ray's side.
+        let h = if self.tree.signed {
+            0.5 * eps
+        } else {
+            (0.25 * f(p).abs()).min(0.5 * eps)
+        }
+        .max(floor);
+        let normal = gradient_normal(&f, p, h, stats).as_vec3();
+        let material = self.tree.distance_material(p).1;
+        let point: Vec3 = p.as_vec3();
+        Some(Hit {
+            t: t as f32,
+            point,
+            normal,
+            material,
+            error: 4.0 * eps as f32 + f32_error(max_abs(point)),
+        })
+    }
+
+    fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
+        self.march(ray, t_min, t_max, stats).is_some()
+    }
+
+    fn bytes_used(&self) -> usize {
+        std::mem::size_of::<Self>() + self.tree.bytes_used() - std::mem::size_of::<SdfTree>()
+            + self.why.capacity()
+    }
+
+    fn describe(&self) -> String {
+        let bound = if self.tree.exact {
+            "exact distance"
+        } else {
+            "Lipschitz bound"
+        };
+        format!("{} ({bound})", self.why)
+    }
+}
+
+/// The whole scene as one geometry: a top-level BVH over the bounded objects plus a list of
+/// unbounded ones (infinite planes, unbounded repetition) that every ray tests.
+pub struct SceneGeometry {
+    objects: Vec<Box<dyn Geometry>>,
+    bvh: Bvh2,
+    /// Indices into `objects` of unbounded objects.
+    unbounded: Vec<u32>,
+    /// For each BVH primitive, the index into `objects`.
+    bounded: Vec<u32>,
+}
+
+impl SceneGeometry {
+    /// Builds the top-level BVH over `objects`.
+    pub fn new(objects: Vec<Box<dyn Geometry>>) -> Self {
+        let mut boxes = Vec::new();
+        let mut bounded = Vec::new();
+        let mut unbounded = Vec::new();
+        for (i, o) in objects.iter().enumerate() {
+            match o.bounds() {
+                Some(b) => {
+                    boxes.push(b);
+                    bounded.push(i as u32);
+                }
+                None => unbounded.push(i as u32),
+            }
+        }
+        let bvh = bvh::build(&boxes, BvhBuildParams::medium_build());
+        SceneGeometry {
+            objects,
+            bvh,
+            unbounded,
+            bounded,
+        }
+    }
+
+    /// The objects, in scene order.
+    pub fn objects(&self) -> &[Box<dyn Geometry>] {
+        &self.objects
+    }
+}
+
+impl Geometry for SceneGeometry {
+    fn bounds(&self) -> Option<Aabb> {
+        if !self.unbounded.is_empty() {
+            return None;
+        }
+        self.objects
+            .iter()
+            .filter_map(|o| o.bounds())
+            .reduce(|a, b| a.union(&b))
+    }
+
+    fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
+        let mut best: Option<Hit> = None;
+        let mut t_best = t_max;
+        for &i in &self.unbounded {
+            if let Some(h) = self.objects[i as usize].closest_hit(ray, t_min, t_best, stats) {
+                t_best = h.t;
+                best = Some(h);
+            }
+        }
+        bvh::traverse(
+            &self.bvh,
+            ray,
+            t_min,
+            t_best,
+            stats,
+            |prim, t_max, stats| {
+                let obj = &self.objects[self.bounded[prim as usize] as usize];
+                Ok(obj.closest_hit(ray, t_min, t_max, stats).map(|h| {
+                    let t = h.t;
+                    best = Some(h);
+                    t
+                }))
+            },
+        );
+        best
+    }
+
+    fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
+        if self
+            .unbounded
+            .iter()
+            .any(|&i| self.objects[i as usize].any_hit(ray, t_min, t_max, stats))
+        {
+            return true;
+        }
+        let mut hit = false;
+        bvh::traverse(&self.bvh, ray, t_min, t_max, stats, |prim, t_max, stats| {
+            if self.objects[self.bounded[prim as usize] as usize].any_hit(ray, t_min, t_max, stats)
+            {
+                hit = true;
+                Err(())
+            } else {
+                Ok(None)
+            }
+        });
+        hit
+    }
+
+    fn bytes_used(&self) -> usize {
+        std::mem::size_of::<Self>()
+            + self
+                .objects
+                .iter()
+                .map(|o| o.bytes_used() + std::mem::size_of::<Box<dyn Geometry>>())
+                .sum::<usize>()
+            + bvh::bytes_used(&self.bvh)
+            + 4 * (self.unbounded.len() + self.bounded.len())
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "{} objects, top-level BVH of {} nodes",
+            self.objects.len(),
+            self.bvh.nodes.len()
+        )
+    }
+}
+
+/// Builds the geometry of every top-level object of `scene` in representation `repr`.
+/// Sphere tracing takes its pixel footprint from the scene's camera.
+pub fn build_objects(scene: &Scene, repr: Representation) -> Vec<Box<dyn Geometry>> {
+    let footprint = 2.0 * ((scene.camera.fov_y_deg as f64).to_radians() * 0.5).tan()
+        / scene.camera.height.max(1) as f64;
+    let repr = match repr {
+        Representation::Analytic { march } => Representation::Analytic {
+            march: MarchParams {
+                pixel_footprint: footprint,
+                ..march
+            },
+        },
+        Representation::Sdf { march } => Representation::Sdf {
+            march: MarchParams {
+                pixel_footprint: footprint,
+                ..march
+            },
+        },
+    };
+    scene
+        .objects
+        .iter()
+        .map(|o| -> Box<dyn Geometry> {
+            match (repr, &o.kind) {
+                (Representation::Analytic { .. }, ObjectKind::Primitive(p)) => {
+                    Box::new(AnalyticObject::new(*p, o))
+                }
+                (Representation::Analytic { march }, _) => Box::new(SdfObject::new(
+                    o,
+                    march,
+                    format!(
+                        "{} '{}': sphere traced (no closed form for {})",
+                        o.kind_name(),
+                        o.label,
+                        o.kind_name()
+                    ),
+                )),
+                (Representation::Sdf { march }, _) => Box::new(SdfObject::new(
+                    o,
+                    march,
+                    format!("{} '{}': sphere traced", o.kind_name(), o.label),
+                )),
+            }
+        })
+        .collect()
+}
+
+/// Builds the scene geometry in representation `repr`.
+pub fn build_scene(scene: &Scene, repr: Representation) -> SceneGeometry {
+    SceneGeometry::new(build_objects(scene, repr))
+}

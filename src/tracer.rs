@@ -1,0 +1,194 @@
+//! The Whitted ray tracer, one implementation for every representation: ambient +
+//! Lambert + Phong with light colours, one hard shadow ray per light, recursive mirror
+//! reflection and Snell refraction with total internal reflection, a depth limit and a
+//! cut-off for negligible contributions. It sees geometry only through [`Geometry`].
+
+use glam::Vec3;
+
+use crate::geometry::{Geometry, Hit, Ray, RayStats, max_abs};
+use crate::scene::{Light, Material, Scene};
+
+/// Contributions weighing less than this (a fraction of the pixel) are not traced.
+pub const MIN_CONTRIBUTION: f32 = 1.0 / 512.0;
+
+/// Traces rays through one scene and geometry.
+pub struct Tracer<'a> {
+    scene: &'a Scene,
+    geometry: &'a dyn Geometry,
+    ambient: f32,
+}
+
+/// How far to move a spawned ray's origin off the surface: the hit's own error bound,
+/// but never less than what f32 rounding at the point's magnitude needs.
+#[inline]
+pub fn spawn_offset(hit: &Hit) -> f32 {
+    2.0 * hit
+        .error
+        .max(64.0 * f32::EPSILON * max_abs(hit.point).max(1e-3))
+}
+
+impl<'a> Tracer<'a> {
+    /// A tracer for `scene` rendered with `geometry`.
+    pub fn new(scene: &'a Scene, geometry: &'a dyn Geometry) -> Self {
+        let ambient = scene
+            .lights
+            .iter()
+            .map(|l| {
+                if let Light::Ambient { intensity } = l {
+                    *intensity
+                } else {
+                    0.0
+                }
+            })
+            .sum();
+        Tracer {
+            scene,
+            geometry,
+            ambient,
+        }
+    }
+
+    /// The colour seen along `ray` (unit direction), linear RGB, not clamped.
+    pub fn trace(&self, ray: &Ray, stats: &mut RayStats) -> Vec3 {
+        self.trace_rec(ray, self.scene.settings.max_depth, 1.0, stats)
+    }
+
+    fn trace_rec(&self, ray: &Ray, depth: u32, weight: f32, stats: &mut RayStats) -> Vec3 {
+        stats.rays += 1;
+        match self
+            .geometry
+            .closest_hit(ray, 0.0, self.scene.settings.max_distance, stats)
+        {
+            Some(hit) => self.shade(ray, &hit, depth, weight, stats),
+            None => self.scene.settings.background,
+        }
+    }
+
+    fn shade(&self, ray: &Ray, hit: &Hit, depth: u32, weight: f32, stats: &mut RayStats) -> Vec3 {
+        let m: &Material = &self.scene.materials[hit.material as usize];
+        // Face the normal towards the viewer; remember whether we are leaving the solid.
+        let leaving = hit.normal.dot(ray.dir) > 0.0;
+        let n = if leaving { -hit.normal } else { hit.normal };
+        let offset = spawn_offset(hit);
+        let above = hit.point + n * offset;
+        let view = -ray.dir;
+
+        let mut local = m.ka * self.ambient * m.color;
+        for light in &self.scene.lights {
+            let (to_light, dist, intensity, color) = match *light {
+                Light::Ambient { .. } => continue,
+                Light::Point {
+                    position,
+                    intensity,
+                    color,
+                } => {
+                    let v = position - above;
+                    let d = v.length();
+                    if d <= 0.0 {
+                        continue;
+                    }
+                    (v / d, d, intensity, color)
+                }
+                Light::Directional {
+                    direction,
+                    intensity,
+                    color,
+                } => (
+                    -direction,
+                    self.scene.settings.max_distance,
+                    intensity,
+                    color,
+                ),
+            };
+            let n_dot_l = n.dot(to_light);
+            if n_dot_l <= 0.0 {
+                continue;
+            }
+            stats.rays += 1;
+            stats.shadow_rays += 1;
+            if self
+                .geometry
+                .any_hit(&Ray::new(above, to_light), 0.0, dist, stats)
+            {
+                continue;
+            }
+            local += m.kd * intensity * n_dot_l * m.color * color;
+            if let Some(exp) = m.shininess {
+                let r = 2.0 * n_dot_l * n - to_light;
+                let r_dot_v = r.dot(view);
+                if r_dot_v > 0.0 {
+                    local += m.ks * intensity * r_dot_v.powf(exp) * color;
+                }
+            }
+        }
+
+        if depth == 0 || (m.reflectivity <= 0.0 && m.transparency <= 0.0) {
+            return local;
+        }
+        let refl_dir = ray.dir - 2.0 * ray.dir.dot(n) * n;
+        let reflected = |w: f32, stats: &mut RayStats| {
+            if w < MIN_CONTRIBUTION {
+                Vec3::ZERO
+            } else {
+                self.trace_rec(&Ray::new(above, refl_dir.normalize()), depth - 1, w, stats)
+            }
+        };
+        let (r, tr) = (m.reflectivity, m.transparency);
+        let opaque = (1.0 - r) * local
+            + if r > 0.0 {
+                r * reflected(weight * (1.0 - tr) * r, stats)
+            } else {
+                Vec3::ZERO
+            };
+        if tr <= 0.0 {
+            return opaque;
+        }
+        let w = weight * tr;
+        let transmitted = if w < MIN_CONTRIBUTION {
+            Vec3::ZERO
+        } else {
+            let eta = if leaving { m.ior } else { 1.0 / m.ior };
+            match refract(ray.dir, n, eta) {
+                Some(dir) => {
+                    let below = hit.point - n * offset;
+                    self.trace_rec(&Ray::new(below, dir), depth - 1, w, stats)
+                }
+                // Total internal reflection: all of it is reflected.
+                None => reflected(w, stats),
+            }
+        };
+        (1.0 - tr) * opaque + tr * transmitted
+    }
+}
+
+/// Refracts unit `d` through a surface with unit normal `n` facing against `d`, with
+/// `eta` = n_incident / n_transmitted. `None` on total internal reflection.
+pub fn refract(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
+    let cos_i = -d.dot(n);
+    let sin2_t = eta * eta * (1.0 - cos_i * cos_i).max(0.0);
+    if sin2_t > 1.0 {
+        return None;
+    }
+    let cos_t = (1.0 - sin2_t).sqrt();
+    Some((eta * d + (eta * cos_i - cos_t) * n).normalize())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn snell_and_total_internal_reflection() {
+        let n = Vec3::Y;
+        let d = Vec3::new(1.0, -1.0, 0.0).normalize();
+        let t = refract(d, n, 1.0 / 1.5).unwrap();
+        let sin_i = d.x;
+        let sin_t = t.x;
+        assert!((sin_i / sin_t - 1.5).abs() < 1e-5);
+        assert!(t.y < 0.0);
+        // From glass at 45 degrees: beyond the critical angle (41.8 degrees).
+        assert!(refract(d, n, 1.5).is_none());
+        // Straight through when eta = 1.
+        assert!((refract(d, n, 1.0).unwrap() - d).length() < 1e-6);
+    }
+}

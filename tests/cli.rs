@@ -1,0 +1,164 @@
+//! The `toolkit` binary end to end: a render writes a PNG and reports its work; bad
+//! input gives one clear line, exit code 2, and no output file; an existing file is
+//! never overwritten by a failed run.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn toolkit(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_toolkit"))
+        .args(args)
+        .output()
+        .expect("run toolkit")
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("sdfmesh-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn scene(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+const GOOD: &str = r#"
+[camera]
+position = [0, 0, -4]
+look_at = [0, 0, 0]
+width = 64
+height = 48
+
+[[lights]]
+type = "ambient"
+intensity = 0.3
+
+[[lights]]
+type = "point"
+position = [2, 3, -3]
+intensity = 0.8
+
+[materials.red]
+color = [1, 0, 0]
+
+[[objects]]
+type = "sphere"
+radius = 1
+material = "red"
+"#;
+
+#[test]
+fn render_writes_png_and_reports_statistics() {
+    let dir = temp_dir("ok");
+    let s = scene(&dir, "s.toml", GOOD);
+    let out = dir.join("out.png");
+    for repr in ["analytic", "sdf"] {
+        let o = toolkit(&[
+            "render",
+            s.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--repr",
+            repr,
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            text.contains("Mrays/s") && text.contains("steps/ray"),
+            "{text}"
+        );
+        let img = image::open(&out).unwrap().to_rgb8();
+        assert_eq!(img.dimensions(), (64, 48));
+        // The red sphere is in the middle, the background is black.
+        assert!(img.get_pixel(32, 24).0[0] > 100);
+        assert_eq!(img.get_pixel(0, 0).0, [0, 0, 0]);
+    }
+}
+
+#[test]
+fn bad_input_fails_cleanly_without_touching_the_output() {
+    let dir = temp_dir("bad");
+    let out = dir.join("keep.png");
+    std::fs::write(&out, b"precious").unwrap();
+    let cases: Vec<(PathBuf, &str)> = vec![
+        (
+            scene(&dir, "neg.toml", &GOOD.replace("radius = 1", "radius = -1")),
+            "neg.toml:",
+        ),
+        (
+            scene(
+                &dir,
+                "nan.toml",
+                &GOOD.replace("radius = 1", "radius = nan"),
+            ),
+            "nan.toml:",
+        ),
+        (
+            scene(
+                &dir,
+                "unknown.toml",
+                &GOOD.replace("radius = 1", "radius = 1\ncolour = 3"),
+            ),
+            "unknown.toml:",
+        ),
+        (
+            scene(&dir, "syntax.toml", "[camera\nposition = [0,0,0]"),
+            "syntax.toml:",
+        ),
+        (dir.join("missing.toml"), "missing.toml"),
+    ];
+    for (path, expect) in cases {
+        let o = toolkit(&[
+            "render",
+            path.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{}: {err}", path.display());
+        assert!(err.contains(expect), "{err}");
+        assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+        assert_eq!(std::fs::read(&out).unwrap(), b"precious");
+    }
+    // Absurd options and an output folder that does not exist.
+    let good = scene(&dir, "good.toml", GOOD);
+    for args in [
+        vec!["--width", "0"],
+        vec!["--width", "100000"],
+        vec!["--depth", "1000"],
+        vec!["--relax", "2.5"],
+        vec!["--epsilon", "0"],
+        vec!["--max-steps", "0"],
+    ] {
+        let mut all = vec![
+            "render",
+            good.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        all.extend(args.iter());
+        let o = toolkit(&all);
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        assert_eq!(std::fs::read(&out).unwrap(), b"precious");
+    }
+    let nowhere = dir.join("no/such/dir/out.png");
+    let o = toolkit(&[
+        "render",
+        good.to_str().unwrap(),
+        "-o",
+        nowhere.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("does not exist"));
+    // No temporary files were left behind.
+    let leftovers: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains(".tmp"))
+        .collect();
+    assert!(leftovers.is_empty());
+}
