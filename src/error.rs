@@ -68,7 +68,8 @@ impl Error {
         }
     }
 
-    /// The process exit code for this error: 2 for bad input or usage, 1 for I/O failures.
+    /// The process exit code for this error: 2 for everything a user can cause (bad input,
+    /// usage, unreadable or unwritable files).
     pub fn exit_code(&self) -> i32 {
         match self {
             Error::Input { .. } | Error::Usage(_) => 2,

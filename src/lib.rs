@@ -10,6 +10,7 @@ pub mod error;
 pub mod geometry;
 pub mod march;
 pub mod mesh;
+pub mod mesh_geometry;
 pub mod render;
 pub mod repr;
 pub mod scene;

@@ -9,8 +9,9 @@ use crate::geometry::RayStats;
 /// Sphere-tracing parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MarchParams {
-    /// Relative hit tolerance: a march stops when `|d| < epsilon * max(t, 0.01 * size)`,
-    /// so the tolerance grows with distance like a pixel footprint. Default 1e-4.
+    /// Relative hit tolerance: a march stops when `|d| < epsilon * max(t, 1e-4 * size)`,
+    /// so the tolerance grows with distance like a pixel footprint (the floor only matters
+    /// for rays that start next to a surface). Default 1e-4.
     pub epsilon: f64,
     /// Maximum distance evaluations per march; a march that runs out is counted in
     /// [`RayStats::step_limit_hits`] and reported as a miss. Default 512.
@@ -21,9 +22,10 @@ pub struct MarchParams {
     pub relaxation: f64,
     /// Angular size of a pixel, radians (`2 tan(fov/2) / height`), set from the camera
     /// when the scene is built. A march that runs out of steps still reports a hit at its
-    /// best point if that point is within this fraction of its distance from the surface,
-    /// i.e. closer than the pixel it is seen through (Keinert et al.'s candidate rule);
-    /// such marches are counted in [`RayStats::step_limit_hits`] either way. Default 1e-3.
+    /// last point if that point is within this fraction of its distance from the surface,
+    /// i.e. closer than the pixel it is seen through (the typical case: a ray grazing a
+    /// plane near the horizon); such marches are counted in
+    /// [`RayStats::step_limit_hits`] either way. Default 1e-3.
     pub pixel_footprint: f64,
 }
 
@@ -42,14 +44,14 @@ impl MarchParams {
     /// The hit tolerance at parameter `t` for an object of characteristic `size`.
     #[inline]
     pub fn tolerance(&self, t: f64, size: f64) -> f64 {
-        self.epsilon * t.max(0.01 * size)
+        self.epsilon * t.max(1e-4 * size)
     }
 }
 
 /// Sphere traces the ray `origin + t * dir` (`dir` unit length) through the distance
 /// function `f` (exact or a Lipschitz-1 lower bound) for `t` in `[t0, t1]`. Returns the
-/// hit parameter, or `None` for a miss. A march that exhausts its step budget reports its
-/// best point if that is within the pixel footprint of the surface, else a miss. A ray that
+/// hit, or `None` for a miss. A march that exhausts its step budget reports its last point
+/// if that is within the pixel footprint of the surface, else a miss. A ray that
 /// starts inside the solid marches `|f|` and finds the exit. With `refine`, a converged
 /// march takes one more step onto the surface (not for unsigned fields, whose gradient is
 /// undefined there).
@@ -64,15 +66,14 @@ pub fn sphere_trace(
     params: &MarchParams,
     refine: bool,
     stats: &mut RayStats,
-) -> Option<f64> {
+) -> Option<MarchHit> {
     stats.marched_rays += 1;
     let mut omega = params.relaxation;
     let mut t = t0;
     let mut sign = 0.0;
     let mut prev_t = t0;
     let mut prev_r = 0.0;
-    // Best point so far by relative distance r / t (for the step-limit fallback).
-    let (mut best_t, mut best_err) = (t0, f64::INFINITY);
+    let mut r = f64::INFINITY;
     for _ in 0..params.max_steps {
         stats.march_steps += 1;
         let raw = f(origin + dir * t);
@@ -80,7 +81,7 @@ pub fn sphere_trace(
             sign = if raw < 0.0 { -1.0 } else { 1.0 };
         }
         let d = sign * raw;
-        let r = d.abs();
+        r = d.abs();
         // With over-relaxation the step may jump over a surface; detect it by the two
         // unbounding spheres (radii prev_r and r) failing to cover the step, and go back
         // to the plain step from the previous point.
@@ -90,33 +91,48 @@ pub fn sphere_trace(
             continue;
         }
         let eps = params.tolerance(t, size);
-        let err = r / t.max(0.01 * size);
-        if err < best_err {
-            (best_t, best_err) = (t, err);
-        }
         if r < eps {
             if !refine {
-                return Some(t);
+                return Some(MarchHit { t, residual: r });
             }
             // One refinement step along the ray (steps back if the point is past the surface).
             let refined = t + d;
             stats.march_steps += 1;
             let r2 = f(origin + dir * refined).abs();
             return Some(if r2 <= r && refined >= t0 - eps {
-                refined
+                MarchHit {
+                    t: refined,
+                    residual: r2,
+                }
             } else {
-                t
+                MarchHit { t, residual: r }
             });
         }
         prev_t = t;
         prev_r = r;
         t += d * omega;
         if t > t1 {
+            // A relaxed step past the end may have jumped a surface near the end: retry it
+            // as a plain step, which is safe.
+            if omega > 1.0 && prev_t + prev_r <= t1 {
+                omega = 1.0;
+                t = prev_t + prev_r;
+                continue;
+            }
             return None;
         }
     }
     stats.step_limit_hits += 1;
-    (best_err < params.pixel_footprint).then_some(best_t)
+    (t > 0.0 && r < params.pixel_footprint * t).then_some(MarchHit { t, residual: r })
+}
+
+/// Where a march stopped.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MarchHit {
+    /// Ray parameter of the hit.
+    pub t: f64,
+    /// |distance| at the hit point: how far from the surface it may be.
+    pub residual: f64,
 }
 
 /// The unit gradient of `f` at `p` by the tetrahedron technique (four evaluations) with
@@ -158,7 +174,8 @@ mod tests {
             true,
             &mut stats,
         )
-        .unwrap();
+        .unwrap()
+        .t;
         assert!((t - 4.0).abs() < 1e-3, "{t}");
         let t = sphere_trace(
             &sphere,
@@ -171,7 +188,8 @@ mod tests {
             true,
             &mut stats,
         )
-        .unwrap();
+        .unwrap()
+        .t;
         assert!((t - 1.0).abs() < 1e-3, "{t}");
         assert!(stats.march_steps > 0);
     }
@@ -235,7 +253,8 @@ mod tests {
             true,
             &mut a,
         )
-        .unwrap();
+        .unwrap()
+        .t;
         let t_relax = sphere_trace(
             &plane,
             DVec3::ZERO,
@@ -247,7 +266,8 @@ mod tests {
             true,
             &mut b,
         )
-        .unwrap();
+        .unwrap()
+        .t;
         assert!((t_plain - t_relax).abs() < 1e-4 * t_plain);
         assert!(
             b.march_steps < a.march_steps,
@@ -277,7 +297,8 @@ mod tests {
             true,
             &mut s,
         )
-        .unwrap();
+        .unwrap()
+        .t;
         assert!((t - 2.99).abs() < 1e-3, "{t}");
     }
 }

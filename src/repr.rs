@@ -9,7 +9,7 @@ use obvhs::bvh2::Bvh2;
 use crate::analytic;
 use crate::bvh;
 use crate::geometry::{Aabb, Geometry, Hit, MaterialId, Ray, RayStats, max_abs};
-use crate::march::{MarchParams, gradient_normal, sphere_trace};
+use crate::march::{MarchHit, MarchParams, gradient_normal, sphere_trace};
 use crate::scene::Scene;
 use crate::sdf::SdfTree;
 use crate::shape::{Object, ObjectKind, Primitive, grow};
@@ -137,7 +137,7 @@ impl SdfObject {
         self.tree.exact
     }
 
-    fn march(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<f64> {
+    fn march(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<MarchHit> {
         let (t0, t1) = match &self.bounds {
             Some(b) => ray.clip_to_box(b, t_min, t_max)?,
             None => (t_min, t_max),
@@ -154,7 +154,7 @@ impl SdfObject {
             self.tree.signed,
             stats,
         )?;
-        (t >= t_min as f64 && t <= t_max as f64).then_some(t)
+        (t.t >= t_min as f64 && t.t <= t_max as f64).then_some(t)
     }
 }
 
@@ -164,9 +164,9 @@ impl Geometry for SdfObject {
     }
 
     fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
-        let t = self.march(ray, t_min, t_max, stats)?;
+        let MarchHit { t, residual } = self.march(ray, t_min, t_max, stats)?;
         let p = ray.origin.as_dvec3() + ray.dir.as_dvec3() * t;
-        let eps = self.march.tolerance(t, self.size);
+        let eps = self.march.tolerance(t, self.size).max(residual);
         let f = |q: DVec3| self.tree.distance(q);
         let floor = 1e-9 * (1.0 + p.abs().max_element());
         // An unsigned field (a triangle) has no gradient on the surface: sample closer than
