@@ -154,7 +154,7 @@ mod tests {
             })
             .collect();
         let bvh = build(&boxes, BvhBuildParams::medium_build());
-        let mut seen = vec![false; 100];
+        let mut seen = [false; 100];
         let mut stats = RayStats::default();
         let ray = Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::X);
         traverse(&bvh, &ray, 0.0, f32::INFINITY, &mut stats, |p, _, _| {

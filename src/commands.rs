@@ -4,13 +4,16 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use crate::error::{Error, Result};
 use crate::geometry::Geometry;
 use crate::march::MarchParams;
+use crate::mesh::{MeshFormat, load_mesh};
 use crate::render::{Frame, render, write_png};
 use crate::repr::{Representation, build_scene};
-use crate::scene::{Scene, load_scene};
+use crate::scene::{Scene, load_scene, mesh_preview_scene};
+use crate::shape::Shading;
 
 /// Which representation to render with (the command-line choice).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -113,6 +116,8 @@ pub struct RenderOptions {
     pub march: MarchParams,
     /// Setting overrides.
     pub overrides: Overrides,
+    /// Shading of a mesh given instead of a scene file.
+    pub shading: Shading,
 }
 
 /// A rendered scene with a printable summary.
@@ -137,7 +142,8 @@ pub fn render_scene(scene: &Scene, repr: Representation) -> RenderReport {
     let _ = writeln!(
         text,
         "{}x{} depth {} repr {}: frame {:.1} ms, {} rays ({} shadow), {:.2} Mrays/s, {:.2} march steps/ray, \
-         {:.2} steps/marched ray, {:.2} BVH nodes/ray, {} step-limit misses, geometry {} bytes",
+         {:.2} steps/marched ray, {:.2} BVH nodes/ray, {:.2} primitive tests/ray, {} step-limit misses, \
+         geometry {} bytes",
         scene.camera.width,
         scene.camera.height,
         scene.settings.max_depth,
@@ -149,6 +155,7 @@ pub fn render_scene(scene: &Scene, repr: Representation) -> RenderReport {
         frame.steps_per_ray(),
         s.march_steps as f64 / s.marched_rays.max(1) as f64,
         frame.nodes_per_ray(),
+        s.prim_tests as f64 / s.rays.max(1) as f64,
         s.step_limit_hits,
         geometry.bytes_used(),
     );
@@ -159,10 +166,30 @@ pub fn render_scene(scene: &Scene, repr: Representation) -> RenderReport {
     }
 }
 
+/// Loads a scene file, or a mesh file (by its extension) into a preview scene.
+pub fn load_scene_or_mesh(path: &Path, shading: Shading) -> Result<Scene> {
+    if MeshFormat::from_path(path).is_some() {
+        let (mesh, report) = load_mesh(path)?;
+        if report.degenerate_dropped > 0 {
+            eprintln!(
+                "{}: dropped {} degenerate triangles",
+                path.display(),
+                report.degenerate_dropped
+            );
+        }
+        return Ok(mesh_preview_scene(
+            Arc::new(mesh),
+            path.to_path_buf(),
+            shading,
+        ));
+    }
+    load_scene(path)
+}
+
 /// `toolkit render`: loads, renders and writes one PNG.
 pub fn render_command(opts: &RenderOptions) -> Result<RenderReport> {
     check_march(&opts.march)?;
-    let mut scene = load_scene(&opts.scene)?;
+    let mut scene = load_scene_or_mesh(&opts.scene, opts.shading)?;
     opts.overrides.apply(&mut scene)?;
     let report = render_scene(&scene, representation(opts.repr, opts.march));
     write_png(&report.frame.image, &opts.output)?;

@@ -2,6 +2,9 @@
 //! render than ray tracing polygon meshes. One Whitted tracer renders every
 //! representation through the [`geometry::Geometry`] interface.
 
+// `!(x >= 0.0)` is the NaN-rejecting form used on purpose in the numerical code.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod analytic;
 pub mod bvh;
 pub mod camera;

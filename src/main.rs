@@ -6,6 +6,7 @@ use std::process::ExitCode;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use sdfmesh::commands::{self, Overrides, ReprChoice};
 use sdfmesh::march::MarchParams;
+use sdfmesh::shape::Shading;
 
 #[derive(Parser)]
 #[command(
@@ -20,9 +21,10 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Render a scene file to a PNG with one representation.
+    /// Render a scene file, or a mesh file (OBJ, glTF, GLB, PLY, STL) framed by a default
+    /// camera and lights, to a PNG with one representation.
     Render {
-        /// Scene file (TOML, see docs/scene-format.md).
+        /// Scene file (TOML, see docs/scene-format.md) or mesh file.
         scene: PathBuf,
         /// Output PNG.
         #[arg(short, long)]
@@ -30,6 +32,9 @@ enum Command {
         /// Representation of the objects.
         #[arg(long, value_enum, default_value_t = Repr::Analytic)]
         repr: Repr,
+        /// Interpolate vertex normals when rendering a mesh file (default: flat).
+        #[arg(long)]
+        smooth: bool,
         #[command(flatten)]
         settings: SettingArgs,
         #[command(flatten)]
@@ -112,6 +117,7 @@ fn main() -> ExitCode {
             scene,
             output,
             repr,
+            smooth,
             settings,
             march,
         } => {
@@ -125,6 +131,11 @@ fn main() -> ExitCode {
                 repr,
                 march: march.params(),
                 overrides: settings.overrides(),
+                shading: if smooth {
+                    Shading::Smooth
+                } else {
+                    Shading::Flat
+                },
             };
             commands::render_command(&opts).map(|r| print!("{}", r.text))
         }

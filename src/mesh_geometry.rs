@@ -11,18 +11,9 @@ use obvhs::bvh2::Bvh2;
 use crate::bvh;
 use crate::geometry::{Aabb, Geometry, Hit, MaterialId, Ray, RayStats, aabb, max_abs};
 use crate::mesh::TriangleMesh;
+pub use crate::shape::Shading;
 use crate::transform::Transform;
 use crate::triangle::ShearedRay;
-
-/// How mesh normals are shaded.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum Shading {
-    /// The triangle's own normal.
-    #[default]
-    Flat,
-    /// Vertex normals interpolated by barycentric weights (computed if the mesh has none).
-    Smooth,
-}
 
 /// A triangle mesh ready for tracing.
 pub struct MeshGeometry {
@@ -49,24 +40,46 @@ impl MeshGeometry {
         label: String,
     ) -> Self {
         let start = Instant::now();
-        let TriangleMesh { positions, triangles, mut normals } = mesh;
+        let TriangleMesh {
+            positions,
+            triangles,
+            mut normals,
+        } = mesh;
         let boxes: Vec<Aabb> = triangles
             .iter()
             .map(|t| {
-                let (a, b, c) = (positions[t[0] as usize], positions[t[1] as usize], positions[t[2] as usize]);
+                let (a, b, c) = (
+                    positions[t[0] as usize],
+                    positions[t[1] as usize],
+                    positions[t[2] as usize],
+                );
                 aabb(a.min(b).min(c), a.max(b).max(c))
             })
             .collect();
-        let mut bvh = bvh::build(&boxes, BvhBuildParams::medium_build());
+        let mut bvh = bvh::build(
+            &boxes,
+            BvhBuildParams {
+                max_prims_per_leaf: 2,
+                ..BvhBuildParams::medium_build()
+            },
+        );
         // Reorder the triangles into leaf order so leaves index them directly.
-        let triangles: Vec<[u32; 3]> = bvh.primitive_indices.iter().map(|&i| triangles[i as usize]).collect();
+        let triangles: Vec<[u32; 3]> = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| triangles[i as usize])
+            .collect();
         for (i, p) in bvh.primitive_indices.iter_mut().enumerate() {
             *p = i as u32;
         }
         match shading {
             Shading::Flat => normals = None,
             Shading::Smooth if normals.is_none() => {
-                let mut m = TriangleMesh { positions: positions.clone(), triangles: triangles.clone(), normals: None };
+                let mut m = TriangleMesh {
+                    positions: positions.clone(),
+                    triangles: triangles.clone(),
+                    normals: None,
+                };
                 m.compute_vertex_normals();
                 normals = m.normals;
             }
@@ -100,7 +113,11 @@ impl MeshGeometry {
     #[inline]
     fn corners(&self, i: u32) -> [Vec3; 3] {
         let t = self.triangles[i as usize];
-        [self.positions[t[0] as usize], self.positions[t[1] as usize], self.positions[t[2] as usize]]
+        [
+            self.positions[t[0] as usize],
+            self.positions[t[1] as usize],
+            self.positions[t[2] as usize],
+        ]
     }
 }
 
@@ -127,7 +144,9 @@ impl Geometry for MeshGeometry {
         let mut n = geometric;
         if let Some(normals) = &self.normals {
             let t = self.triangles[i as usize];
-            let s = normals[t[0] as usize] * h.bary[0] + normals[t[1] as usize] * h.bary[1] + normals[t[2] as usize] * h.bary[2];
+            let s = normals[t[0] as usize] * h.bary[0]
+                + normals[t[1] as usize] * h.bary[1]
+                + normals[t[2] as usize] * h.bary[2];
             // Keep the side the geometric normal is on, so inside/outside stays consistent.
             if s.dot(geometric) > 0.0 {
                 n = s;
@@ -135,7 +154,9 @@ impl Geometry for MeshGeometry {
         }
         let point = ray.at(h.t);
         let local_point = local.at(h.t);
-        let m = max_abs(point).max(max_abs(ray.origin)).max(max_abs(local_point) * self.transform.max_scale);
+        let m = max_abs(point)
+            .max(max_abs(ray.origin))
+            .max(max_abs(local_point) * self.transform.max_scale);
         Some(Hit {
             t: h.t,
             point,
@@ -166,7 +187,10 @@ impl Geometry for MeshGeometry {
         std::mem::size_of::<Self>()
             + self.positions.capacity() * std::mem::size_of::<Vec3>()
             + self.triangles.capacity() * std::mem::size_of::<[u32; 3]>()
-            + self.normals.as_ref().map_or(0, |n| n.capacity() * std::mem::size_of::<Vec3>())
+            + self
+                .normals
+                .as_ref()
+                .map_or(0, |n| n.capacity() * std::mem::size_of::<Vec3>())
             + bvh::bytes_used(&self.bvh)
             - std::mem::size_of::<Bvh2>()
             + self.label.capacity()
@@ -179,7 +203,11 @@ impl Geometry for MeshGeometry {
             self.triangles.len(),
             self.bvh.nodes.len(),
             self.build_time.as_secs_f64() * 1e3,
-            if self.normals.is_some() { "smooth shading" } else { "flat shading" }
+            if self.normals.is_some() {
+                "smooth shading"
+            } else {
+                "flat shading"
+            }
         )
     }
 }

@@ -10,6 +10,8 @@ use crate::analytic;
 use crate::bvh;
 use crate::geometry::{Aabb, Geometry, Hit, MaterialId, Ray, RayStats, max_abs};
 use crate::march::{MarchHit, MarchParams, gradient_normal, sphere_trace};
+use crate::mesh::TriangleMesh;
+use crate::mesh_geometry::MeshGeometry;
 use crate::scene::Scene;
 use crate::sdf::SdfTree;
 use crate::shape::{Object, ObjectKind, Primitive, grow};
@@ -110,9 +112,10 @@ pub struct SdfObject {
 }
 
 impl SdfObject {
-    /// Compiles `object` for sphere tracing; `why` says why it is sphere traced.
-    pub fn new(object: &Object, march: MarchParams, why: String) -> Self {
-        let tree = SdfTree::new(object);
+    /// Compiles `object` for sphere tracing; `why` says why it is sphere traced. `None`
+    /// when the object holds a mesh.
+    pub fn new(object: &Object, march: MarchParams, why: String) -> Option<Self> {
+        let tree = SdfTree::new(object)?;
         let bounds = object.bounds();
         let size = bounds.map_or(1.0, |b| b.diagonal().length() as f64);
         // March a little beyond the bounds so a hit on the box face is not lost.
@@ -123,13 +126,13 @@ impl SdfObject {
                     + f32_error(max_abs(b.max.into()).max(max_abs(b.min.into()))),
             )
         });
-        SdfObject {
+        Some(SdfObject {
             tree,
             bounds,
             size,
             march,
             why,
-        }
+        })
     }
 
     /// Whether the distance is exact (false: a Lipschitz-1 bound).
@@ -351,25 +354,38 @@ pub fn build_objects(scene: &Scene, repr: Representation) -> Vec<Box<dyn Geometr
         .objects
         .iter()
         .map(|o| -> Box<dyn Geometry> {
-            match (repr, &o.kind) {
-                (Representation::Analytic { .. }, ObjectKind::Primitive(p)) => {
-                    Box::new(AnalyticObject::new(*p, o))
+            let (march, why) = match repr {
+                Representation::Analytic { march } => {
+                    if let ObjectKind::Primitive(p) = &o.kind {
+                        return Box::new(AnalyticObject::new(*p, o));
+                    }
+                    let kind = o.kind_name();
+                    (
+                        march,
+                        format!(
+                            "{kind} '{}': sphere traced (no closed form for {kind})",
+                            o.label
+                        ),
+                    )
                 }
-                (Representation::Analytic { march }, _) => Box::new(SdfObject::new(
-                    o,
-                    march,
-                    format!(
-                        "{} '{}': sphere traced (no closed form for {})",
-                        o.kind_name(),
-                        o.label,
-                        o.kind_name()
-                    ),
-                )),
-                (Representation::Sdf { march }, _) => Box::new(SdfObject::new(
-                    o,
+                Representation::Sdf { march } => (
                     march,
                     format!("{} '{}': sphere traced", o.kind_name(), o.label),
-                )),
+                ),
+            };
+            if let ObjectKind::Mesh { mesh, shading, .. } = &o.kind {
+                // A mesh is traced as triangles in every representation until grids exist.
+                return Box::new(MeshGeometry::new(
+                    TriangleMesh::clone(mesh),
+                    *shading,
+                    o.compiled_transform(),
+                    o.material,
+                    o.label.clone(),
+                ));
+            }
+            match SdfObject::new(o, march, why) {
+                Some(s) => Box::new(s),
+                None => unreachable!("only top-level objects hold meshes"),
             }
         })
         .collect()

@@ -61,7 +61,13 @@ pub fn primitive_distance_f64(prim: &Primitive, p: DVec3) -> f64 {
             let (a, b) = (a.as_dvec3(), b.as_dvec3());
             let pa = p - a;
             let ba = b - a;
-            let h = (pa.dot(ba) / ba.dot(ba)).clamp(0.0, 1.0);
+            // A capsule with a == b is a sphere (no 0/0).
+            let bb = ba.dot(ba);
+            let h = if bb > 0.0 {
+                (pa.dot(ba) / bb).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
             (pa - ba * h).length() - radius as f64
         }
     }
@@ -159,13 +165,18 @@ pub struct SdfTree {
 }
 
 impl SdfTree {
-    /// Compiles an object tree.
-    pub fn new(object: &Object) -> Self {
+    /// Compiles an object tree; `None` when it holds a mesh.
+    pub fn new(object: &Object) -> Option<Self> {
         let mut exact = true;
         let mut node_count = 0;
-        let root = compile(object, &mut exact, &mut node_count);
+        let root = compile(object, &mut exact, &mut node_count)?;
         let signed = !contains_triangle(object);
-        SdfTree { root, exact, signed, node_count }
+        Some(SdfTree {
+            root,
+            exact,
+            signed,
+            node_count,
+        })
     }
 
     /// Signed distance (or a Lipschitz-1 lower bound of it) at world point `p`.
@@ -191,16 +202,19 @@ fn contains_triangle(object: &Object) -> bool {
         ObjectKind::Primitive(p) => matches!(p, Primitive::Triangle { .. }),
         ObjectKind::Csg { children, .. } => children.iter().any(contains_triangle),
         ObjectKind::Repeat { child, .. } => contains_triangle(child),
+        ObjectKind::Mesh { .. } => true,
     }
 }
 
-fn compile(object: &Object, exact: &mut bool, count: &mut usize) -> SdfNode {
+/// Compiles `object`, or `None` when it holds a mesh (meshes have no analytic SDF).
+fn compile(object: &Object, exact: &mut bool, count: &mut usize) -> Option<SdfNode> {
     *count += 1;
     let transform = object.compiled_transform();
     if !transform.is_uniform() {
         *exact = false;
     }
-    match &object.kind {
+    Some(match &object.kind {
+        ObjectKind::Mesh { .. } => return None,
         ObjectKind::Primitive(prim) => {
             if !primitive_is_exact(prim) {
                 *exact = false;
@@ -217,7 +231,10 @@ fn compile(object: &Object, exact: &mut bool, count: &mut usize) -> SdfNode {
             if !matches!(op, CsgOp::Union) {
                 *exact = false;
             }
-            let children = children.iter().map(|c| compile(c, exact, count)).collect();
+            let children = children
+                .iter()
+                .map(|c| compile(c, exact, count))
+                .collect::<Option<_>>()?;
             SdfNode::Csg {
                 op: *op,
                 children,
@@ -230,7 +247,7 @@ fn compile(object: &Object, exact: &mut bool, count: &mut usize) -> SdfNode {
             child,
         } => {
             *exact = false;
-            let child = Box::new(compile(child, exact, count));
+            let child = Box::new(compile(child, exact, count)?);
             SdfNode::Repeat {
                 period: *period,
                 count: *reps,
@@ -238,7 +255,7 @@ fn compile(object: &Object, exact: &mut bool, count: &mut usize) -> SdfNode {
                 transform,
             }
         }
-    }
+    })
 }
 
 impl SdfNode {
@@ -423,7 +440,7 @@ mod tests {
         // World point just above the top of a radius-5000 sphere centred at (0, -5001, 0).
         let mut o = obj(ObjectKind::Primitive(Primitive::Sphere { radius: 5000.0 }));
         o.transform.translate = Vec3::new(0.0, -5001.0, 0.0);
-        let tree = SdfTree::new(&o);
+        let tree = SdfTree::new(&o).unwrap();
         for h in [1e-3, 1e-4, 1e-5] {
             let d = tree.distance(DVec3::new(0.0, -1.0 + h, 0.0));
             assert!((d - h).abs() < 1e-8, "{d} vs {h}");
@@ -444,27 +461,31 @@ mod tests {
         let u = SdfTree::new(&obj(ObjectKind::Csg {
             op: CsgOp::Union,
             children: vec![a.clone(), b.clone()],
-        }));
+        }))
+        .unwrap();
         assert_eq!(u.distance_material(DVec3::new(-2.0, 0.0, 0.0)), (1.0, 1));
         assert_eq!(u.distance_material(DVec3::new(3.5, 0.0, 0.0)).1, 2);
         assert!(u.exact);
         let s = SdfTree::new(&obj(ObjectKind::Csg {
             op: CsgOp::Subtraction,
             children: vec![a.clone(), b.clone()],
-        }));
+        }))
+        .unwrap();
         assert!(s.distance(DVec3::new(0.75, 0.0, 0.0)) > 0.0);
         assert!(s.distance(DVec3::new(-0.5, 0.0, 0.0)) < 0.0);
         assert!(!s.exact);
         let i = SdfTree::new(&obj(ObjectKind::Csg {
             op: CsgOp::Intersection,
             children: vec![a.clone(), b.clone()],
-        }));
+        }))
+        .unwrap();
         assert!(i.distance(DVec3::new(0.75, 0.0, 0.0)) < 0.0);
         assert!(i.distance(DVec3::new(-0.5, 0.0, 0.0)) > 0.0);
         let su = SdfTree::new(&obj(ObjectKind::Csg {
             op: CsgOp::SmoothUnion { k: 0.5 },
             children: vec![a, b],
-        }));
+        }))
+        .unwrap();
         // The smooth union fills the waist between the spheres.
         assert!(su.distance(DVec3::new(0.75, 0.75, 0.0)) < u.distance(DVec3::new(0.75, 0.75, 0.0)));
     }
@@ -476,14 +497,16 @@ mod tests {
             period: Vec3::new(2.0, 0.0, 0.0),
             count: None,
             child: Box::new(s.clone()),
-        }));
+        }))
+        .unwrap();
         assert!((inf.distance(DVec3::new(100.0, 0.0, 0.0)) + 0.5).abs() < 1e-4);
         assert!((inf.distance(DVec3::new(101.0, 0.0, 0.0)) - 0.5).abs() < 1e-4);
         let fin = SdfTree::new(&obj(ObjectKind::Repeat {
             period: Vec3::new(2.0, 0.0, 0.0),
             count: Some(UVec3::new(2, 1, 1)),
             child: Box::new(s),
-        }));
+        }))
+        .unwrap();
         // Two copies at x = -1 and x = 1.
         assert!((fin.distance(DVec3::new(1.0, 0.0, 0.0)) + 0.5).abs() < 1e-5);
         assert!((fin.distance(DVec3::new(-1.0, 0.0, 0.0)) + 0.5).abs() < 1e-5);

@@ -2,9 +2,13 @@
 //! closed-form primitives with their parameters in local space, and the object tree
 //! (primitives, CSG nodes, domain repetition) with transforms and materials.
 
+use std::path::PathBuf;
+use std::sync::Arc;
+
 use glam::{UVec3, Vec3};
 
 use crate::geometry::{Aabb, MaterialId, aabb};
+use crate::mesh::TriangleMesh;
 use crate::transform::{Transform, TransformDesc};
 
 /// A primitive in its local frame. All lengths are scene units, finite and > 0 unless
@@ -134,6 +138,25 @@ pub enum ObjectKind {
         count: Option<UVec3>,
         child: Box<Object>,
     },
+    /// A triangle mesh loaded from a file (top level only: meshes have no analytic SDF).
+    Mesh {
+        /// The loaded, validated mesh (shared, never copied per representation).
+        mesh: Arc<TriangleMesh>,
+        /// The file it came from.
+        source: PathBuf,
+        /// Flat or smooth shading.
+        shading: Shading,
+    },
+}
+
+/// How mesh normals are shaded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Shading {
+    /// The triangle's own normal.
+    #[default]
+    Flat,
+    /// Vertex normals interpolated by barycentric weights (computed if the mesh has none).
+    Smooth,
 }
 
 /// A node of the object tree: what it is, where it is and what it is made of.
@@ -161,6 +184,7 @@ impl Object {
             ObjectKind::Primitive(p) => p.kind_name(),
             ObjectKind::Csg { op, .. } => op.name(),
             ObjectKind::Repeat { .. } => "repeat",
+            ObjectKind::Mesh { .. } => "mesh",
         }
     }
 
@@ -168,6 +192,10 @@ impl Object {
     pub fn bounds(&self) -> Option<Aabb> {
         let local = match &self.kind {
             ObjectKind::Primitive(p) => p.local_bounds()?,
+            ObjectKind::Mesh { mesh, .. } => {
+                let (lo, hi) = mesh.bounds()?;
+                aabb(lo, hi)
+            }
             ObjectKind::Csg {
                 op: CsgOp::Intersection | CsgOp::SmoothIntersection { .. },
                 children,
@@ -218,11 +246,6 @@ impl Object {
             }
         };
         Some(self.compiled_transform().box_to_world(&local))
-    }
-
-    /// Whether the object or any of its descendants is not a closed-form primitive.
-    pub fn needs_sphere_tracing(&self) -> bool {
-        !matches!(self.kind, ObjectKind::Primitive(_))
     }
 }
 

@@ -142,7 +142,7 @@ mod tests {
         #[test]
         fn shared_edges_and_vertices_are_watertight(
             ox in -5.0f32..5.0, oy in -5.0f32..5.0, oz in 1.0f32..5.0, s in 0.0f32..=1.0,
-            tilt in -1.0f32..1.0, spin in 0.0f32..6.28, side in prop::bool::ANY,
+            tilt in -1.0f32..1.0, spin in 0.0f32..std::f32::consts::TAU, side in prop::bool::ANY,
         ) {
             let rot = glam::Quat::from_rotation_y(spin) * glam::Quat::from_rotation_x(tilt);
             let corner = |x: f32, y: f32| rot * Vec3::new(x, y, 0.0) + Vec3::new(0.1, -0.2, 0.3);

@@ -14,6 +14,7 @@ use std::fmt;
 use std::marker::PhantomData;
 use std::ops::Range;
 use std::path::Path;
+use std::sync::Arc;
 
 use glam::{DVec3, UVec3, Vec3};
 use serde::Deserialize;
@@ -24,7 +25,7 @@ use toml::de::{DeTable, DeValue};
 use super::{Camera, Light, Material, Scene, Settings};
 use crate::error::{Error, Location, Result};
 use crate::geometry::MaterialId;
-use crate::shape::{CsgOp, Object, ObjectKind, Primitive};
+use crate::shape::{CsgOp, Object, ObjectKind, Primitive, Shading};
 use crate::transform::TransformDesc;
 
 /// Largest accepted image width or height, pixels.
@@ -34,7 +35,8 @@ pub const MAX_IMAGE_SIZE: u32 = 16384;
 pub const MAX_RECURSION_DEPTH: u32 = 100;
 
 /// Every value of an object's `type` key.
-pub const OBJECT_TYPES: [&str; 16] = [
+pub const OBJECT_TYPES: [&str; 17] = [
+    "mesh",
     "sphere",
     "plane",
     "box",
@@ -74,6 +76,7 @@ fn object_type_keys(ty: &str) -> Option<&'static [&'static str]> {
         "union" | "subtraction" | "intersection" => &["children"],
         "smooth_union" | "smooth_subtraction" | "smooth_intersection" => &["children", "blend"],
         "repeat" => &["period", "count", "child"],
+        "mesh" => &["path", "shading"],
         _ => return None,
     })
 }
@@ -438,6 +441,8 @@ struct RawObject {
     count: S<Int3>,
     children: S<Vec<Spanned<Table<RawObject>>>>,
     child: S<Box<Table<RawObject>>>,
+    path: S<String>,
+    shading: S<String>,
 }
 
 /// The names and value spans of the present optional fields of a raw struct.
@@ -458,7 +463,7 @@ impl RawObject {
     fn specific_keys(&self) -> Vec<(&'static str, Range<usize>)> {
         present_keys!(self; radius, normal, offset, point, half_size, radii, height,
             radius_bottom, radius_top, major_radius, minor_radius, a, b, c, blend, period,
-            count, children, child)
+            count, children, child, path, shading)
     }
 }
 
@@ -813,6 +818,7 @@ impl Cx<'_> {
         };
         let req_num = |v, key| need(v, &missing, key);
         let req_v3 = |v, key| need(v, &missing, key);
+        let req_str = |v, key| need(v, &missing, key);
 
         let own_material = match &o.material {
             Some(name) => Some(*materials.by_name.get(name.get_ref()).ok_or_else(|| {
@@ -970,6 +976,47 @@ impl Cx<'_> {
             });
         }
 
+        if ty == "mesh" {
+            let file = req_str(&o.path, "path")?;
+            if at.contains(".child") {
+                return Err(self.err(
+                    o.kind.span(),
+                    format!("{at}: a mesh can only be a top-level object (meshes have no analytic SDF for CSG)"),
+                ));
+            }
+            let shading = match o.shading.as_ref().map(|s| (s.get_ref().as_str(), s.span())) {
+                None | Some(("flat", _)) => Shading::Flat,
+                Some(("smooth", _)) => Shading::Smooth,
+                Some((other, span)) => {
+                    return Err(self.err(
+                        span,
+                        format!(
+                            "{}: must be \"flat\" or \"smooth\", got \"{other}\"",
+                            w("shading")
+                        ),
+                    ));
+                }
+            };
+            // Relative to the scene file's folder.
+            let source = self
+                .path
+                .parent()
+                .unwrap_or(Path::new(""))
+                .join(file.get_ref());
+            let (mesh, _report) = crate::mesh::load_mesh(&source)?;
+            let material = material.unwrap_or_else(|| materials.default_id());
+            return Ok(Object {
+                kind: ObjectKind::Mesh {
+                    mesh: Arc::new(mesh),
+                    source,
+                    shading,
+                },
+                transform,
+                material,
+                label,
+            });
+        }
+
         let kind = if ty == "repeat" {
             let period = req_v3(&o.period, "period")?;
             let pv = period.get_ref().0;
@@ -1057,7 +1104,9 @@ impl Cx<'_> {
         let material = material.unwrap_or(match &kind {
             ObjectKind::Csg { children, .. } => children[0].material,
             ObjectKind::Repeat { child, .. } => child.material,
-            ObjectKind::Primitive(_) => unreachable!("primitives returned above"),
+            ObjectKind::Primitive(_) | ObjectKind::Mesh { .. } => {
+                unreachable!("primitives and meshes returned above")
+            }
         });
         Ok(Object {
             kind,

@@ -133,3 +133,68 @@ pub struct Scene {
     /// Top-level objects.
     pub objects: Vec<Object>,
 }
+
+/// A scene that shows one mesh: a camera framing its bounding box from the front and a
+/// little above (+z towards the viewer, +y up), an ambient light, a key point light near the
+/// camera and a directional fill light, and one grey Phong material. Used by
+/// `toolkit render MESH_FILE` so a mesh can be seen without writing a scene file.
+pub fn mesh_preview_scene(
+    mesh: std::sync::Arc<crate::mesh::TriangleMesh>,
+    source: std::path::PathBuf,
+    shading: crate::shape::Shading,
+) -> Scene {
+    let (lo, hi) = mesh.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::ONE));
+    let centre = 0.5 * (lo + hi);
+    let radius = (0.5 * (hi - lo).length()).max(1e-6);
+    let fov_y_deg: f32 = 40.0;
+    let distance = radius / (0.5 * fov_y_deg).to_radians().sin() * 1.05;
+    let view = Vec3::new(0.35, 0.3, 1.0).normalize();
+    let position = centre + view * distance;
+    let label = source
+        .file_name()
+        .map_or_else(|| "mesh".into(), |n| n.to_string_lossy().into_owned());
+    Scene {
+        camera: Camera {
+            position,
+            forward: -view,
+            up: Vec3::Y,
+            fov_y_deg,
+            width: 500,
+            height: 500,
+        },
+        settings: Settings {
+            max_distance: 4.0 * distance + 4.0 * radius,
+            ..Settings::default()
+        },
+        lights: vec![
+            Light::Ambient { intensity: 0.15 },
+            Light::Point {
+                position: centre + Vec3::new(-0.6, 0.9, 0.8).normalize() * distance,
+                intensity: 0.7,
+                color: Vec3::ONE,
+            },
+            Light::Directional {
+                direction: Vec3::new(0.5, -0.3, -0.6).normalize(),
+                intensity: 0.25,
+                color: Vec3::ONE,
+            },
+        ],
+        materials: vec![Material {
+            name: "preview".into(),
+            color: Vec3::new(0.75, 0.72, 0.68),
+            ks: 0.3,
+            shininess: Some(40.0),
+            ..Material::default()
+        }],
+        objects: vec![Object {
+            kind: crate::shape::ObjectKind::Mesh {
+                mesh,
+                source,
+                shading,
+            },
+            transform: crate::transform::TransformDesc::default(),
+            material: 0,
+            label,
+        }],
+    }
+}
