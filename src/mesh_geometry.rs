@@ -31,6 +31,14 @@ pub struct MeshGeometry {
 }
 
 impl MeshGeometry {
+    /// The BVH build parameters used by [`MeshGeometry::new`], chosen by measurement
+    /// (see the README's benchmark section): PLOC with reinsertion, at most two triangles
+    /// per leaf.
+    pub const BUILD_PARAMS: BvhBuildParams = BvhBuildParams {
+        max_prims_per_leaf: 2,
+        ..BvhBuildParams::medium_build()
+    };
+
     /// Builds the BVH of `mesh` (which must satisfy the `TriangleMesh` invariants).
     pub fn new(
         mesh: TriangleMesh,
@@ -38,6 +46,25 @@ impl MeshGeometry {
         transform: Transform,
         material: MaterialId,
         label: String,
+    ) -> Self {
+        Self::with_params(
+            mesh,
+            shading,
+            transform,
+            material,
+            label,
+            Self::BUILD_PARAMS,
+        )
+    }
+
+    /// [`MeshGeometry::new`] with explicit BVH build parameters (for benchmarks).
+    pub fn with_params(
+        mesh: TriangleMesh,
+        shading: Shading,
+        transform: Transform,
+        material: MaterialId,
+        label: String,
+        params: BvhBuildParams,
     ) -> Self {
         let start = Instant::now();
         let TriangleMesh {
@@ -56,13 +83,7 @@ impl MeshGeometry {
                 aabb(a.min(b).min(c), a.max(b).max(c))
             })
             .collect();
-        let mut bvh = bvh::build(
-            &boxes,
-            BvhBuildParams {
-                max_prims_per_leaf: 2,
-                ..BvhBuildParams::medium_build()
-            },
-        );
+        let mut bvh = bvh::build(&boxes, params);
         // Reorder the triangles into leaf order so leaves index them directly.
         let triangles: Vec<[u32; 3]> = bvh
             .primitive_indices
