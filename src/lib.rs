@@ -19,6 +19,7 @@ pub mod repr;
 pub mod scene;
 pub mod sdf;
 pub mod shape;
+pub mod tessellate;
 pub mod tracer;
 pub mod transform;
 pub mod triangle;

@@ -1290,3 +1290,41 @@ fn thesis_scene_values() {
     };
     assert!(close(direction, -Vec3::new(1.0, 4.0, 4.0).normalize()));
 }
+
+#[test]
+fn mesh_objects_load_relative_to_the_scene_and_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("tri.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
+    )
+    .unwrap();
+    let scene_path = dir.path().join("s.toml");
+    let text = "[[objects]]\ntype = \"mesh\"\npath = \"tri.obj\"\nshading = \"smooth\"\n";
+    std::fs::write(&scene_path, text).unwrap();
+    let scene = load_scene(&scene_path).unwrap();
+    match &scene.objects[0].kind {
+        ObjectKind::Mesh { mesh, shading, .. } => {
+            assert_eq!(mesh.triangles.len(), 4);
+            assert_eq!(*shading, sdfmesh::shape::Shading::Smooth);
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(scene.objects[0].bounds().is_some());
+    // A missing mesh file names the mesh file.
+    std::fs::write(&scene_path, text.replace("tri.obj", "nope.obj")).unwrap();
+    let err = load_scene(&scene_path).unwrap_err();
+    assert!(err.to_string().contains("nope.obj"), "{err}");
+    assert_eq!(err.exit_code(), 2);
+    // Meshes cannot be CSG children; bad shading names the key.
+    let nested = "[[objects]]\ntype = \"union\"\n[[objects.children]]\ntype = \"mesh\"\npath = \"tri.obj\"\n";
+    std::fs::write(&scene_path, nested).unwrap();
+    let err = load_scene(&scene_path).unwrap_err().to_string();
+    assert!(err.contains("top-level"), "{err}");
+    std::fs::write(&scene_path, text.replace("smooth", "glossy")).unwrap();
+    let err = load_scene(&scene_path).unwrap_err().to_string();
+    assert!(
+        err.contains("s.toml:4:") && err.contains("shading"),
+        "{err}"
+    );
+}
