@@ -22,13 +22,7 @@ const INF: f64 = f64::INFINITY;
 /// keeps its meaning) with `prim`, for `t` in `[t_min, t_max]`. Returns `t` and the outward
 /// local-space normal (unit length). Rays starting inside a solid return the exit point.
 /// Never returns NaN; returns `None` on a miss.
-pub fn intersect(
-    prim: &Primitive,
-    o: Vec3,
-    d: Vec3,
-    t_min: f32,
-    t_max: f32,
-) -> Option<(f32, Vec3)> {
+pub fn intersect(prim: &Primitive, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> Option<(f32, Vec3)> {
     intersect_f64(prim, o.as_dvec3(), d.as_dvec3(), t_min, t_max)
 }
 
@@ -42,13 +36,7 @@ pub fn occluded(prim: &Primitive, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> b
 /// its origin (about 2.4e-4 for coordinates near 5000, the centre distance of the classic
 /// ground sphere); callers that can map the origin into local space in f64 keep the hit
 /// point on the surface to about 1e-9 instead.
-pub fn intersect_f64(
-    prim: &Primitive,
-    o: DVec3,
-    d: DVec3,
-    t_min: f32,
-    t_max: f32,
-) -> Option<(f32, Vec3)> {
+pub fn intersect_f64(prim: &Primitive, o: DVec3, d: DVec3, t_min: f32, t_max: f32) -> Option<(f32, Vec3)> {
     hit::<true>(prim, o, d, t_min, t_max).map(|(t, n)| (t, n.as_vec3()))
 }
 
@@ -72,34 +60,17 @@ fn hit<const NORMAL: bool>(
     let (lo, hi) = (t_min as f64, t_max as f64);
     let (t, n) = match *prim {
         Primitive::Sphere { radius } => sphere::<NORMAL>(o, d, radius as f64, lo, hi),
-        Primitive::Plane { normal, offset } => {
-            plane(o, d, normal.as_dvec3(), offset as f64, lo, hi)
-        }
+        Primitive::Plane { normal, offset } => plane(o, d, normal.as_dvec3(), offset as f64, lo, hi),
         Primitive::Box { half } => box_hit::<NORMAL>(o, d, half.as_dvec3(), lo, hi),
         Primitive::Ellipsoid { radii } => ellipsoid::<NORMAL>(o, d, radii.as_dvec3(), lo, hi),
-        Primitive::Cylinder {
-            radius,
-            half_height,
-        } => cylinder::<NORMAL>(o, d, radius as f64, half_height as f64, lo, hi),
-        Primitive::Cone {
-            radius_bottom,
-            radius_top,
-            half_height,
-        } => cone::<NORMAL>(
-            o,
-            d,
-            radius_bottom as f64,
-            radius_top as f64,
-            half_height as f64,
-            lo,
-            hi,
-        ),
-        Primitive::Torus { major, minor } => {
-            torus::<NORMAL>(o, d, major as f64, minor as f64, lo, hi)
+        Primitive::Cylinder { radius, half_height } => {
+            cylinder::<NORMAL>(o, d, radius as f64, half_height as f64, lo, hi)
         }
-        Primitive::Triangle { a, b, c } => {
-            triangle(o, d, a.as_dvec3(), b.as_dvec3(), c.as_dvec3(), lo, hi)
+        Primitive::Cone { radius_bottom, radius_top, half_height } => {
+            cone::<NORMAL>(o, d, radius_bottom as f64, radius_top as f64, half_height as f64, lo, hi)
         }
+        Primitive::Torus { major, minor } => torus::<NORMAL>(o, d, major as f64, minor as f64, lo, hi),
+        Primitive::Triangle { a, b, c } => triangle(o, d, a.as_dvec3(), b.as_dvec3(), c.as_dvec3(), lo, hi),
         Primitive::Capsule { a, b, radius } => {
             capsule::<NORMAL>(o, d, a.as_dvec3(), b.as_dvec3(), radius as f64, lo, hi)
         }
@@ -118,11 +89,7 @@ fn hit<const NORMAL: bool>(
 #[inline]
 fn unit_or(v: DVec3, fallback: DVec3) -> DVec3 {
     let l2 = v.length_squared();
-    if l2 > 0.0 && l2.is_finite() {
-        v / l2.sqrt()
-    } else {
-        fallback
-    }
+    if l2 > 0.0 && l2.is_finite() { v / l2.sqrt() } else { fallback }
 }
 
 /// Both roots, ascending, of `a t^2 + 2 b t + c` (half-`b` form) given its quarter
@@ -160,11 +127,7 @@ fn sphere_span(o: DVec3, d: DVec3, r: f64) -> Option<(f64, f64)> {
 #[inline]
 fn slab(o: f64, d: f64, h: f64) -> Option<(f64, f64)> {
     if d == 0.0 {
-        if o < -h || o > h {
-            None
-        } else {
-            Some((-INF, INF))
-        }
+        if o < -h || o > h { None } else { Some((-INF, INF)) }
     } else {
         let ta = (-h - o) / d;
         let tb = (h - o) / d;
@@ -213,30 +176,16 @@ fn infinite_cylinder_span(o: DVec3, d: DVec3, axis: DVec3, r: f64) -> Option<(f6
 fn sphere<const N: bool>(o: DVec3, d: DVec3, r: f64, lo: f64, hi: f64) -> Option<(f64, DVec3)> {
     let (t0, t1) = sphere_span(o, d, r)?;
     let (t, _) = first_crossing(t0, t1, lo, hi)?;
-    let n = if N {
-        unit_or(o + d * t, DVec3::Y)
-    } else {
-        DVec3::ZERO
-    };
+    let n = if N { unit_or(o + d * t, DVec3::Y) } else { DVec3::ZERO };
     Some((t, n))
 }
 
-fn ellipsoid<const N: bool>(
-    o: DVec3,
-    d: DVec3,
-    radii: DVec3,
-    lo: f64,
-    hi: f64,
-) -> Option<(f64, DVec3)> {
+fn ellipsoid<const N: bool>(o: DVec3, d: DVec3, radii: DVec3, lo: f64, hi: f64) -> Option<(f64, DVec3)> {
     // Dividing by the radii maps the ellipsoid to the unit sphere and keeps t.
     let inv = radii.recip();
     let (t0, t1) = sphere_span(o * inv, d * inv, 1.0)?;
     let (t, _) = first_crossing(t0, t1, lo, hi)?;
-    let n = if N {
-        unit_or((o + d * t) * inv * inv, DVec3::Y)
-    } else {
-        DVec3::ZERO
-    };
+    let n = if N { unit_or((o + d * t) * inv * inv, DVec3::Y) } else { DVec3::ZERO };
     Some((t, n))
 }
 
@@ -249,13 +198,7 @@ fn plane(o: DVec3, d: DVec3, normal: DVec3, offset: f64, lo: f64, hi: f64) -> Op
     (t >= lo && t <= hi).then(|| (t, unit_or(normal, DVec3::Y)))
 }
 
-fn box_hit<const N: bool>(
-    o: DVec3,
-    d: DVec3,
-    half: DVec3,
-    lo: f64,
-    hi: f64,
-) -> Option<(f64, DVec3)> {
+fn box_hit<const N: bool>(o: DVec3, d: DVec3, half: DVec3, lo: f64, hi: f64) -> Option<(f64, DVec3)> {
     let mut t0 = -INF;
     let mut t1 = INF;
     // Axis of the entered and exited face; ties go to the lowest axis.
@@ -299,14 +242,7 @@ fn box_hit<const N: bool>(
     Some((t, n))
 }
 
-fn cylinder<const N: bool>(
-    o: DVec3,
-    d: DVec3,
-    r: f64,
-    h: f64,
-    lo: f64,
-    hi: f64,
-) -> Option<(f64, DVec3)> {
+fn cylinder<const N: bool>(o: DVec3, d: DVec3, r: f64, h: f64, lo: f64, hi: f64) -> Option<(f64, DVec3)> {
     let (c0, c1) = infinite_cylinder_span(o, d, DVec3::Y, r)?;
     let (s0, s1) = slab(o.y, d.y, h)?;
     // The side wins ties at the rim (deterministic).
@@ -448,11 +384,7 @@ fn capsule<const N: bool>(
     let (t, _) = first_crossing(t0, t1, lo, hi)?;
     let n = if N {
         let pa = o + d * t - a;
-        let h = if len2 > 0.0 {
-            (pa.dot(ba) / len2).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
+        let h = if len2 > 0.0 { (pa.dot(ba) / len2).clamp(0.0, 1.0) } else { 0.0 };
         unit_or(pa - ba * h, DVec3::Y)
     } else {
         DVec3::ZERO
@@ -461,15 +393,7 @@ fn capsule<const N: bool>(
 }
 
 /// Two-sided Möller–Trumbore in f64. The normal has the triangle's fixed orientation.
-fn triangle(
-    o: DVec3,
-    d: DVec3,
-    a: DVec3,
-    b: DVec3,
-    c: DVec3,
-    lo: f64,
-    hi: f64,
-) -> Option<(f64, DVec3)> {
+fn triangle(o: DVec3, d: DVec3, a: DVec3, b: DVec3, c: DVec3, lo: f64, hi: f64) -> Option<(f64, DVec3)> {
     let e1 = b - a;
     let e2 = c - a;
     let pv = d.cross(e2);
@@ -529,12 +453,7 @@ fn torus<const N: bool>(
     }
     let len = d.length();
     let scale = 1.0 / outer;
-    let quartic = TorusQuartic::new(
-        (o + d * start) * scale,
-        d / len,
-        major * scale,
-        minor * scale,
-    );
+    let quartic = TorusQuartic::new((o + d * start) * scale, d / len, major * scale, minor * scale);
     let s = quartic.first_root((end - start) * len * scale)?;
     let t = (start + s * outer / len).min(end);
     let n = if N { quartic.normal(s) } else { DVec3::ZERO };
@@ -556,14 +475,7 @@ struct TorusQuartic {
 
 impl TorusQuartic {
     fn new(p: DVec3, e: DVec3, big: f64, small: f64) -> Self {
-        TorusQuartic {
-            p,
-            e,
-            big,
-            small,
-            k: (big - small) * (big + small),
-            four_r2: 4.0 * big * big,
-        }
+        TorusQuartic { p, e, big, small, k: (big - small) * (big + small), four_r2: 4.0 * big * big }
     }
 
     #[inline]
@@ -589,8 +501,7 @@ impl TorusQuartic {
         let xe = x.dot(self.e);
         let e = self.e;
         let df = 4.0 * q * xe - 2.0 * self.four_r2 * (x.x * e.x + x.z * e.z);
-        let ddf = 8.0 * xe * xe + 4.0 * q * e.length_squared()
-            - 2.0 * self.four_r2 * (e.x * e.x + e.z * e.z);
+        let ddf = 8.0 * xe * xe + 4.0 * q * e.length_squared() - 2.0 * self.four_r2 * (e.x * e.x + e.z * e.z);
         (df, ddf)
     }
 
@@ -600,8 +511,8 @@ impl TorusQuartic {
         // a = p.e and b = |p|^2 + R^2 - r^2 (|e| = 1).
         let alpha = self.p.dot(self.e);
         let beta = self.p.length_squared() + self.k;
-        let c2 = 4.0 * alpha * alpha + 2.0 * beta
-            - self.four_r2 * (self.e.x * self.e.x + self.e.z * self.e.z);
+        let c2 =
+            4.0 * alpha * alpha + 2.0 * beta - self.four_r2 * (self.e.x * self.e.x + self.e.z * self.e.z);
         let mut knots = [0.0; 4];
         let mut nk = 1;
         let disc = 36.0 * alpha * alpha - 6.0 * c2;
@@ -639,11 +550,7 @@ impl TorusQuartic {
             let root = if fu == 0.0 {
                 Some(u)
             } else if (fu < 0.0) != (fv < 0.0) {
-                Some(if fv == 0.0 {
-                    v
-                } else {
-                    bracketed_root(|s| self.value(s), u, v, fu)
-                })
+                Some(if fv == 0.0 { v } else { bracketed_root(|s| self.value(s), u, v, fu) })
             } else if fv == 0.0 {
                 Some(v)
             } else {
@@ -702,11 +609,7 @@ fn bracketed_root(f: impl Fn(f64) -> (f64, f64), mut a: f64, mut b: f64, fa: f64
             b = x;
         }
         let newton = x - fx / dfx;
-        let next = if newton > a && newton < b {
-            newton
-        } else {
-            0.5 * (a + b)
-        };
+        let next = if newton > a && newton < b { newton } else { 0.5 * (a + b) };
         if (next - x).abs() <= 1e-15 * (1.0 + x.abs()) {
             return next;
         }
@@ -726,15 +629,11 @@ mod tests {
     // ---------------------------------------------------------------- oracle helpers
 
     fn size(prim: &Primitive) -> f32 {
-        prim.local_bounds()
-            .map(|b| Vec3::from(b.max - b.min).length())
-            .unwrap_or(1.0)
+        prim.local_bounds().map(|b| Vec3::from(b.max - b.min).length()).unwrap_or(1.0)
     }
 
     fn centre(prim: &Primitive) -> Vec3 {
-        prim.local_bounds()
-            .map(|b| Vec3::from(b.min + b.max) * 0.5)
-            .unwrap_or(Vec3::ZERO)
+        prim.local_bounds().map(|b| Vec3::from(b.min + b.max) * 0.5).unwrap_or(Vec3::ZERO)
     }
 
     fn is_solid(prim: &Primitive) -> bool {
@@ -770,34 +669,22 @@ mod tests {
                 let near = (0..3).filter(|&i| p[i].abs() > half[i] - eps).count();
                 near < 2
             }
-            Primitive::Cylinder {
-                radius,
-                half_height,
-            } => !(rho > radius - eps && p.y.abs() > half_height - eps),
-            Primitive::Cone {
-                radius_bottom,
-                radius_top,
-                half_height,
-            } => {
+            Primitive::Cylinder { radius, half_height } => {
+                !(rho > radius - eps && p.y.abs() > half_height - eps)
+            }
+            Primitive::Cone { radius_bottom, radius_top, half_height } => {
                 let r_end = if p.y > 0.0 { radius_top } else { radius_bottom };
                 let near_rim = p.y.abs() > half_height - eps && rho > r_end - eps;
                 let apex_dist = |r: f32, y: f32| {
-                    if r == 0.0 {
-                        (p - Vec3::new(0.0, y, 0.0)).length()
-                    } else {
-                        f32::INFINITY
-                    }
+                    if r == 0.0 { (p - Vec3::new(0.0, y, 0.0)).length() } else { f32::INFINITY }
                 };
-                let near_apex = apex_dist(radius_top, half_height)
-                    .min(apex_dist(radius_bottom, -half_height))
-                    < 5e-2 * s;
+                let near_apex =
+                    apex_dist(radius_top, half_height).min(apex_dist(radius_bottom, -half_height)) < 5e-2 * s;
                 !near_rim && !near_apex
             }
             Primitive::Torus { .. } => rho > 5e-2 * s,
             Primitive::Triangle { a, b, c } => {
-                segment_distance(p, a, b)
-                    .min(segment_distance(p, b, c))
-                    .min(segment_distance(p, c, a))
+                segment_distance(p, a, b).min(segment_distance(p, b, c)).min(segment_distance(p, c, a))
                     > 2.0 * eps
             }
             _ => true,
@@ -841,13 +728,7 @@ mod tests {
     }
 
     /// The part of `[t_min, t_max]` worth examining: inside the bounds grown by 5 %.
-    fn examined_span(
-        prim: &Primitive,
-        o: Vec3,
-        d: Vec3,
-        t_min: f32,
-        t_max: f32,
-    ) -> Option<(f32, f32)> {
+    fn examined_span(prim: &Primitive, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> Option<(f32, f32)> {
         match prim.local_bounds() {
             Some(b) => {
                 let g = 0.05 * size(prim);
@@ -921,17 +802,9 @@ mod tests {
                 // Missing is wrong when the ray crosses the surface: both clearly inside and
                 // clearly outside somewhere along it.
                 if is_solid(prim) && m < -1e-4 * s && top > 1e-4 * s {
-                    return Err(format!(
-                        "missed a ray that crosses the surface (min {m}): {}",
-                        ctx()
-                    ));
+                    return Err(format!("missed a ray that crosses the surface (min {m}): {}", ctx()));
                 }
-                if let Primitive::Triangle {
-                    a: va,
-                    b: vb,
-                    c: vc,
-                } = *prim
-                {
+                if let Primitive::Triangle { a: va, b: vb, c: vc } = *prim {
                     // Zero thickness: sphere tracing cannot tell a graze from a crossing, so
                     // check where the ray crosses the plane: not inside the triangle (up to
                     // rounding at the edges).
@@ -944,10 +817,7 @@ mod tests {
                             .min(segment_distance(x, vb, vc))
                             .min(segment_distance(x, vc, va));
                         if inside && edge > 1e-4 * s {
-                            return Err(format!(
-                                "missed a ray through the interior at t={tc}: {}",
-                                ctx()
-                            ));
+                            return Err(format!("missed a ray through the interior at t={tc}: {}", ctx()));
                         }
                     }
                 } else {
@@ -956,10 +826,7 @@ mod tests {
                     if let Some(tm) = march(prim, o, d, a, b, 1e-4 * s).filter(|_| start_outside)
                         && (m < -1e-4 * s || m > 1e-3 * s)
                     {
-                        return Err(format!(
-                            "sphere tracing finds a surface at t={tm}: {}",
-                            ctx()
-                        ));
+                        return Err(format!("sphere tracing finds a surface at t={tm}: {}", ctx()));
                     }
                 }
             }
@@ -980,18 +847,9 @@ mod tests {
     }
 
     fn ray_spec() -> impl Strategy<Value = RaySpec> {
-        let v = || {
-            (fr(-1.0, 1.0), fr(-1.0, 1.0), fr(-1.0, 1.0)).prop_map(|(x, y, z)| Vec3::new(x, y, z))
-        };
+        let v = || (fr(-1.0, 1.0), fr(-1.0, 1.0), fr(-1.0, 1.0)).prop_map(|(x, y, z)| Vec3::new(x, y, z));
         (v(), fr(0.6, 2.5), v(), fr(0.3, 3.0), 0u8..4, fr(0.0, 1.0)).prop_map(
-            |(from, dist, target, dscale, range, tval)| RaySpec {
-                from,
-                dist,
-                target,
-                dscale,
-                range,
-                tval,
-            },
+            |(from, dist, target, dscale, range, tval)| RaySpec { from, dist, target, dscale, range, tval },
         )
     }
 
@@ -999,10 +857,7 @@ mod tests {
     fn make_ray(prim: &Primitive, r: &RaySpec) -> (Vec3, Vec3, f32, f32) {
         let s = size(prim);
         let c = centre(prim);
-        let ext = prim
-            .local_bounds()
-            .map(|b| Vec3::from(b.max - b.min))
-            .unwrap_or(Vec3::ONE);
+        let ext = prim.local_bounds().map(|b| Vec3::from(b.max - b.min)).unwrap_or(Vec3::ONE);
         let o = c + r.from.try_normalize().unwrap_or(Vec3::X) * (r.dist * s);
         let target = c + r.target * 0.7 * ext;
         let d = (target - o).try_normalize().unwrap_or(-Vec3::X) * r.dscale;
@@ -1039,11 +894,7 @@ mod tests {
     }
 
     fn cfg() -> ProptestConfig {
-        ProptestConfig {
-            cases: 1000,
-            failure_persistence: None,
-            ..ProptestConfig::default()
-        }
+        ProptestConfig { cases: 1000, failure_persistence: None, ..ProptestConfig::default() }
     }
 
     // ---------------------------------------------------------------- property tests
@@ -1182,11 +1033,7 @@ mod tests {
 
         fn unit(&mut self) -> DVec3 {
             loop {
-                let v = DVec3::new(
-                    self.range(-1.0, 1.0),
-                    self.range(-1.0, 1.0),
-                    self.range(-1.0, 1.0),
-                );
+                let v = DVec3::new(self.range(-1.0, 1.0), self.range(-1.0, 1.0), self.range(-1.0, 1.0));
                 let l = v.length();
                 if l > 0.1 && l <= 1.0 {
                     return v / l;
@@ -1199,18 +1046,9 @@ mod tests {
     fn sphere_grazing_tangent_rays() {
         let r = 1.5f32;
         let prim = Primitive::Sphere { radius: r };
-        for &(dir, off) in &[
-            (Vec3::X, Vec3::Y),
-            (Vec3::Z, Vec3::X),
-            (Vec3::new(1.0, 1.0, 0.0), Vec3::Z),
-        ] {
+        for &(dir, off) in &[(Vec3::X, Vec3::Y), (Vec3::Z, Vec3::X), (Vec3::new(1.0, 1.0, 0.0), Vec3::Z)] {
             let dn = dir.normalize();
-            for &(delta, hits) in &[
-                (-1e-4f32, true),
-                (-1e-5, true),
-                (1e-5, false),
-                (1e-4, false),
-            ] {
+            for &(delta, hits) in &[(-1e-4f32, true), (-1e-5, true), (1e-5, false), (1e-4, false)] {
                 let o = -dn * 10.0 + off * (r + delta);
                 let res = check_ray(&prim, o, dn * 0.7, 0.0, f32::INFINITY).unwrap();
                 assert_eq!(res.is_some(), hits, "delta {delta} dir {dir:?}");
@@ -1228,28 +1066,19 @@ mod tests {
     #[test]
     fn ground_sphere_at_grazing_angles() {
         let radius = 5000.0f64;
-        let prim = Primitive::Sphere {
-            radius: radius as f32,
-        };
+        let prim = Primitive::Sphere { radius: radius as f32 };
         let centre = DVec3::new(0.0, -5001.0, 0.0);
         let mut rng = Rng(0x9e3779b97f4a7c15);
         let (mut hits, mut misses) = (0, 0);
         for i in 0..20_000 {
             // World origins on a 1/1024 grid, so that the f32 local origin is exact.
             let q = |v: f64| (v * 1024.0).round() / 1024.0;
-            let ow = DVec3::new(
-                q(rng.range(-3.0, 3.0)),
-                q(rng.range(-0.9, 3.0)),
-                q(rng.range(-3.0, 3.0)),
-            );
+            let ow = DVec3::new(q(rng.range(-3.0, 3.0)), q(rng.range(-0.9, 3.0)), q(rng.range(-3.0, 3.0)));
             let phi = rng.range(0.0, std::f64::consts::TAU);
             // Around the horizon dip (about sqrt(2 h / R) = 0.02 rad for h = 1).
             let theta = rng.range(-0.08, 0.01);
-            let dw = DVec3::new(
-                theta.cos() * phi.cos(),
-                theta.sin(),
-                theta.cos() * phi.sin(),
-            ) * rng.range(0.5, 2.0);
+            let dw = DVec3::new(theta.cos() * phi.cos(), theta.sin(), theta.cos() * phi.sin())
+                * rng.range(0.5, 2.0);
             let (o, d) = ((ow - centre).as_vec3(), dw.as_vec3());
             let (o64, d64) = (o.as_dvec3(), d.as_dvec3());
             assert_eq!(o64, ow - centre);
@@ -1268,10 +1097,7 @@ mod tests {
                     hits += 1;
                     let p = o64 + d64 * t as f64;
                     let err = p.length() - radius;
-                    assert!(
-                        err.abs() < 1e-4,
-                        "hit {err} off the ground: o={ow:?} d={dw:?}"
-                    );
+                    assert!(err.abs() < 1e-4, "hit {err} off the ground: o={ow:?} d={dw:?}");
                     // The near root: entering, before the closest approach.
                     assert!(n.as_dvec3().dot(d64) < 0.0 && (t as f64) <= along + 1e-3);
                     assert!(closest <= radius + 1e-6);
@@ -1310,49 +1136,16 @@ mod tests {
     fn rays_from_inside_exit_with_outward_normals() {
         let solids = [
             Primitive::Sphere { radius: 1.3 },
-            Primitive::Ellipsoid {
-                radii: Vec3::new(0.5, 1.5, 1.0),
-            },
-            Primitive::Box {
-                half: Vec3::new(0.5, 1.0, 1.5),
-            },
-            Primitive::Cylinder {
-                radius: 0.7,
-                half_height: 1.2,
-            },
-            Primitive::Cone {
-                radius_bottom: 1.0,
-                radius_top: 0.0,
-                half_height: 1.0,
-            },
-            Primitive::Cone {
-                radius_bottom: 0.0,
-                radius_top: 0.8,
-                half_height: 0.6,
-            },
-            Primitive::Cone {
-                radius_bottom: 0.4,
-                radius_top: 1.1,
-                half_height: 0.9,
-            },
-            Primitive::Cone {
-                radius_bottom: 0.6,
-                radius_top: 0.6,
-                half_height: 0.9,
-            },
-            Primitive::Capsule {
-                a: Vec3::new(-0.5, 0.2, 0.1),
-                b: Vec3::new(0.7, -0.4, 0.3),
-                radius: 0.4,
-            },
-            Primitive::Torus {
-                major: 2.0,
-                minor: 0.5,
-            },
-            Primitive::Torus {
-                major: 0.6,
-                minor: 0.8,
-            },
+            Primitive::Ellipsoid { radii: Vec3::new(0.5, 1.5, 1.0) },
+            Primitive::Box { half: Vec3::new(0.5, 1.0, 1.5) },
+            Primitive::Cylinder { radius: 0.7, half_height: 1.2 },
+            Primitive::Cone { radius_bottom: 1.0, radius_top: 0.0, half_height: 1.0 },
+            Primitive::Cone { radius_bottom: 0.0, radius_top: 0.8, half_height: 0.6 },
+            Primitive::Cone { radius_bottom: 0.4, radius_top: 1.1, half_height: 0.9 },
+            Primitive::Cone { radius_bottom: 0.6, radius_top: 0.6, half_height: 0.9 },
+            Primitive::Capsule { a: Vec3::new(-0.5, 0.2, 0.1), b: Vec3::new(0.7, -0.4, 0.3), radius: 0.4 },
+            Primitive::Torus { major: 2.0, minor: 0.5 },
+            Primitive::Torus { major: 0.6, minor: 0.8 },
         ];
         let mut rng = Rng(12345);
         for prim in &solids {
@@ -1364,10 +1157,7 @@ mod tests {
                     .unwrap()
                     .unwrap_or_else(|| panic!("no exit from inside {prim:?} o={o:?} d={d:?}"));
                 assert!(t > 0.0);
-                assert!(
-                    n.dot(d) > 0.0,
-                    "normal not outward at the exit: {prim:?} o={o:?} d={d:?}"
-                );
+                assert!(n.dot(d) > 0.0, "normal not outward at the exit: {prim:?} o={o:?} d={d:?}");
                 let p = o + d * t;
                 if smooth_at(prim, p, s) {
                     let g = sdf_gradient(prim, p, 1e-4 * s);
@@ -1377,10 +1167,7 @@ mod tests {
         }
         // The plane: solid below.
         let normal = Vec3::new(0.3, 0.9, -0.2).normalize();
-        let plane = Primitive::Plane {
-            normal,
-            offset: 0.5,
-        };
+        let plane = Primitive::Plane { normal, offset: 0.5 };
         let o = normal * -1.0;
         let up = intersect(&plane, o, normal + Vec3::X * 0.3, 0.0, f32::INFINITY).unwrap();
         assert!((up.1 - normal).length() < 1e-6);
@@ -1454,39 +1241,26 @@ mod tests {
         let (t, n) = intersect(&prim, Vec3::ZERO, d, 0.0, f32::INFINITY).unwrap();
         assert_eq!((t, n), (1.0, Vec3::X));
         // An edge (x and y tie).
-        let (t, n) = intersect(
-            &prim,
-            Vec3::new(-3.0, -3.0, 0.2),
-            Vec3::new(1.0, 1.0, 0.0),
-            0.0,
-            f32::INFINITY,
-        )
-        .unwrap();
+        let (t, n) =
+            intersect(&prim, Vec3::new(-3.0, -3.0, 0.2), Vec3::new(1.0, 1.0, 0.0), 0.0, f32::INFINITY)
+                .unwrap();
         assert_eq!((t, n), (2.0, -Vec3::X));
     }
 
     #[test]
     fn cone_apex_hit_exactly() {
         let inf = f32::INFINITY;
-        let up = Primitive::Cone {
-            radius_bottom: 1.0,
-            radius_top: 0.0,
-            half_height: 1.0,
-        };
+        let up = Primitive::Cone { radius_bottom: 1.0, radius_top: 0.0, half_height: 1.0 };
         // Down the axis onto the apex.
         let (t, n) = intersect(&up, Vec3::new(0.0, 3.0, 0.0), -Vec3::Y, 0.0, inf).unwrap();
         assert!((t - 2.0).abs() < 1e-6, "{t}");
         assert_eq!(n, Vec3::Y);
         // Steeper than the surface, through the apex: enters there.
         let apex = Vec3::Y;
-        for &o in &[
-            Vec3::new(0.5, 3.0, 0.0),
-            Vec3::new(-0.2, 2.0, 0.3),
-            Vec3::new(0.01, 4.0, -0.02),
-        ] {
+        for &o in &[Vec3::new(0.5, 3.0, 0.0), Vec3::new(-0.2, 2.0, 0.3), Vec3::new(0.01, 4.0, -0.02)] {
             let d = (apex - o) * 0.37;
-            let (t, _) = intersect(&up, o, d, 0.0, inf)
-                .unwrap_or_else(|| panic!("missed the apex from {o:?}"));
+            let (t, _) =
+                intersect(&up, o, d, 0.0, inf).unwrap_or_else(|| panic!("missed the apex from {o:?}"));
             assert!((o + d * t - apex).length() < 1e-5, "{t}");
         }
         // Exactly along a generator line through the apex (the ray slides on the surface):
@@ -1500,11 +1274,7 @@ mod tests {
         let (t, n) = intersect(&up, Vec3::ZERO, Vec3::Y, 0.0, inf).unwrap();
         assert!((t - 1.0).abs() < 1e-6 && n == Vec3::Y);
         // Apex at the bottom.
-        let down = Primitive::Cone {
-            radius_bottom: 0.0,
-            radius_top: 0.5,
-            half_height: 2.0,
-        };
+        let down = Primitive::Cone { radius_bottom: 0.0, radius_top: 0.5, half_height: 2.0 };
         let (t, n) = intersect(&down, Vec3::new(0.0, -5.0, 0.0), Vec3::Y * 2.0, 0.0, inf).unwrap();
         assert!((t - 1.5).abs() < 1e-6 && n == -Vec3::Y);
         let o = Vec3::new(0.05, -4.0, 0.0);
@@ -1521,23 +1291,13 @@ mod tests {
 
     #[test]
     fn cone_with_equal_radii_is_a_cylinder() {
-        let cone = Primitive::Cone {
-            radius_bottom: 0.8,
-            radius_top: 0.8,
-            half_height: 1.1,
-        };
-        let cyl = Primitive::Cylinder {
-            radius: 0.8,
-            half_height: 1.1,
-        };
+        let cone = Primitive::Cone { radius_bottom: 0.8, radius_top: 0.8, half_height: 1.1 };
+        let cyl = Primitive::Cylinder { radius: 0.8, half_height: 1.1 };
         let mut rng = Rng(777);
         for i in 0..5000 {
             let o = (rng.unit() * 4.0).as_vec3();
-            let mut d = (DVec3::new(
-                rng.range(-1.2, 1.2),
-                rng.range(-1.2, 1.2),
-                rng.range(-1.2, 1.2),
-            ) - o.as_dvec3())
+            let mut d = (DVec3::new(rng.range(-1.2, 1.2), rng.range(-1.2, 1.2), rng.range(-1.2, 1.2))
+                - o.as_dvec3())
             .as_vec3();
             if i % 5 == 0 {
                 // Parallel to the axis.
@@ -1564,24 +1324,10 @@ mod tests {
         let prim = Primitive::Torus { major, minor };
         let outer = (major + minor) as f64;
         // Through the centre in the torus plane: t = dist - (R + r).
-        let (t, n) = intersect(
-            &prim,
-            Vec3::new(-10.0, 0.0, 0.0),
-            Vec3::X,
-            0.0,
-            f32::INFINITY,
-        )
-        .unwrap();
+        let (t, n) = intersect(&prim, Vec3::new(-10.0, 0.0, 0.0), Vec3::X, 0.0, f32::INFINITY).unwrap();
         assert!((t - 7.5).abs() < 1e-6, "{t}");
         assert!((n + Vec3::X).length() < 1e-6);
-        let (t, _) = intersect(
-            &prim,
-            Vec3::new(-10.0, 0.0, 0.0),
-            Vec3::X * 3.0,
-            0.0,
-            f32::INFINITY,
-        )
-        .unwrap();
+        let (t, _) = intersect(&prim, Vec3::new(-10.0, 0.0, 0.0), Vec3::X * 3.0, 0.0, f32::INFINITY).unwrap();
         assert!((t - 2.5).abs() < 1e-6, "{t}");
         // Many rays in the plane y = 0 against the two circles of radii R + r and R - r.
         let mut rng = Rng(99);
@@ -1605,10 +1351,7 @@ mod tests {
             let res = intersect(&prim, o, d, 0.0, f32::INFINITY);
             match (expect, res) {
                 (Some(te), Some((t, n))) => {
-                    assert!(
-                        ((t as f64) - te).abs() < 1e-5 * te.max(1.0),
-                        "{t} vs {te}: o={o:?} d={d:?}"
-                    );
+                    assert!(((t as f64) - te).abs() < 1e-5 * te.max(1.0), "{t} vs {te}: o={o:?} d={d:?}");
                     assert!(n.y.abs() < 1e-6);
                 }
                 (None, None) => {}
@@ -1616,10 +1359,7 @@ mod tests {
                     // Only a numerically tangent ray may miss.
                     let along = -o64.dot(d64) / d64.length_squared();
                     let closest = (o64 + d64 * along).length();
-                    assert!(
-                        (closest - outer).abs() < 1e-6,
-                        "missed: o={o:?} d={d:?} expected {te}"
-                    );
+                    assert!((closest - outer).abs() < 1e-6, "missed: o={o:?} d={d:?} expected {te}");
                 }
                 (None, Some(h)) => panic!("spurious hit {h:?}: o={o:?} d={d:?}"),
             }
@@ -1647,10 +1387,7 @@ mod tests {
 
     #[test]
     fn torus_grazing_the_outer_equator() {
-        let prim = Primitive::Torus {
-            major: 2.0,
-            minor: 0.5,
-        };
+        let prim = Primitive::Torus { major: 2.0, minor: 0.5 };
         let inf = f32::INFINITY;
         // Exactly tangent: either a touch at the tangent point or a miss, never anything else.
         if let Some((t, _)) = intersect(&prim, Vec3::new(-10.0, 0.0, 2.5), Vec3::X, 0.0, inf) {
@@ -1682,51 +1419,20 @@ mod tests {
 
     #[test]
     fn torus_hole_is_empty() {
-        let prim = Primitive::Torus {
-            major: 2.0,
-            minor: 0.5,
-        };
+        let prim = Primitive::Torus { major: 2.0, minor: 0.5 };
         let inf = f32::INFINITY;
         assert!(intersect(&prim, Vec3::new(0.0, 5.0, 0.0), -Vec3::Y, 0.0, inf).is_none());
-        assert!(
-            intersect(
-                &prim,
-                Vec3::new(0.5, 5.0, 0.0),
-                Vec3::new(-0.1, -1.0, 0.0),
-                0.0,
-                inf
-            )
-            .is_none()
-        );
-        assert!(
-            intersect(
-                &prim,
-                Vec3::new(1.0, 4.0, -1.0),
-                Vec3::new(-0.3, -1.0, 0.25),
-                0.0,
-                inf
-            )
-            .is_none()
-        );
+        assert!(intersect(&prim, Vec3::new(0.5, 5.0, 0.0), Vec3::new(-0.1, -1.0, 0.0), 0.0, inf).is_none());
+        assert!(intersect(&prim, Vec3::new(1.0, 4.0, -1.0), Vec3::new(-0.3, -1.0, 0.25), 0.0, inf).is_none());
         // Parallel to the axis just inside and just outside the inner equator (rho = 1.5).
-        for &(x, hits) in &[
-            (-1.45f32, false),
-            (-1.499, false),
-            (-1.501, true),
-            (-1.55, true),
-        ] {
+        for &(x, hits) in &[(-1.45f32, false), (-1.499, false), (-1.501, true), (-1.55, true)] {
             let res = check_ray(&prim, Vec3::new(x, 3.0, 0.0), -Vec3::Y, 0.0, inf).unwrap();
             assert_eq!(res.is_some(), hits, "{x}");
         }
         // Thin ring, long way through the hole along the axis from below.
-        let ring = Primitive::Torus {
-            major: 100.0,
-            minor: 0.1,
-        };
+        let ring = Primitive::Torus { major: 100.0, minor: 0.1 };
         assert!(intersect(&ring, Vec3::new(3.0, -50.0, -2.0), Vec3::Y, 0.0, inf).is_none());
-        let (t, _) = check_ray(&ring, Vec3::new(100.0, -50.0, 0.0), Vec3::Y, 0.0, inf)
-            .unwrap()
-            .unwrap();
+        let (t, _) = check_ray(&ring, Vec3::new(100.0, -50.0, 0.0), Vec3::Y, 0.0, inf).unwrap().unwrap();
         assert!((t - 49.9).abs() < 1e-4);
     }
 
@@ -1762,52 +1468,19 @@ mod tests {
     fn degenerate_inputs_never_nan() {
         let prims = [
             Primitive::Sphere { radius: 1.0 },
-            Primitive::Plane {
-                normal: Vec3::Y,
-                offset: 0.0,
-            },
+            Primitive::Plane { normal: Vec3::Y, offset: 0.0 },
             Primitive::Box { half: Vec3::ONE },
-            Primitive::Ellipsoid {
-                radii: Vec3::new(1.0, 2.0, 3.0),
-            },
-            Primitive::Cylinder {
-                radius: 1.0,
-                half_height: 1.0,
-            },
-            Primitive::Cone {
-                radius_bottom: 1.0,
-                radius_top: 0.0,
-                half_height: 1.0,
-            },
-            Primitive::Torus {
-                major: 1.0,
-                minor: 0.3,
-            },
-            Primitive::Triangle {
-                a: Vec3::ZERO,
-                b: Vec3::X,
-                c: Vec3::Z,
-            },
-            Primitive::Capsule {
-                a: Vec3::ZERO,
-                b: Vec3::Y,
-                radius: 0.5,
-            },
+            Primitive::Ellipsoid { radii: Vec3::new(1.0, 2.0, 3.0) },
+            Primitive::Cylinder { radius: 1.0, half_height: 1.0 },
+            Primitive::Cone { radius_bottom: 1.0, radius_top: 0.0, half_height: 1.0 },
+            Primitive::Torus { major: 1.0, minor: 0.3 },
+            Primitive::Triangle { a: Vec3::ZERO, b: Vec3::X, c: Vec3::Z },
+            Primitive::Capsule { a: Vec3::ZERO, b: Vec3::Y, radius: 0.5 },
         ];
-        let origins = [
-            Vec3::ZERO,
-            Vec3::new(0.0, 5.0, 0.0),
-            Vec3::new(1.0, 1.0, 1.0),
-            Vec3::new(0.0, 1.0, 0.0),
-        ];
-        let dirs = [
-            Vec3::ZERO,
-            Vec3::Y,
-            -Vec3::Y,
-            Vec3::X,
-            Vec3::new(0.0, 1e-30, 0.0),
-            Vec3::new(1e-38, -1.0, 0.0),
-        ];
+        let origins =
+            [Vec3::ZERO, Vec3::new(0.0, 5.0, 0.0), Vec3::new(1.0, 1.0, 1.0), Vec3::new(0.0, 1.0, 0.0)];
+        let dirs =
+            [Vec3::ZERO, Vec3::Y, -Vec3::Y, Vec3::X, Vec3::new(0.0, 1e-30, 0.0), Vec3::new(1e-38, -1.0, 0.0)];
         for prim in &prims {
             for &o in &origins {
                 for &d in &dirs {
@@ -1835,44 +1508,19 @@ mod tests {
             assert!(intersect(prim, Vec3::ZERO, Vec3::new(f32::NAN, 0.0, 1.0), 0.0, 1.0).is_none());
         }
         // Plane: parallel rays miss, even in the plane.
-        let plane = Primitive::Plane {
-            normal: Vec3::Y,
-            offset: 1.0,
-        };
-        assert!(
-            intersect(
-                &plane,
-                Vec3::new(0.0, 1.0, 0.0),
-                Vec3::X,
-                0.0,
-                f32::INFINITY
-            )
-            .is_none()
-        );
+        let plane = Primitive::Plane { normal: Vec3::Y, offset: 1.0 };
+        assert!(intersect(&plane, Vec3::new(0.0, 1.0, 0.0), Vec3::X, 0.0, f32::INFINITY).is_none());
         assert!(intersect(&plane, Vec3::ZERO, Vec3::X, 0.0, f32::INFINITY).is_none());
         // A capsule with a == b is a sphere.
-        let cap = Primitive::Capsule {
-            a: Vec3::ONE,
-            b: Vec3::ONE,
-            radius: 0.5,
-        };
-        let (t, n) =
-            intersect(&cap, Vec3::new(1.0, 1.0, -3.0), Vec3::Z, 0.0, f32::INFINITY).unwrap();
+        let cap = Primitive::Capsule { a: Vec3::ONE, b: Vec3::ONE, radius: 0.5 };
+        let (t, n) = intersect(&cap, Vec3::new(1.0, 1.0, -3.0), Vec3::Z, 0.0, f32::INFINITY).unwrap();
         assert!((t - 3.5).abs() < 1e-6 && (n + Vec3::Z).length() < 1e-6);
         // Cylinder: rays along the axis, inside and outside.
         let cyl = prims[4];
-        let (t, n) =
-            intersect(&cyl, Vec3::new(0.3, -4.0, 0.2), Vec3::Y, 0.0, f32::INFINITY).unwrap();
+        let (t, n) = intersect(&cyl, Vec3::new(0.3, -4.0, 0.2), Vec3::Y, 0.0, f32::INFINITY).unwrap();
         assert!((t - 3.0).abs() < 1e-6 && n == -Vec3::Y);
         assert!(intersect(&cyl, Vec3::new(1.3, -4.0, 0.2), Vec3::Y, 0.0, f32::INFINITY).is_none());
-        let (t, n) = intersect(
-            &cyl,
-            Vec3::new(0.3, 0.0, 0.2),
-            -Vec3::Y * 2.0,
-            0.0,
-            f32::INFINITY,
-        )
-        .unwrap();
+        let (t, n) = intersect(&cyl, Vec3::new(0.3, 0.0, 0.2), -Vec3::Y * 2.0, 0.0, f32::INFINITY).unwrap();
         assert!((t - 0.5).abs() < 1e-6 && n == -Vec3::Y);
     }
 }

@@ -32,10 +32,7 @@ impl BoxRay {
     #[inline]
     pub fn new(ray: &Ray) -> Self {
         let inv = |x: f32| obvhs::ray::safe_inverse(x);
-        BoxRay {
-            origin: ray.origin,
-            inv_dir: Vec3::new(inv(ray.dir.x), inv(ray.dir.y), inv(ray.dir.z)),
-        }
+        BoxRay { origin: ray.origin, inv_dir: Vec3::new(inv(ray.dir.x), inv(ray.dir.y), inv(ray.dir.z)) }
     }
 
     /// Entry distance into the box within `[t_min, t_max]`, or `None`.
@@ -70,10 +67,7 @@ pub fn traverse(
     let mut len = 0usize;
     let root = &bvh.nodes[0];
     stats.bvh_nodes += 1;
-    if br
-        .hit(root.aabb().min.into(), root.aabb().max.into(), t_min, t_max)
-        .is_none()
-    {
+    if br.hit(root.aabb().min.into(), root.aabb().max.into(), t_min, t_max).is_none() {
         return;
     }
     let mut node = 0u32;
@@ -146,12 +140,7 @@ mod tests {
     fn traversal_finds_every_box_a_ray_crosses() {
         // 100 unit boxes along x; a ray along x crosses all, a ray above crosses none.
         let boxes: Vec<Aabb> = (0..100)
-            .map(|i| {
-                aabb(
-                    Vec3::new(i as f32 * 2.0, 0.0, 0.0),
-                    Vec3::new(i as f32 * 2.0 + 1.0, 1.0, 1.0),
-                )
-            })
+            .map(|i| aabb(Vec3::new(i as f32 * 2.0, 0.0, 0.0), Vec3::new(i as f32 * 2.0 + 1.0, 1.0, 1.0)))
             .collect();
         let bvh = build(&boxes, BvhBuildParams::medium_build());
         let mut seen = [false; 100];

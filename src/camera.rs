@@ -44,10 +44,7 @@ impl RayGenerator {
     pub fn ray(&self, x: u32, y: u32) -> Ray {
         let u = (2.0 * (x as f32 + 0.5) / self.width as f32 - 1.0) * self.half_w;
         let v = (1.0 - 2.0 * (y as f32 + 0.5) / self.height as f32) * self.half_h;
-        Ray::new(
-            self.origin,
-            (self.forward + self.right * u + self.up * v).normalize(),
-        )
+        Ray::new(self.origin, (self.forward + self.right * u + self.up * v).normalize())
     }
 }
 
@@ -57,11 +54,7 @@ mod tests {
 
     #[test]
     fn centre_pixel_looks_forward_and_right_is_plus_x() {
-        let cam = Camera {
-            width: 101,
-            height: 101,
-            ..Camera::default()
-        };
+        let cam = Camera { width: 101, height: 101, ..Camera::default() };
         let g = RayGenerator::new(&cam);
         assert!((g.ray(50, 50).dir - Vec3::Z).length() < 1e-6);
         assert!(g.ray(100, 50).dir.x > 0.0);

@@ -8,21 +8,11 @@ use std::sync::Arc;
 
 use crate::error::{Error, Result};
 use crate::geometry::Geometry;
-use crate::march::MarchParams;
 use crate::mesh::{MeshFormat, load_mesh};
 use crate::render::{Frame, render, write_png};
 use crate::repr::{Representation, build_scene};
 use crate::scene::{Scene, load_scene, mesh_preview_scene};
 use crate::shape::Shading;
-
-/// Which representation to render with (the command-line choice).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ReprChoice {
-    /// Closed form where it exists.
-    Analytic,
-    /// Sphere tracing of analytic SDFs.
-    Sdf,
-}
 
 /// Overrides of a scene's settings from the command line.
 #[derive(Clone, Copy, Debug, Default)]
@@ -47,17 +37,13 @@ impl Overrides {
             if let Some(v) = v
                 && (v == 0 || v > MAX_IMAGE_EDGE)
             {
-                return Err(Error::Usage(format!(
-                    "{name} must be between 1 and {MAX_IMAGE_EDGE}, got {v}"
-                )));
+                return Err(Error::Usage(format!("{name} must be between 1 and {MAX_IMAGE_EDGE}, got {v}")));
             }
         }
         if let Some(d) = self.depth
             && d > MAX_DEPTH
         {
-            return Err(Error::Usage(format!(
-                "--depth must be at most {MAX_DEPTH}, got {d}"
-            )));
+            return Err(Error::Usage(format!("--depth must be at most {MAX_DEPTH}, got {d}")));
         }
         if let Some(w) = self.width {
             scene.camera.width = w;
@@ -72,35 +58,32 @@ impl Overrides {
     }
 }
 
-/// Checks sphere-tracing parameters given on the command line.
-pub fn check_march(p: &MarchParams) -> Result<()> {
+/// Largest tessellation resolution accepted.
+pub const MAX_RESOLUTION: u32 = 8192;
+
+/// Checks a representation's parameters given on the command line.
+pub fn check_repr(repr: &Representation) -> Result<()> {
+    let p = match repr {
+        Representation::Analytic { march } | Representation::Sdf { march } => march,
+        Representation::Mesh { resolution, march, .. } => {
+            if *resolution < 3 || *resolution > MAX_RESOLUTION {
+                return Err(Error::Usage(format!(
+                    "--res must be between 3 and {MAX_RESOLUTION}, got {resolution}"
+                )));
+            }
+            march
+        }
+    };
     if !(1.0..2.0).contains(&p.relaxation) {
-        return Err(Error::Usage(format!(
-            "--relax must be in [1, 2), got {}",
-            p.relaxation
-        )));
+        return Err(Error::Usage(format!("--relax must be in [1, 2), got {}", p.relaxation)));
     }
     if !(p.epsilon > 0.0 && p.epsilon < 1.0) {
-        return Err(Error::Usage(format!(
-            "--epsilon must be in (0, 1), got {}",
-            p.epsilon
-        )));
+        return Err(Error::Usage(format!("--epsilon must be in (0, 1), got {}", p.epsilon)));
     }
     if p.max_steps == 0 || p.max_steps > 1_000_000 {
-        return Err(Error::Usage(format!(
-            "--max-steps must be between 1 and 1000000, got {}",
-            p.max_steps
-        )));
+        return Err(Error::Usage(format!("--max-steps must be between 1 and 1000000, got {}", p.max_steps)));
     }
     Ok(())
-}
-
-/// The representation for a choice and march parameters.
-pub fn representation(choice: ReprChoice, march: MarchParams) -> Representation {
-    match choice {
-        ReprChoice::Analytic => Representation::Analytic { march },
-        ReprChoice::Sdf => Representation::Sdf { march },
-    }
 }
 
 /// Options of `toolkit render`.
@@ -111,9 +94,7 @@ pub struct RenderOptions {
     /// Output PNG.
     pub output: PathBuf,
     /// Representation.
-    pub repr: ReprChoice,
-    /// Sphere-tracing parameters.
-    pub march: MarchParams,
+    pub repr: Representation,
     /// Setting overrides.
     pub overrides: Overrides,
     /// Shading of a mesh given instead of a scene file.
@@ -159,11 +140,7 @@ pub fn render_scene(scene: &Scene, repr: Representation) -> RenderReport {
         s.step_limit_hits,
         geometry.bytes_used(),
     );
-    RenderReport {
-        geometry_bytes: geometry.bytes_used(),
-        frame,
-        text,
-    }
+    RenderReport { geometry_bytes: geometry.bytes_used(), frame, text }
 }
 
 /// Loads a scene file, or a mesh file (by its extension) into a preview scene.
@@ -171,40 +148,34 @@ pub fn load_scene_or_mesh(path: &Path, shading: Shading) -> Result<Scene> {
     if MeshFormat::from_path(path).is_some() {
         let (mesh, report) = load_mesh(path)?;
         if report.degenerate_dropped > 0 {
-            eprintln!(
-                "{}: dropped {} degenerate triangles",
-                path.display(),
-                report.degenerate_dropped
-            );
+            eprintln!("{}: dropped {} degenerate triangles", path.display(), report.degenerate_dropped);
         }
-        return Ok(mesh_preview_scene(
-            Arc::new(mesh),
-            path.to_path_buf(),
-            shading,
-        ));
+        return Ok(mesh_preview_scene(Arc::new(mesh), path.to_path_buf(), shading));
     }
     load_scene(path)
 }
 
 /// `toolkit render`: loads, renders and writes one PNG.
 pub fn render_command(opts: &RenderOptions) -> Result<RenderReport> {
-    check_march(&opts.march)?;
+    check_repr(&opts.repr)?;
     let mut scene = load_scene_or_mesh(&opts.scene, opts.shading)?;
     opts.overrides.apply(&mut scene)?;
-    let report = render_scene(&scene, representation(opts.repr, opts.march));
+    let report = render_scene(&scene, opts.repr);
     write_png(&report.frame.image, &opts.output)?;
     Ok(report)
 }
 
-/// `toolkit gallery`: renders every `*.toml` scene in `scenes` in both representations into
-/// `out` as `NAME.analytic.png` and `NAME.sdf.png`. Returns the report text.
+/// `toolkit gallery`: renders every `*.toml` scene in `scenes` in each of `reprs` into `out`
+/// as `NAME.REPR.png`. Returns the report text.
 pub fn gallery_command(
     scenes: &Path,
     out: &Path,
-    march: MarchParams,
+    reprs: &[Representation],
     overrides: Overrides,
 ) -> Result<String> {
-    check_march(&march)?;
+    for r in reprs {
+        check_repr(r)?;
+    }
     let mut files: Vec<PathBuf> = std::fs::read_dir(scenes)
         .map_err(|e| Error::io(scenes, e))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -224,12 +195,8 @@ pub fn gallery_command(
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let mut text = String::new();
     for (f, scene) in &loaded {
-        let stem = f
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        for choice in [ReprChoice::Analytic, ReprChoice::Sdf] {
-            let repr = representation(choice, march);
+        let stem = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        for &repr in reprs {
             let report = render_scene(scene, repr);
             let path = out.join(format!("{stem}.{}.png", repr.name()));
             write_png(&report.frame.image, &path)?;

@@ -48,24 +48,13 @@ fn fmt_input(path: &Path, location: &Option<Location>, message: &str) -> String 
 
 impl Error {
     /// An input error at an optional location.
-    pub fn input(
-        path: impl Into<PathBuf>,
-        location: Option<Location>,
-        message: impl fmt::Display,
-    ) -> Self {
-        Error::Input {
-            path: path.into(),
-            location,
-            message: message.to_string(),
-        }
+    pub fn input(path: impl Into<PathBuf>, location: Option<Location>, message: impl fmt::Display) -> Self {
+        Error::Input { path: path.into(), location, message: message.to_string() }
     }
 
     /// An I/O error on `path`.
     pub fn io(path: impl Into<PathBuf>, err: impl fmt::Display) -> Self {
-        Error::Io {
-            path: path.into(),
-            message: err.to_string(),
-        }
+        Error::Io { path: path.into(), message: err.to_string() }
     }
 
     /// The process exit code for this error: 2 for everything a user can cause (bad input,

@@ -4,7 +4,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
-use sdfmesh::commands::{self, Overrides, ReprChoice};
+use sdfmesh::commands::{self, Overrides};
+use sdfmesh::repr::Representation;
 use sdfmesh::march::MarchParams;
 use sdfmesh::shape::Shading;
 
@@ -32,9 +33,8 @@ enum Command {
         /// Representation of the objects.
         #[arg(long, value_enum, default_value_t = Repr::Analytic)]
         repr: Repr,
-        /// Interpolate vertex normals when rendering a mesh file (default: flat).
-        #[arg(long)]
-        smooth: bool,
+        #[command(flatten)]
+        mesh: MeshArgs,
         #[command(flatten)]
         settings: SettingArgs,
         #[command(flatten)]
@@ -49,6 +49,8 @@ enum Command {
         #[arg(short, long, default_value = "reports/gallery")]
         output: PathBuf,
         #[command(flatten)]
+        mesh: MeshArgs,
+        #[command(flatten)]
         settings: SettingArgs,
         #[command(flatten)]
         march: MarchArgs,
@@ -61,6 +63,33 @@ enum Repr {
     Analytic,
     /// Sphere tracing of the analytic signed distance functions.
     Sdf,
+    /// Primitives tessellated at --res and ray traced as triangle meshes.
+    Mesh,
+}
+
+#[derive(Args)]
+struct MeshArgs {
+    /// Tessellation resolution for --repr mesh (segments around the largest circle).
+    #[arg(long, default_value_t = 64)]
+    res: u32,
+    /// Interpolate vertex normals of meshes (tessellated primitives and mesh files given
+    /// instead of a scene); default flat.
+    #[arg(long)]
+    smooth: bool,
+}
+
+impl MeshArgs {
+    fn shading(&self) -> Shading {
+        if self.smooth { Shading::Smooth } else { Shading::Flat }
+    }
+}
+
+fn representation(repr: Repr, mesh: &MeshArgs, march: MarchParams) -> Representation {
+    match repr {
+        Repr::Analytic => Representation::Analytic { march },
+        Repr::Sdf => Representation::Sdf { march },
+        Repr::Mesh => Representation::Mesh { resolution: mesh.res, shading: mesh.shading(), march },
+    }
 }
 
 #[derive(Args)]
@@ -91,11 +120,7 @@ struct MarchArgs {
 
 impl SettingArgs {
     fn overrides(&self) -> Overrides {
-        Overrides {
-            width: self.width,
-            height: self.height,
-            depth: self.depth,
-        }
+        Overrides { width: self.width, height: self.height, depth: self.depth }
     }
 }
 
@@ -113,39 +138,21 @@ impl MarchArgs {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Render {
-            scene,
-            output,
-            repr,
-            smooth,
-            settings,
-            march,
-        } => {
-            let repr = match repr {
-                Repr::Analytic => ReprChoice::Analytic,
-                Repr::Sdf => ReprChoice::Sdf,
-            };
+        Command::Render { scene, output, repr, mesh, settings, march } => {
             let opts = commands::RenderOptions {
                 scene,
                 output,
-                repr,
-                march: march.params(),
+                repr: representation(repr, &mesh, march.params()),
                 overrides: settings.overrides(),
-                shading: if smooth {
-                    Shading::Smooth
-                } else {
-                    Shading::Flat
-                },
+                shading: mesh.shading(),
             };
             commands::render_command(&opts).map(|r| print!("{}", r.text))
         }
-        Command::Gallery {
-            scenes,
-            output,
-            settings,
-            march,
-        } => commands::gallery_command(&scenes, &output, march.params(), settings.overrides())
-            .map(|t| print!("{t}")),
+        Command::Gallery { scenes, output, mesh, settings, march } => {
+            let reprs: Vec<Representation> =
+                [Repr::Analytic, Repr::Sdf, Repr::Mesh].map(|r| representation(r, &mesh, march.params())).into();
+            commands::gallery_command(&scenes, &output, &reprs, settings.overrides()).map(|t| print!("{t}"))
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

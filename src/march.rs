@@ -31,12 +31,7 @@ pub struct MarchParams {
 
 impl Default for MarchParams {
     fn default() -> Self {
-        MarchParams {
-            epsilon: 1e-4,
-            max_steps: 512,
-            relaxation: 1.0,
-            pixel_footprint: 1e-3,
-        }
+        MarchParams { epsilon: 1e-4, max_steps: 512, relaxation: 1.0, pixel_footprint: 1e-3 }
     }
 }
 
@@ -100,10 +95,7 @@ pub fn sphere_trace(
             stats.march_steps += 1;
             let r2 = f(origin + dir * refined).abs();
             return Some(if r2 <= r && refined >= t0 - eps {
-                MarchHit {
-                    t: refined,
-                    residual: r2,
-                }
+                MarchHit { t: refined, residual: r2 }
             } else {
                 MarchHit { t, residual: r }
             });
@@ -145,9 +137,7 @@ pub fn gradient_normal(f: &impl Fn(DVec3) -> f64, p: DVec3, h: f64, stats: &mut 
         DVec3::new(1.0, 1.0, 1.0),
     ];
     stats.march_steps += 4;
-    let g = K
-        .iter()
-        .fold(DVec3::ZERO, |acc, k| acc + *k * f(p + *k * h));
+    let g = K.iter().fold(DVec3::ZERO, |acc, k| acc + *k * f(p + *k * h));
     g.try_normalize().unwrap_or(DVec3::Y)
 }
 
@@ -163,33 +153,13 @@ mod tests {
     fn hits_sphere_front_and_exits_from_inside() {
         let mut stats = RayStats::default();
         let p = MarchParams::default();
-        let t = sphere_trace(
-            &sphere,
-            DVec3::ZERO,
-            DVec3::Z,
-            0.0,
-            100.0,
-            2.0,
-            &p,
-            true,
-            &mut stats,
-        )
-        .unwrap()
-        .t;
+        let t =
+            sphere_trace(&sphere, DVec3::ZERO, DVec3::Z, 0.0, 100.0, 2.0, &p, true, &mut stats).unwrap().t;
         assert!((t - 4.0).abs() < 1e-3, "{t}");
-        let t = sphere_trace(
-            &sphere,
-            DVec3::new(0.0, 0.0, 5.0),
-            DVec3::Z,
-            0.0,
-            100.0,
-            2.0,
-            &p,
-            true,
-            &mut stats,
-        )
-        .unwrap()
-        .t;
+        let t =
+            sphere_trace(&sphere, DVec3::new(0.0, 0.0, 5.0), DVec3::Z, 0.0, 100.0, 2.0, &p, true, &mut stats)
+                .unwrap()
+                .t;
         assert!((t - 1.0).abs() < 1e-3, "{t}");
         assert!(stats.march_steps > 0);
     }
@@ -197,36 +167,12 @@ mod tests {
     #[test]
     fn misses_and_step_limit_are_reported() {
         let mut stats = RayStats::default();
-        let p = MarchParams {
-            max_steps: 4,
-            pixel_footprint: 1e-6,
-            ..Default::default()
-        };
-        let miss = sphere_trace(
-            &sphere,
-            DVec3::ZERO,
-            DVec3::Y,
-            0.0,
-            10.0,
-            2.0,
-            &p,
-            true,
-            &mut stats,
-        );
+        let p = MarchParams { max_steps: 4, pixel_footprint: 1e-6, ..Default::default() };
+        let miss = sphere_trace(&sphere, DVec3::ZERO, DVec3::Y, 0.0, 10.0, 2.0, &p, true, &mut stats);
         assert_eq!(miss, None);
         // Grazing: the ray passes at distance 1.0001 from the centre; 4 steps are not enough.
         let dir = DVec3::new(1.0001 / 5.0, 0.0, 1.0).normalize();
-        let r = sphere_trace(
-            &sphere,
-            DVec3::ZERO,
-            dir,
-            0.0,
-            100.0,
-            2.0,
-            &p,
-            true,
-            &mut stats,
-        );
+        let r = sphere_trace(&sphere, DVec3::ZERO, dir, 0.0, 100.0, 2.0, &p, true, &mut stats);
         assert_eq!(r, None);
         assert_eq!(stats.step_limit_hits, 1);
     }
@@ -238,67 +184,21 @@ mod tests {
         let dir = DVec3::new(0.0, -0.05, 1.0).normalize();
         let (mut a, mut b) = (RayStats::default(), RayStats::default());
         let plain = MarchParams::default();
-        let relaxed = MarchParams {
-            relaxation: 1.6,
-            ..plain
-        };
-        let t_plain = sphere_trace(
-            &plane,
-            DVec3::ZERO,
-            dir,
-            0.0,
-            1e3,
-            1.0,
-            &plain,
-            true,
-            &mut a,
-        )
-        .unwrap()
-        .t;
-        let t_relax = sphere_trace(
-            &plane,
-            DVec3::ZERO,
-            dir,
-            0.0,
-            1e3,
-            1.0,
-            &relaxed,
-            true,
-            &mut b,
-        )
-        .unwrap()
-        .t;
+        let relaxed = MarchParams { relaxation: 1.6, ..plain };
+        let t_plain = sphere_trace(&plane, DVec3::ZERO, dir, 0.0, 1e3, 1.0, &plain, true, &mut a).unwrap().t;
+        let t_relax =
+            sphere_trace(&plane, DVec3::ZERO, dir, 0.0, 1e3, 1.0, &relaxed, true, &mut b).unwrap().t;
         assert!((t_plain - t_relax).abs() < 1e-4 * t_plain);
-        assert!(
-            b.march_steps < a.march_steps,
-            "{} vs {}",
-            b.march_steps,
-            a.march_steps
-        );
+        assert!(b.march_steps < a.march_steps, "{} vs {}", b.march_steps, a.march_steps);
     }
 
     #[test]
     fn over_relaxation_does_not_skip_a_thin_sheet() {
         // A sheet of thickness 0.02 behind a sphere that pulls relaxed steps long.
         let f = |p: DVec3| (p.z - 3.0).abs() - 0.01;
-        let relaxed = MarchParams {
-            relaxation: 1.9,
-            ..Default::default()
-        };
+        let relaxed = MarchParams { relaxation: 1.9, ..Default::default() };
         let mut s = RayStats::default();
-        let t = sphere_trace(
-            &f,
-            DVec3::ZERO,
-            DVec3::Z,
-            0.0,
-            10.0,
-            1.0,
-            &relaxed,
-            true,
-            &mut s,
-        )
-        .unwrap()
-        .t;
+        let t = sphere_trace(&f, DVec3::ZERO, DVec3::Z, 0.0, 10.0, 1.0, &relaxed, true, &mut s).unwrap().t;
         assert!((t - 2.99).abs() < 1e-3, "{t}");
     }
 }

@@ -34,10 +34,8 @@ impl MeshGeometry {
     /// The BVH build parameters used by [`MeshGeometry::new`], chosen by measurement
     /// (see the README's benchmark section): PLOC with reinsertion, at most two triangles
     /// per leaf.
-    pub const BUILD_PARAMS: BvhBuildParams = BvhBuildParams {
-        max_prims_per_leaf: 2,
-        ..BvhBuildParams::medium_build()
-    };
+    pub const BUILD_PARAMS: BvhBuildParams =
+        BvhBuildParams { max_prims_per_leaf: 2, ..BvhBuildParams::medium_build() };
 
     /// Builds the BVH of `mesh` (which must satisfy the `TriangleMesh` invariants).
     pub fn new(
@@ -47,14 +45,7 @@ impl MeshGeometry {
         material: MaterialId,
         label: String,
     ) -> Self {
-        Self::with_params(
-            mesh,
-            shading,
-            transform,
-            material,
-            label,
-            Self::BUILD_PARAMS,
-        )
+        Self::with_params(mesh, shading, transform, material, label, Self::BUILD_PARAMS)
     }
 
     /// [`MeshGeometry::new`] with explicit BVH build parameters (for benchmarks).
@@ -67,29 +58,18 @@ impl MeshGeometry {
         params: BvhBuildParams,
     ) -> Self {
         let start = Instant::now();
-        let TriangleMesh {
-            positions,
-            triangles,
-            mut normals,
-        } = mesh;
+        let TriangleMesh { positions, triangles, mut normals } = mesh;
         let boxes: Vec<Aabb> = triangles
             .iter()
             .map(|t| {
-                let (a, b, c) = (
-                    positions[t[0] as usize],
-                    positions[t[1] as usize],
-                    positions[t[2] as usize],
-                );
+                let (a, b, c) =
+                    (positions[t[0] as usize], positions[t[1] as usize], positions[t[2] as usize]);
                 aabb(a.min(b).min(c), a.max(b).max(c))
             })
             .collect();
         let mut bvh = bvh::build(&boxes, params);
         // Reorder the triangles into leaf order so leaves index them directly.
-        let triangles: Vec<[u32; 3]> = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| triangles[i as usize])
-            .collect();
+        let triangles: Vec<[u32; 3]> = bvh.primitive_indices.iter().map(|&i| triangles[i as usize]).collect();
         for (i, p) in bvh.primitive_indices.iter_mut().enumerate() {
             *p = i as u32;
         }
@@ -134,11 +114,7 @@ impl MeshGeometry {
     #[inline]
     fn corners(&self, i: u32) -> [Vec3; 3] {
         let t = self.triangles[i as usize];
-        [
-            self.positions[t[0] as usize],
-            self.positions[t[1] as usize],
-            self.positions[t[2] as usize],
-        ]
+        [self.positions[t[0] as usize], self.positions[t[1] as usize], self.positions[t[2] as usize]]
     }
 }
 
@@ -175,9 +151,7 @@ impl Geometry for MeshGeometry {
         }
         let point = ray.at(h.t);
         let local_point = local.at(h.t);
-        let m = max_abs(point)
-            .max(max_abs(ray.origin))
-            .max(max_abs(local_point) * self.transform.max_scale);
+        let m = max_abs(point).max(max_abs(ray.origin)).max(max_abs(local_point) * self.transform.max_scale);
         Some(Hit {
             t: h.t,
             point,
@@ -208,10 +182,7 @@ impl Geometry for MeshGeometry {
         std::mem::size_of::<Self>()
             + self.positions.capacity() * std::mem::size_of::<Vec3>()
             + self.triangles.capacity() * std::mem::size_of::<[u32; 3]>()
-            + self
-                .normals
-                .as_ref()
-                .map_or(0, |n| n.capacity() * std::mem::size_of::<Vec3>())
+            + self.normals.as_ref().map_or(0, |n| n.capacity() * std::mem::size_of::<Vec3>())
             + bvh::bytes_used(&self.bvh)
             - std::mem::size_of::<Bvh2>()
             + self.label.capacity()
@@ -219,16 +190,12 @@ impl Geometry for MeshGeometry {
 
     fn describe(&self) -> String {
         format!(
-            "mesh '{}': {} triangles, BVH2 of {} nodes built in {:.1} ms, {}",
+            "{}: {} triangles, BVH2 of {} nodes built in {:.1} ms, {}",
             self.label,
             self.triangles.len(),
             self.bvh.nodes.len(),
             self.build_time.as_secs_f64() * 1e3,
-            if self.normals.is_some() {
-                "smooth shading"
-            } else {
-                "flat shading"
-            }
+            if self.normals.is_some() { "smooth shading" } else { "flat shading" }
         )
     }
 }

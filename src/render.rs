@@ -100,25 +100,14 @@ pub fn write_png(image: &RgbImage, path: &Path) -> Result<()> {
         _ => Path::new("."),
     };
     if !dir.is_dir() {
-        return Err(Error::io(
-            path,
-            "cannot write: the directory does not exist",
-        ));
+        return Err(Error::io(path, "cannot write: the directory does not exist"));
     }
-    let name = path
-        .file_name()
-        .ok_or_else(|| Error::io(path, "not a file name"))?;
-    let tmp = dir.join(format!(
-        ".{}.tmp{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
+    let name = path.file_name().ok_or_else(|| Error::io(path, "not a file name"))?;
+    let tmp = dir.join(format!(".{}.tmp{}", name.to_string_lossy(), std::process::id()));
     let result = image
         .save_with_format(&tmp, image::ImageFormat::Png)
         .map_err(|e| Error::io(path, format!("cannot write: {e}")))
-        .and_then(|_| {
-            std::fs::rename(&tmp, path).map_err(|e| Error::io(path, format!("cannot write: {e}")))
-        });
+        .and_then(|_| std::fs::rename(&tmp, path).map_err(|e| Error::io(path, format!("cannot write: {e}"))));
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }

@@ -14,7 +14,8 @@ use crate::mesh::TriangleMesh;
 use crate::mesh_geometry::MeshGeometry;
 use crate::scene::Scene;
 use crate::sdf::SdfTree;
-use crate::shape::{Object, ObjectKind, Primitive, grow};
+use crate::shape::{Object, ObjectKind, Primitive, Shading, grow};
+use crate::tessellate::tessellate;
 use crate::transform::Transform;
 
 /// How the scene's objects are represented for tracing.
@@ -25,6 +26,11 @@ pub enum Representation {
     Analytic { march: MarchParams },
     /// Sphere tracing of the analytic signed distance functions.
     Sdf { march: MarchParams },
+    /// Primitives tessellated parametrically at `resolution` (segments around the largest
+    /// circle) and ray traced as triangle meshes through a BVH; infinite planes become a
+    /// disc around the camera out to the scene's `max_distance`. CSG and repetition have
+    /// no parametric tessellation and are sphere traced with `march` (the render says so).
+    Mesh { resolution: u32, shading: Shading, march: MarchParams },
 }
 
 impl Representation {
@@ -33,6 +39,7 @@ impl Representation {
         match self {
             Representation::Analytic { .. } => "analytic",
             Representation::Sdf { .. } => "sdf",
+            Representation::Mesh { .. } => "mesh",
         }
     }
 }
@@ -126,13 +133,7 @@ impl SdfObject {
                     + f32_error(max_abs(b.max.into()).max(max_abs(b.min.into()))),
             )
         });
-        Some(SdfObject {
-            tree,
-            bounds,
-            size,
-            march,
-            why,
-        })
+        Some(SdfObject { tree, bounds, size, march, why })
     }
 
     /// Whether the distance is exact (false: a Lipschitz-1 bound).
@@ -174,12 +175,7 @@ impl Geometry for SdfObject {
         let floor = 1e-9 * (1.0 + p.abs().max_element());
         // An unsigned field (a triangle) has no gradient on the surface: sample closer than
         // the point's own distance so every sample lies on the ray's side.
-        let h = if self.tree.signed {
-            0.5 * eps
-        } else {
-            (0.25 * f(p).abs()).min(0.5 * eps)
-        }
-        .max(floor);
+        let h = if self.tree.signed { 0.5 * eps } else { (0.25 * f(p).abs()).min(0.5 * eps) }.max(floor);
         let normal = gradient_normal(&f, p, h, stats).as_vec3();
         let material = self.tree.distance_material(p).1;
         let point: Vec3 = p.as_vec3();
@@ -202,11 +198,7 @@ impl Geometry for SdfObject {
     }
 
     fn describe(&self) -> String {
-        let bound = if self.tree.exact {
-            "exact distance"
-        } else {
-            "Lipschitz bound"
-        };
+        let bound = if self.tree.exact { "exact distance" } else { "Lipschitz bound" };
         format!("{} ({bound})", self.why)
     }
 }
@@ -238,12 +230,7 @@ impl SceneGeometry {
             }
         }
         let bvh = bvh::build(&boxes, BvhBuildParams::medium_build());
-        SceneGeometry {
-            objects,
-            bvh,
-            unbounded,
-            bounded,
-        }
+        SceneGeometry { objects, bvh, unbounded, bounded }
     }
 
     /// The objects, in scene order.
@@ -257,10 +244,7 @@ impl Geometry for SceneGeometry {
         if !self.unbounded.is_empty() {
             return None;
         }
-        self.objects
-            .iter()
-            .filter_map(|o| o.bounds())
-            .reduce(|a, b| a.union(&b))
+        self.objects.iter().filter_map(|o| o.bounds()).reduce(|a, b| a.union(&b))
     }
 
     fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
@@ -272,36 +256,24 @@ impl Geometry for SceneGeometry {
                 best = Some(h);
             }
         }
-        bvh::traverse(
-            &self.bvh,
-            ray,
-            t_min,
-            t_best,
-            stats,
-            |prim, t_max, stats| {
-                let obj = &self.objects[self.bounded[prim as usize] as usize];
-                Ok(obj.closest_hit(ray, t_min, t_max, stats).map(|h| {
-                    let t = h.t;
-                    best = Some(h);
-                    t
-                }))
-            },
-        );
+        bvh::traverse(&self.bvh, ray, t_min, t_best, stats, |prim, t_max, stats| {
+            let obj = &self.objects[self.bounded[prim as usize] as usize];
+            Ok(obj.closest_hit(ray, t_min, t_max, stats).map(|h| {
+                let t = h.t;
+                best = Some(h);
+                t
+            }))
+        });
         best
     }
 
     fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
-        if self
-            .unbounded
-            .iter()
-            .any(|&i| self.objects[i as usize].any_hit(ray, t_min, t_max, stats))
-        {
+        if self.unbounded.iter().any(|&i| self.objects[i as usize].any_hit(ray, t_min, t_max, stats)) {
             return true;
         }
         let mut hit = false;
         bvh::traverse(&self.bvh, ray, t_min, t_max, stats, |prim, t_max, stats| {
-            if self.objects[self.bounded[prim as usize] as usize].any_hit(ray, t_min, t_max, stats)
-            {
+            if self.objects[self.bounded[prim as usize] as usize].any_hit(ray, t_min, t_max, stats) {
                 hit = true;
                 Err(())
             } else {
@@ -323,32 +295,22 @@ impl Geometry for SceneGeometry {
     }
 
     fn describe(&self) -> String {
-        format!(
-            "{} objects, top-level BVH of {} nodes",
-            self.objects.len(),
-            self.bvh.nodes.len()
-        )
+        format!("{} objects, top-level BVH of {} nodes", self.objects.len(), self.bvh.nodes.len())
     }
 }
 
 /// Builds the geometry of every top-level object of `scene` in representation `repr`.
 /// Sphere tracing takes its pixel footprint from the scene's camera.
 pub fn build_objects(scene: &Scene, repr: Representation) -> Vec<Box<dyn Geometry>> {
-    let footprint = 2.0 * ((scene.camera.fov_y_deg as f64).to_radians() * 0.5).tan()
-        / scene.camera.height.max(1) as f64;
+    let footprint =
+        2.0 * ((scene.camera.fov_y_deg as f64).to_radians() * 0.5).tan() / scene.camera.height.max(1) as f64;
+    let with_footprint = |march: MarchParams| MarchParams { pixel_footprint: footprint, ..march };
     let repr = match repr {
-        Representation::Analytic { march } => Representation::Analytic {
-            march: MarchParams {
-                pixel_footprint: footprint,
-                ..march
-            },
-        },
-        Representation::Sdf { march } => Representation::Sdf {
-            march: MarchParams {
-                pixel_footprint: footprint,
-                ..march
-            },
-        },
+        Representation::Analytic { march } => Representation::Analytic { march: with_footprint(march) },
+        Representation::Sdf { march } => Representation::Sdf { march: with_footprint(march) },
+        Representation::Mesh { resolution, shading, march } => {
+            Representation::Mesh { resolution, shading, march: with_footprint(march) }
+        }
     };
     scene
         .objects
@@ -360,18 +322,18 @@ pub fn build_objects(scene: &Scene, repr: Representation) -> Vec<Box<dyn Geometr
                         return Box::new(AnalyticObject::new(*p, o));
                     }
                     let kind = o.kind_name();
-                    (
-                        march,
-                        format!(
-                            "{kind} '{}': sphere traced (no closed form for {kind})",
-                            o.label
-                        ),
-                    )
+                    (march, format!("{kind} '{}': sphere traced (no closed form for {kind})", o.label))
                 }
-                Representation::Sdf { march } => (
-                    march,
-                    format!("{} '{}': sphere traced", o.kind_name(), o.label),
-                ),
+                Representation::Sdf { march } => {
+                    (march, format!("{} '{}': sphere traced", o.kind_name(), o.label))
+                }
+                Representation::Mesh { resolution, shading, march } => {
+                    if let Some(g) = tessellated(scene, o, resolution, shading) {
+                        return Box::new(g);
+                    }
+                    let kind = o.kind_name();
+                    (march, format!("{kind} '{}': sphere traced (no parametric tessellation for {kind})", o.label))
+                }
             };
             if let ObjectKind::Mesh { mesh, shading, .. } = &o.kind {
                 // A mesh is traced as triangles in every representation until grids exist.
@@ -380,7 +342,7 @@ pub fn build_objects(scene: &Scene, repr: Representation) -> Vec<Box<dyn Geometr
                     *shading,
                     o.compiled_transform(),
                     o.material,
-                    o.label.clone(),
+                    format!("mesh '{}'", o.label),
                 ));
             }
             match SdfObject::new(o, march, why) {
@@ -394,4 +356,65 @@ pub fn build_objects(scene: &Scene, repr: Representation) -> Vec<Box<dyn Geometr
 /// Builds the scene geometry in representation `repr`.
 pub fn build_scene(scene: &Scene, repr: Representation) -> SceneGeometry {
     SceneGeometry::new(build_objects(scene, repr))
+}
+
+/// A primitive object tessellated at `resolution` and traced as a mesh under the object's
+/// transform; an infinite plane becomes a disc around the camera. `None` for objects that
+/// are not primitives.
+fn tessellated(scene: &Scene, o: &Object, resolution: u32, shading: Shading) -> Option<MeshGeometry> {
+    let ObjectKind::Primitive(prim) = &o.kind else { return None };
+    let label = format!("{} '{}' tessellated at {resolution}", prim.kind_name(), o.label);
+    if let Primitive::Plane { normal, offset } = *prim {
+        let t = o.compiled_transform();
+        let n = t.normal_to_world(normal);
+        let p0 = t.to_world.transform_point3(normal * offset);
+        let mesh = plane_view_mesh(n, n.dot(p0), scene.camera.position, scene.settings.max_distance);
+        return Some(MeshGeometry::new(mesh, Shading::Flat, Transform::IDENTITY, o.material, label));
+    }
+    let mesh = tessellate(prim, resolution, None);
+    Some(MeshGeometry::new(mesh, shading, o.compiled_transform(), o.material, label))
+}
+
+/// The part of the plane `normal . p = offset` within `radius` of `eye`, as a disc of
+/// rings around the eye's foot point whose radii grow geometrically (by 1.25), so the
+/// triangles near the camera are small (precise hits in f32) and far ones large (few
+/// triangles). Flat, so the rings lose nothing: the disc is exactly the plane out to its
+/// polygonal rim, which circumscribes the circle of `radius`. Oriented with `normal` out.
+pub fn plane_view_mesh(normal: Vec3, offset: f32, eye: Vec3, radius: f32) -> TriangleMesh {
+    const SEGMENTS: u32 = 16;
+    let n = normal.normalize();
+    let height = n.dot(eye) - offset;
+    let foot = eye - n * height;
+    let (u, v) = n.any_orthonormal_pair();
+    // u x v = n keeps the winding counter-clockwise seen from +n.
+    let (u, v) = if u.cross(v).dot(n) > 0.0 { (u, v) } else { (v, u) };
+    let mut positions = vec![foot];
+    let mut triangles = Vec::new();
+    let mut r = 0.25 * height.abs().max(1e-3);
+    let mut ring = 0u32;
+    loop {
+        let last = r >= radius;
+        let r_ring = r.min(radius) / (std::f32::consts::PI / SEGMENTS as f32).cos();
+        for i in 0..SEGMENTS {
+            let a = i as f32 * std::f32::consts::TAU / SEGMENTS as f32;
+            positions.push(foot + (u * a.cos() + v * a.sin()) * r_ring);
+        }
+        let base = 1 + ring * SEGMENTS;
+        for i in 0..SEGMENTS {
+            let j = (i + 1) % SEGMENTS;
+            if ring == 0 {
+                triangles.push([0, base + i, base + j]);
+            } else {
+                let inner = base - SEGMENTS;
+                triangles.push([inner + i, base + i, base + j]);
+                triangles.push([inner + i, base + j, inner + j]);
+            }
+        }
+        if last {
+            break;
+        }
+        ring += 1;
+        r *= 1.25;
+    }
+    TriangleMesh { positions, triangles, normals: None }
 }

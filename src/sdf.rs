@@ -30,44 +30,25 @@ pub fn primitive_distance_f64(prim: &Primitive, p: DVec3) -> f64 {
             let r = radii.as_dvec3();
             ((p / r).length() - 1.0) * r.min_element()
         }
-        Primitive::Cylinder {
-            radius,
-            half_height,
-        } => {
-            let d = DVec2::new(
-                DVec2::new(p.x, p.z).length() - radius as f64,
-                p.y.abs() - half_height as f64,
-            );
+        Primitive::Cylinder { radius, half_height } => {
+            let d = DVec2::new(DVec2::new(p.x, p.z).length() - radius as f64, p.y.abs() - half_height as f64);
             d.max_element().min(0.0) + d.max(DVec2::ZERO).length()
         }
-        Primitive::Cone {
-            radius_bottom,
-            radius_top,
-            half_height,
-        } => capped_cone(
-            p,
-            half_height as f64,
-            radius_bottom as f64,
-            radius_top as f64,
-        ),
+        Primitive::Cone { radius_bottom, radius_top, half_height } => {
+            capped_cone(p, half_height as f64, radius_bottom as f64, radius_top as f64)
+        }
         Primitive::Torus { major, minor } => {
             let q = DVec2::new(DVec2::new(p.x, p.z).length() - major as f64, p.y);
             q.length() - minor as f64
         }
-        Primitive::Triangle { a, b, c } => {
-            triangle_distance(p, a.as_dvec3(), b.as_dvec3(), c.as_dvec3())
-        }
+        Primitive::Triangle { a, b, c } => triangle_distance(p, a.as_dvec3(), b.as_dvec3(), c.as_dvec3()),
         Primitive::Capsule { a, b, radius } => {
             let (a, b) = (a.as_dvec3(), b.as_dvec3());
             let pa = p - a;
             let ba = b - a;
             // A capsule with a == b is a sphere (no 0/0).
             let bb = ba.dot(ba);
-            let h = if bb > 0.0 {
-                (pa.dot(ba) / bb).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
+            let h = if bb > 0.0 { (pa.dot(ba) / bb).clamp(0.0, 1.0) } else { 0.0 };
             (pa - ba * h).length() - radius as f64
         }
     }
@@ -83,10 +64,7 @@ fn capped_cone(p: DVec3, h: f64, r1: f64, r2: f64) -> f64 {
     let q = DVec2::new(DVec2::new(p.x, p.z).length(), p.y);
     let k1 = DVec2::new(r2, h);
     let k2 = DVec2::new(r2 - r1, 2.0 * h);
-    let ca = DVec2::new(
-        q.x - q.x.min(if q.y < 0.0 { r1 } else { r2 }),
-        q.y.abs() - h,
-    );
+    let ca = DVec2::new(q.x - q.x.min(if q.y < 0.0 { r1 } else { r2 }), q.y.abs() - h);
     let cb = q - k1 + k2 * ((k1 - q).dot(k2) / k2.dot(k2)).clamp(0.0, 1.0);
     let s = if cb.x < 0.0 && ca.y < 0.0 { -1.0 } else { 1.0 };
     s * ca.length_squared().min(cb.length_squared()).sqrt()
@@ -101,16 +79,14 @@ pub fn triangle_distance(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> f64 {
     let ac = a - c;
     let pc = p - c;
     let nor = ba.cross(ac);
-    let inside = ba.cross(nor).dot(pa).signum()
-        + cb.cross(nor).dot(pb).signum()
-        + ac.cross(nor).dot(pc).signum()
-        >= 2.0;
+    let inside =
+        ba.cross(nor).dot(pa).signum() + cb.cross(nor).dot(pb).signum() + ac.cross(nor).dot(pc).signum()
+            >= 2.0;
     let d2 = if inside {
         nor.dot(pa) * nor.dot(pa) / nor.length_squared()
     } else {
-        let e = |v: DVec3, w: DVec3| {
-            (v * (v.dot(w) / v.length_squared()).clamp(0.0, 1.0) - w).length_squared()
-        };
+        let e =
+            |v: DVec3, w: DVec3| (v * (v.dot(w) / v.length_squared()).clamp(0.0, 1.0) - w).length_squared();
         e(ba, pa).min(e(cb, pb)).min(e(ac, pc))
     };
     d2.sqrt()
@@ -129,24 +105,11 @@ fn smooth_min(a: f64, b: f64, k: f64) -> (f64, f64) {
 #[derive(Clone, Debug)]
 pub enum SdfNode {
     /// A primitive under a transform.
-    Primitive {
-        prim: Primitive,
-        transform: Transform,
-        material: MaterialId,
-    },
+    Primitive { prim: Primitive, transform: Transform, material: MaterialId },
     /// A CSG operation under a transform.
-    Csg {
-        op: CsgOp,
-        children: Vec<SdfNode>,
-        transform: Transform,
-    },
+    Csg { op: CsgOp, children: Vec<SdfNode>, transform: Transform },
     /// Domain repetition under a transform (see [`ObjectKind::Repeat`]).
-    Repeat {
-        period: Vec3,
-        count: Option<UVec3>,
-        child: Box<SdfNode>,
-        transform: Transform,
-    },
+    Repeat { period: Vec3, count: Option<UVec3>, child: Box<SdfNode>, transform: Transform },
 }
 
 /// A compiled object tree with its distance bound kind.
@@ -171,12 +134,7 @@ impl SdfTree {
         let mut node_count = 0;
         let root = compile(object, &mut exact, &mut node_count)?;
         let signed = !contains_triangle(object);
-        Some(SdfTree {
-            root,
-            exact,
-            signed,
-            node_count,
-        })
+        Some(SdfTree { root, exact, signed, node_count })
     }
 
     /// Signed distance (or a Lipschitz-1 lower bound of it) at world point `p`.
@@ -219,11 +177,7 @@ fn compile(object: &Object, exact: &mut bool, count: &mut usize) -> Option<SdfNo
             if !primitive_is_exact(prim) {
                 *exact = false;
             }
-            SdfNode::Primitive {
-                prim: *prim,
-                transform,
-                material: object.material,
-            }
+            SdfNode::Primitive { prim: *prim, transform, material: object.material }
         }
         ObjectKind::Csg { op, children } => {
             // Sharp union, intersection and subtraction of exact SDFs are exact outside and
@@ -231,29 +185,13 @@ fn compile(object: &Object, exact: &mut bool, count: &mut usize) -> Option<SdfNo
             if !matches!(op, CsgOp::Union) {
                 *exact = false;
             }
-            let children = children
-                .iter()
-                .map(|c| compile(c, exact, count))
-                .collect::<Option<_>>()?;
-            SdfNode::Csg {
-                op: *op,
-                children,
-                transform,
-            }
+            let children = children.iter().map(|c| compile(c, exact, count)).collect::<Option<_>>()?;
+            SdfNode::Csg { op: *op, children, transform }
         }
-        ObjectKind::Repeat {
-            period,
-            count: reps,
-            child,
-        } => {
+        ObjectKind::Repeat { period, count: reps, child } => {
             *exact = false;
             let child = Box::new(compile(child, exact, count)?);
-            SdfNode::Repeat {
-                period: *period,
-                count: *reps,
-                child,
-                transform,
-            }
+            SdfNode::Repeat { period: *period, count: *reps, child, transform }
         }
     })
 }
@@ -272,16 +210,9 @@ impl SdfNode {
         let t = self.transform();
         let q = t.point_to_local_f64(p);
         let (d, m) = match self {
-            SdfNode::Primitive { prim, material, .. } => {
-                (primitive_distance_f64(prim, q), *material)
-            }
+            SdfNode::Primitive { prim, material, .. } => (primitive_distance_f64(prim, q), *material),
             SdfNode::Csg { op, children, .. } => eval_csg(*op, children, q),
-            SdfNode::Repeat {
-                period,
-                count,
-                child,
-                ..
-            } => eval_repeat(*period, *count, child, q),
+            SdfNode::Repeat { period, count, child, .. } => eval_repeat(*period, *count, child, q),
         };
         // Rotation and translation keep distances; scale multiplies them. The smallest scale
         // factor keeps the result a lower bound under non-uniform scale.
@@ -392,45 +323,24 @@ mod tests {
     use crate::transform::TransformDesc;
 
     fn obj(kind: ObjectKind) -> Object {
-        Object {
-            kind,
-            transform: TransformDesc::default(),
-            material: 0,
-            label: "t".into(),
-        }
+        Object { kind, transform: TransformDesc::default(), material: 0, label: "t".into() }
     }
 
     #[test]
     fn primitive_distances_at_known_points() {
         let s = Primitive::Sphere { radius: 2.0 };
         assert!((primitive_distance(&s, Vec3::new(3.0, 0.0, 0.0)) - 1.0).abs() < 1e-6);
-        let b = Primitive::Box {
-            half: Vec3::new(1.0, 2.0, 3.0),
-        };
+        let b = Primitive::Box { half: Vec3::new(1.0, 2.0, 3.0) };
         assert!((primitive_distance(&b, Vec3::new(2.0, 3.0, 0.0)) - 2f32.sqrt()).abs() < 1e-6);
         assert!((primitive_distance(&b, Vec3::ZERO) + 1.0).abs() < 1e-6);
-        let c = Primitive::Cylinder {
-            radius: 1.0,
-            half_height: 1.0,
-        };
+        let c = Primitive::Cylinder { radius: 1.0, half_height: 1.0 };
         assert!((primitive_distance(&c, Vec3::new(0.0, 3.0, 0.0)) - 2.0).abs() < 1e-6);
-        let t = Primitive::Torus {
-            major: 2.0,
-            minor: 0.5,
-        };
+        let t = Primitive::Torus { major: 2.0, minor: 0.5 };
         assert!((primitive_distance(&t, Vec3::new(2.0, 1.0, 0.0)) - 0.5).abs() < 1e-6);
-        let cone = Primitive::Cone {
-            radius_bottom: 1.0,
-            radius_top: 0.0,
-            half_height: 1.0,
-        };
+        let cone = Primitive::Cone { radius_bottom: 1.0, radius_top: 0.0, half_height: 1.0 };
         assert!((primitive_distance(&cone, Vec3::new(0.0, 2.0, 0.0)) - 1.0).abs() < 1e-6);
         assert!(primitive_distance(&cone, Vec3::new(0.0, -0.5, 0.0)) < 0.0);
-        let tri = Primitive::Triangle {
-            a: Vec3::ZERO,
-            b: Vec3::X,
-            c: Vec3::Y,
-        };
+        let tri = Primitive::Triangle { a: Vec3::ZERO, b: Vec3::X, c: Vec3::Y };
         assert!((primitive_distance(&tri, Vec3::new(0.2, 0.2, -0.5)) - 0.5).abs() < 1e-6);
         assert!((primitive_distance(&tri, Vec3::new(2.0, 0.0, 0.0)) - 1.0).abs() < 1e-6);
     }
@@ -449,20 +359,12 @@ mod tests {
 
     #[test]
     fn csg_and_materials() {
-        let a = Object {
-            material: 1,
-            ..obj(ObjectKind::Primitive(Primitive::Sphere { radius: 1.0 }))
-        };
-        let mut b = Object {
-            material: 2,
-            ..obj(ObjectKind::Primitive(Primitive::Sphere { radius: 1.0 }))
-        };
+        let a = Object { material: 1, ..obj(ObjectKind::Primitive(Primitive::Sphere { radius: 1.0 })) };
+        let mut b = Object { material: 2, ..obj(ObjectKind::Primitive(Primitive::Sphere { radius: 1.0 })) };
         b.transform.translate = Vec3::new(1.5, 0.0, 0.0);
-        let u = SdfTree::new(&obj(ObjectKind::Csg {
-            op: CsgOp::Union,
-            children: vec![a.clone(), b.clone()],
-        }))
-        .unwrap();
+        let u =
+            SdfTree::new(&obj(ObjectKind::Csg { op: CsgOp::Union, children: vec![a.clone(), b.clone()] }))
+                .unwrap();
         assert_eq!(u.distance_material(DVec3::new(-2.0, 0.0, 0.0)), (1.0, 1));
         assert_eq!(u.distance_material(DVec3::new(3.5, 0.0, 0.0)).1, 2);
         assert!(u.exact);
@@ -481,11 +383,9 @@ mod tests {
         .unwrap();
         assert!(i.distance(DVec3::new(0.75, 0.0, 0.0)) < 0.0);
         assert!(i.distance(DVec3::new(-0.5, 0.0, 0.0)) > 0.0);
-        let su = SdfTree::new(&obj(ObjectKind::Csg {
-            op: CsgOp::SmoothUnion { k: 0.5 },
-            children: vec![a, b],
-        }))
-        .unwrap();
+        let su =
+            SdfTree::new(&obj(ObjectKind::Csg { op: CsgOp::SmoothUnion { k: 0.5 }, children: vec![a, b] }))
+                .unwrap();
         // The smooth union fills the waist between the spheres.
         assert!(su.distance(DVec3::new(0.75, 0.75, 0.0)) < u.distance(DVec3::new(0.75, 0.75, 0.0)));
     }

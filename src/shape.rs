@@ -27,11 +27,7 @@ pub enum Primitive {
     Cylinder { radius: f32, half_height: f32 },
     /// Capped cone (frustum) around y: radius `radius_bottom` at `y = -half_height`,
     /// `radius_top` at `y = half_height`; radii >= 0, not both 0. A radius of 0 is an apex.
-    Cone {
-        radius_bottom: f32,
-        radius_top: f32,
-        half_height: f32,
-    },
+    Cone { radius_bottom: f32, radius_top: f32, half_height: f32 },
     /// Torus in the xz plane: ring radius `major`, tube radius `minor` (`0 < minor`).
     Torus { major: f32, minor: f32 },
     /// A single two-sided triangle (zero thickness); vertices are not collinear.
@@ -63,18 +59,11 @@ impl Primitive {
             Primitive::Plane { .. } => return None,
             Primitive::Box { half } => aabb(-half, half),
             Primitive::Ellipsoid { radii } => aabb(-radii, radii),
-            Primitive::Cylinder {
-                radius,
-                half_height,
-            } => {
+            Primitive::Cylinder { radius, half_height } => {
                 let e = Vec3::new(radius, half_height, radius);
                 aabb(-e, e)
             }
-            Primitive::Cone {
-                radius_bottom,
-                radius_top,
-                half_height,
-            } => {
+            Primitive::Cone { radius_bottom, radius_top, half_height } => {
                 let r = radius_bottom.max(radius_top);
                 let e = Vec3::new(r, half_height, r);
                 aabb(-e, e)
@@ -84,10 +73,9 @@ impl Primitive {
                 aabb(-e, e)
             }
             Primitive::Triangle { a, b, c } => aabb(a.min(b).min(c), a.max(b).max(c)),
-            Primitive::Capsule { a, b, radius } => aabb(
-                a.min(b) - Vec3::splat(radius),
-                a.max(b) + Vec3::splat(radius),
-            ),
+            Primitive::Capsule { a, b, radius } => {
+                aabb(a.min(b) - Vec3::splat(radius), a.max(b) + Vec3::splat(radius))
+            }
         })
     }
 }
@@ -133,11 +121,7 @@ pub enum ObjectKind {
     /// Domain repetition of `child`: copies every `period` along each axis whose period
     /// is > 0 (an axis with period 0 is not repeated). With `count`, only `count` copies per
     /// repeated axis (>= 1), centred on the origin; without, infinitely many.
-    Repeat {
-        period: Vec3,
-        count: Option<UVec3>,
-        child: Box<Object>,
-    },
+    Repeat { period: Vec3, count: Option<UVec3>, child: Box<Object> },
     /// A triangle mesh loaded from a file (top level only: meshes have no analytic SDF).
     Mesh {
         /// The loaded, validated mesh (shared, never copied per representation).
@@ -196,10 +180,7 @@ impl Object {
                 let (lo, hi) = mesh.bounds()?;
                 aabb(lo, hi)
             }
-            ObjectKind::Csg {
-                op: CsgOp::Intersection | CsgOp::SmoothIntersection { .. },
-                children,
-            } => {
+            ObjectKind::Csg { op: CsgOp::Intersection | CsgOp::SmoothIntersection { .. }, children } => {
                 // Unbounded children do not constrain an intersection.
                 let mut bounded = children.iter().filter_map(Object::bounds);
                 let first = bounded.next()?;
@@ -227,11 +208,7 @@ impl Object {
                     CsgOp::Intersection | CsgOp::SmoothIntersection { .. } => unreachable!(),
                 }
             }
-            ObjectKind::Repeat {
-                period,
-                count,
-                child,
-            } => {
+            ObjectKind::Repeat { period, count, child } => {
                 let cb = child.bounds()?;
                 let count = (*count)?;
                 let mut b = cb;

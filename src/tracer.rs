@@ -22,9 +22,7 @@ pub struct Tracer<'a> {
 /// but never less than what f32 rounding at the point's magnitude needs.
 #[inline]
 pub fn spawn_offset(hit: &Hit) -> f32 {
-    2.0 * hit
-        .error
-        .max(64.0 * f32::EPSILON * max_abs(hit.point).max(1e-3))
+    2.0 * hit.error.max(64.0 * f32::EPSILON * max_abs(hit.point).max(1e-3))
 }
 
 impl<'a> Tracer<'a> {
@@ -33,19 +31,9 @@ impl<'a> Tracer<'a> {
         let ambient = scene
             .lights
             .iter()
-            .map(|l| {
-                if let Light::Ambient { intensity } = l {
-                    *intensity
-                } else {
-                    0.0
-                }
-            })
+            .map(|l| if let Light::Ambient { intensity } = l { *intensity } else { 0.0 })
             .sum();
-        Tracer {
-            scene,
-            geometry,
-            ambient,
-        }
+        Tracer { scene, geometry, ambient }
     }
 
     /// The colour seen along `ray` (unit direction), linear RGB, not clamped.
@@ -55,10 +43,7 @@ impl<'a> Tracer<'a> {
 
     fn trace_rec(&self, ray: &Ray, depth: u32, weight: f32, stats: &mut RayStats) -> Vec3 {
         stats.rays += 1;
-        match self
-            .geometry
-            .closest_hit(ray, 0.0, self.scene.settings.max_distance, stats)
-        {
+        match self.geometry.closest_hit(ray, 0.0, self.scene.settings.max_distance, stats) {
             Some(hit) => self.shade(ray, &hit, depth, weight, stats),
             None => self.scene.settings.background,
         }
@@ -77,11 +62,7 @@ impl<'a> Tracer<'a> {
         for light in &self.scene.lights {
             let (to_light, dist, intensity, color) = match *light {
                 Light::Ambient { .. } => continue,
-                Light::Point {
-                    position,
-                    intensity,
-                    color,
-                } => {
+                Light::Point { position, intensity, color } => {
                     let v = position - above;
                     let d = v.length();
                     if d <= 0.0 {
@@ -89,16 +70,9 @@ impl<'a> Tracer<'a> {
                     }
                     (v / d, d, intensity, color)
                 }
-                Light::Directional {
-                    direction,
-                    intensity,
-                    color,
-                } => (
-                    -direction,
-                    self.scene.settings.max_distance,
-                    intensity,
-                    color,
-                ),
+                Light::Directional { direction, intensity, color } => {
+                    (-direction, self.scene.settings.max_distance, intensity, color)
+                }
             };
             let n_dot_l = n.dot(to_light);
             if n_dot_l <= 0.0 {
@@ -106,10 +80,7 @@ impl<'a> Tracer<'a> {
             }
             stats.rays += 1;
             stats.shadow_rays += 1;
-            if self
-                .geometry
-                .any_hit(&Ray::new(above, to_light), 0.0, dist, stats)
-            {
+            if self.geometry.any_hit(&Ray::new(above, to_light), 0.0, dist, stats) {
                 continue;
             }
             local += m.kd * intensity * n_dot_l * m.color * color;
@@ -135,11 +106,7 @@ impl<'a> Tracer<'a> {
         };
         let (r, tr) = (m.reflectivity, m.transparency);
         let opaque = (1.0 - r) * local
-            + if r > 0.0 {
-                r * reflected(weight * (1.0 - tr) * r, stats)
-            } else {
-                Vec3::ZERO
-            };
+            + if r > 0.0 { r * reflected(weight * (1.0 - tr) * r, stats) } else { Vec3::ZERO };
         if tr <= 0.0 {
             return opaque;
         }

@@ -21,11 +21,7 @@ pub struct TransformDesc {
 
 impl Default for TransformDesc {
     fn default() -> Self {
-        TransformDesc {
-            translate: Vec3::ZERO,
-            rotate_deg: Vec3::ZERO,
-            scale: Vec3::ONE,
-        }
+        TransformDesc { translate: Vec3::ZERO, rotate_deg: Vec3::ZERO, scale: Vec3::ONE }
     }
 }
 
@@ -64,8 +60,7 @@ impl Transform {
     /// Compiles a scene-file transform.
     pub fn new(desc: &TransformDesc) -> Self {
         let r = desc.rotate_deg.as_dvec3() * (std::f64::consts::PI / 180.0);
-        let rot =
-            DMat3::from_rotation_z(r.z) * DMat3::from_rotation_y(r.y) * DMat3::from_rotation_x(r.x);
+        let rot = DMat3::from_rotation_z(r.z) * DMat3::from_rotation_y(r.y) * DMat3::from_rotation_x(r.x);
         let linear64 = rot * DMat3::from_diagonal(desc.scale.as_dvec3());
         let to_world64 = DAffine3::from_mat3_translation(linear64, desc.translate.as_dvec3());
         let to_local_f64 = to_world64.inverse();
@@ -96,21 +91,13 @@ impl Transform {
     /// Maps a world point into local space.
     #[inline]
     pub fn point_to_local(&self, p: Vec3) -> Vec3 {
-        if self.identity {
-            p
-        } else {
-            self.to_local.transform_point3(p)
-        }
+        if self.identity { p } else { self.to_local.transform_point3(p) }
     }
 
     /// Maps a world point into local space in f64.
     #[inline]
     pub fn point_to_local_f64(&self, p: DVec3) -> DVec3 {
-        if self.identity {
-            p
-        } else {
-            self.to_local_f64.transform_point3(p)
-        }
+        if self.identity { p } else { self.to_local_f64.transform_point3(p) }
     }
 
     /// Maps a world ray into local space in f64 (origin and direction); `t` keeps its meaning.
@@ -120,10 +107,7 @@ impl Transform {
         if self.identity {
             (o, d)
         } else {
-            (
-                self.to_local_f64.transform_point3(o),
-                self.to_local_f64.transform_vector3(d),
-            )
+            (self.to_local_f64.transform_point3(o), self.to_local_f64.transform_vector3(d))
         }
     }
 
@@ -133,10 +117,7 @@ impl Transform {
         if self.identity {
             *ray
         } else {
-            Ray::new(
-                self.to_local.transform_point3(ray.origin),
-                self.to_local.transform_vector3(ray.dir),
-            )
+            Ray::new(self.to_local.transform_point3(ray.origin), self.to_local.transform_vector3(ray.dir))
         }
     }
 
@@ -194,10 +175,8 @@ mod tests {
 
     #[test]
     fn rotation_order_is_x_then_y_then_z() {
-        let t = Transform::new(&TransformDesc {
-            rotate_deg: Vec3::new(90.0, 90.0, 0.0),
-            ..Default::default()
-        });
+        let t =
+            Transform::new(&TransformDesc { rotate_deg: Vec3::new(90.0, 90.0, 0.0), ..Default::default() });
         // x rotation maps +y to +z, then y rotation maps +z to +x.
         let v = t.to_world.transform_vector3(Vec3::Y);
         assert!((v - Vec3::X).length() < 1e-5, "{v}");

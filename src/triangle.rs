@@ -40,23 +40,12 @@ impl ShearedRay {
             std::mem::swap(&mut kx, &mut ky);
         }
         let shear = Vec3::new(dir[kx] / dir[kz], dir[ky] / dir[kz], 1.0 / dir[kz]);
-        ShearedRay {
-            origin,
-            k: [kx, ky, kz],
-            shear,
-        }
+        ShearedRay { origin, k: [kx, ky, kz], shear }
     }
 
     /// Intersects the triangle (`v0`, `v1`, `v2`), both sides, for `t` in `[t_min, t_max]`.
     #[inline]
-    pub fn intersect(
-        &self,
-        v0: Vec3,
-        v1: Vec3,
-        v2: Vec3,
-        t_min: f32,
-        t_max: f32,
-    ) -> Option<TriHit> {
+    pub fn intersect(&self, v0: Vec3, v1: Vec3, v2: Vec3, t_min: f32, t_max: f32) -> Option<TriHit> {
         let [kx, ky, kz] = self.k;
         let (sx, sy, sz) = (self.shear.x, self.shear.y, self.shear.z);
         let a = v0 - self.origin;
@@ -73,9 +62,7 @@ impl ShearedRay {
         let mut w = bx * ay - by * ax;
         if u == 0.0 || v == 0.0 || w == 0.0 {
             // Exactly on an edge in f32: decide in f64 so neighbours agree.
-            let (cx, cy, bx, by, ax, ay) = (
-                cx as f64, cy as f64, bx as f64, by as f64, ax as f64, ay as f64,
-            );
+            let (cx, cy, bx, by, ax, ay) = (cx as f64, cy as f64, bx as f64, by as f64, ax as f64, ay as f64);
             u = (cx * by - cy * bx) as f32;
             v = (ax * cy - ay * cx) as f32;
             w = (bx * ay - by * ax) as f32;
@@ -96,10 +83,7 @@ impl ShearedRay {
         if !(t >= t_min && t <= t_max) {
             return None;
         }
-        Some(TriHit {
-            t,
-            bary: [u * inv, v * inv, w * inv],
-        })
+        Some(TriHit { t, bary: [u * inv, v * inv, w * inv] })
     }
 }
 
@@ -117,23 +101,15 @@ mod tests {
     #[test]
     fn hits_centre_and_reports_barycentrics() {
         let r = ShearedRay::new(Vec3::new(0.25, 0.25, -1.0), Vec3::Z);
-        let h = r
-            .intersect(Vec3::ZERO, Vec3::X, Vec3::Y, 0.0, 10.0)
-            .unwrap();
+        let h = r.intersect(Vec3::ZERO, Vec3::X, Vec3::Y, 0.0, 10.0).unwrap();
         assert!((h.t - 1.0).abs() < 1e-6);
         assert!((h.bary[0] - 0.5).abs() < 1e-6 && (h.bary[1] - 0.25).abs() < 1e-6);
         // Both sides.
         let r = ShearedRay::new(Vec3::new(0.25, 0.25, 1.0), -Vec3::Z);
-        assert!(
-            r.intersect(Vec3::ZERO, Vec3::X, Vec3::Y, 0.0, 10.0)
-                .is_some()
-        );
+        assert!(r.intersect(Vec3::ZERO, Vec3::X, Vec3::Y, 0.0, 10.0).is_some());
         // Ray parallel to the triangle's plane.
         let r = ShearedRay::new(Vec3::new(-1.0, 0.25, 0.0), Vec3::X);
-        assert!(
-            r.intersect(Vec3::ZERO, Vec3::X, Vec3::Y, 0.0, 10.0)
-                .is_none()
-        );
+        assert!(r.intersect(Vec3::ZERO, Vec3::X, Vec3::Y, 0.0, 10.0).is_none());
     }
 
     proptest! {

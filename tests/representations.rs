@@ -14,54 +14,16 @@ fn primitives() -> Vec<(Primitive, Vec3, Vec3)> {
     let r = Vec3::new(20.0, 35.0, 10.0);
     vec![
         (Primitive::Sphere { radius: 1.2 }, Vec3::ZERO, Vec3::ONE),
+        (Primitive::Box { half: Vec3::new(1.0, 0.7, 0.8) }, r, Vec3::ONE),
+        (Primitive::Ellipsoid { radii: Vec3::new(1.5, 0.8, 1.0) }, r, Vec3::ONE),
+        (Primitive::Cylinder { radius: 0.8, half_height: 1.0 }, r, Vec3::ONE),
         (
-            Primitive::Box {
-                half: Vec3::new(1.0, 0.7, 0.8),
-            },
-            r,
-            Vec3::ONE,
-        ),
-        (
-            Primitive::Ellipsoid {
-                radii: Vec3::new(1.5, 0.8, 1.0),
-            },
-            r,
-            Vec3::ONE,
-        ),
-        (
-            Primitive::Cylinder {
-                radius: 0.8,
-                half_height: 1.0,
-            },
-            r,
-            Vec3::ONE,
-        ),
-        (
-            Primitive::Cone {
-                radius_bottom: 1.0,
-                radius_top: 0.0,
-                half_height: 1.0,
-            },
+            Primitive::Cone { radius_bottom: 1.0, radius_top: 0.0, half_height: 1.0 },
             Vec3::new(-20.0, 0.0, 0.0),
             Vec3::ONE,
         ),
-        (
-            Primitive::Cone {
-                radius_bottom: 1.0,
-                radius_top: 0.4,
-                half_height: 0.8,
-            },
-            r,
-            Vec3::ONE,
-        ),
-        (
-            Primitive::Torus {
-                major: 1.2,
-                minor: 0.35,
-            },
-            Vec3::new(-60.0, 0.0, 15.0),
-            Vec3::ONE,
-        ),
+        (Primitive::Cone { radius_bottom: 1.0, radius_top: 0.4, half_height: 0.8 }, r, Vec3::ONE),
+        (Primitive::Torus { major: 1.2, minor: 0.35 }, Vec3::new(-60.0, 0.0, 15.0), Vec3::ONE),
         (
             Primitive::Triangle {
                 a: Vec3::new(-1.5, -1.0, 0.0),
@@ -72,20 +34,12 @@ fn primitives() -> Vec<(Primitive, Vec3, Vec3)> {
             Vec3::ONE,
         ),
         (
-            Primitive::Capsule {
-                a: Vec3::new(-1.0, -0.5, 0.0),
-                b: Vec3::new(1.0, 0.5, 0.3),
-                radius: 0.5,
-            },
+            Primitive::Capsule { a: Vec3::new(-1.0, -0.5, 0.0), b: Vec3::new(1.0, 0.5, 0.3), radius: 0.5 },
             Vec3::ZERO,
             Vec3::ONE,
         ),
         // Non-uniform scale: the SDF is only a bound there.
-        (
-            Primitive::Sphere { radius: 1.0 },
-            r,
-            Vec3::new(1.5, 0.7, 1.0),
-        ),
+        (Primitive::Sphere { radius: 1.0 }, r, Vec3::new(1.5, 0.7, 1.0)),
     ]
 }
 
@@ -94,38 +48,19 @@ fn closed_form_and_sphere_traced_renders_agree_for_every_primitive() {
     let march = MarchParams::default();
     for (prim, rot, scale) in primitives() {
         // A ground plane under the object catches its shadow.
-        let ground = object(
-            Primitive::Plane {
-                normal: Vec3::Y,
-                offset: -1.6,
-            },
-            Vec3::ZERO,
-            Vec3::ZERO,
-            Vec3::ONE,
-        );
+        let ground =
+            object(Primitive::Plane { normal: Vec3::Y, offset: -1.6 }, Vec3::ZERO, Vec3::ZERO, Vec3::ONE);
         let mut ground = ground;
         ground.material = 0;
         let scene = lit_scene(vec![object(prim, Vec3::ZERO, rot, scale), ground], 200);
         let a = render_scene(&scene, Representation::Analytic { march });
         let s = render_scene(&scene, Representation::Sdf { march });
         let agree = fraction_within(&a.frame.image, &s.frame.image, 2);
-        common::dump(
-            &format!("{}-{}", prim.kind_name(), rot.x),
-            &[&a.frame.image, &s.frame.image],
-        );
-        assert!(
-            agree >= 0.995,
-            "{}: only {:.3}% of pixels agree",
-            prim.kind_name(),
-            agree * 100.0
-        );
+        common::dump(&format!("{}-{}", prim.kind_name(), rot.x), &[&a.frame.image, &s.frame.image]);
+        assert!(agree >= 0.995, "{}: only {:.3}% of pixels agree", prim.kind_name(), agree * 100.0);
         // The object is really there (not an empty image agreeing with an empty image).
         let bg = [26u8, 26, 38];
-        assert!(
-            covered(&a.frame.image, bg) > 2000,
-            "{}: nothing rendered",
-            prim.kind_name()
-        );
+        assert!(covered(&a.frame.image, bg) > 2000, "{}: nothing rendered", prim.kind_name());
         assert!(s.frame.stats.march_steps > 0);
     }
 }
@@ -138,20 +73,10 @@ fn over_relaxation_reduces_steps_and_keeps_the_image() {
         .enumerate()
         .map(|(i, (p, r, s))| object(p, Vec3::new(i as f32 * 2.5 - 3.75, 0.0, 2.0), r, s));
     let scene = lit_scene(objects.collect(), 160);
-    let plain = render_scene(
-        &scene,
-        Representation::Sdf {
-            march: MarchParams::default(),
-        },
-    );
+    let plain = render_scene(&scene, Representation::Sdf { march: MarchParams::default() });
     let relaxed = render_scene(
         &scene,
-        Representation::Sdf {
-            march: MarchParams {
-                relaxation: 1.6,
-                ..MarchParams::default()
-            },
-        },
+        Representation::Sdf { march: MarchParams { relaxation: 1.6, ..MarchParams::default() } },
     );
     assert!(relaxed.frame.stats.march_steps < plain.frame.stats.march_steps);
     assert!(fraction_within(&plain.frame.image, &relaxed.frame.image, 2) >= 0.995);
@@ -162,16 +87,33 @@ fn rendering_is_deterministic() {
     let (p, r, s) = primitives()[6];
     let scene = lit_scene(vec![object(p, Vec3::ZERO, r, s)], 96);
     for repr in [
-        Representation::Analytic {
-            march: MarchParams::default(),
-        },
-        Representation::Sdf {
-            march: MarchParams::default(),
-        },
+        Representation::Analytic { march: MarchParams::default() },
+        Representation::Sdf { march: MarchParams::default() },
     ] {
         let a = render_scene(&scene, repr);
         let b = render_scene(&scene, repr);
         assert_eq!(a.frame.image.as_raw(), b.frame.image.as_raw());
         assert_eq!(a.frame.stats, b.frame.stats);
     }
+}
+
+#[test]
+fn finely_tessellated_sphere_renders_like_the_closed_form_sphere() {
+    let sphere = object(Primitive::Sphere { radius: 1.2 }, Vec3::ZERO, Vec3::ZERO, Vec3::ONE);
+    let mut ground = object(Primitive::Plane { normal: Vec3::Y, offset: -1.6 }, Vec3::ZERO, Vec3::ZERO, Vec3::ONE);
+    ground.material = 0;
+    let scene = lit_scene(vec![sphere, ground], 200);
+    let march = MarchParams::default();
+    let reference = render_scene(&scene, Representation::Analytic { march });
+    let mut previous = 0.0;
+    for resolution in [32, 128, 512] {
+        let mesh = Representation::Mesh { resolution, shading: sdfmesh::shape::Shading::Smooth, march };
+        let m = render_scene(&scene, mesh);
+        let agree = fraction_within(&reference.frame.image, &m.frame.image, 2);
+        common::dump(&format!("tessellated-sphere-{resolution}"), &[&reference.frame.image, &m.frame.image]);
+        eprintln!("tessellated sphere at {resolution}: {:.3}% of pixels within 2/255", agree * 100.0);
+        assert!(agree >= previous - 0.002, "agreement fell from {previous} to {agree} at {resolution}");
+        previous = agree;
+    }
+    assert!(previous >= 0.99, "only {:.2}% of pixels agree at resolution 512", previous * 100.0);
 }

@@ -44,23 +44,14 @@ pub(crate) fn check_vertex_count(path: &Path, n: usize) -> Result<()> {
 
 /// Turns a reader's output into a mesh that meets the [`TriangleMesh`] invariants.
 pub(crate) fn finish(path: &Path, raw: RawMesh) -> Result<(TriangleMesh, LoadReport)> {
-    let RawMesh {
-        positions,
-        normals,
-        triangles,
-        mut report,
-    } = raw;
+    let RawMesh { positions, normals, triangles, mut report } = raw;
     report.triangles_read = triangles.len();
     let n = positions.len();
     check_vertex_count(path, n)?;
     // The readers check these with better messages; this is the safety net.
     for (i, p) in positions.iter().enumerate() {
         if let Some(what) = non_finite(*p) {
-            return Err(Error::input(
-                path,
-                None,
-                format!("vertex {i}: coordinate is {what}"),
-            ));
+            return Err(Error::input(path, None, format!("vertex {i}: coordinate is {what}")));
         }
     }
     for (i, t) in triangles.iter().enumerate() {
@@ -77,10 +68,7 @@ pub(crate) fn finish(path: &Path, raw: RawMesh) -> Result<(TriangleMesh, LoadRep
 
     let normals = normals.and_then(|mut normals| {
         if normals.len() != n {
-            report.notes.push(format!(
-                "normals ignored: {} normals for {n} vertices",
-                normals.len()
-            ));
+            report.notes.push(format!("normals ignored: {} normals for {n} vertices", normals.len()));
             return None;
         }
         for (i, v) in normals.iter_mut().enumerate() {
@@ -88,11 +76,7 @@ pub(crate) fn finish(path: &Path, raw: RawMesh) -> Result<(TriangleMesh, LoadRep
             if !(len.is_finite() && len > 1e-20) {
                 report.notes.push(format!(
                     "normals ignored: vertex {i} has a {} normal",
-                    if len.is_finite() {
-                        "zero"
-                    } else {
-                        "non-finite"
-                    }
+                    if len.is_finite() { "zero" } else { "non-finite" }
                 ));
                 return None;
             }
@@ -101,11 +85,7 @@ pub(crate) fn finish(path: &Path, raw: RawMesh) -> Result<(TriangleMesh, LoadRep
         Some(normals)
     });
 
-    let mut mesh = TriangleMesh {
-        positions,
-        triangles,
-        normals,
-    };
+    let mut mesh = TriangleMesh { positions, triangles, normals };
     report.vertices_welded = mesh.weld();
 
     let before = mesh.triangles.len();
@@ -114,29 +94,19 @@ pub(crate) fn finish(path: &Path, raw: RawMesh) -> Result<(TriangleMesh, LoadRep
         a != b
             && b != c
             && a != c
-            && !is_degenerate(
-                positions[a as usize],
-                positions[b as usize],
-                positions[c as usize],
-            )
+            && !is_degenerate(positions[a as usize], positions[b as usize], positions[c as usize])
     });
     report.degenerate_dropped = before - mesh.triangles.len();
 
     if mesh.triangles.is_empty() {
         let msg = if report.triangles_read == 0 {
             if report.skipped_primitives > 0 {
-                format!(
-                    "no triangles ({} point or line primitives skipped)",
-                    report.skipped_primitives
-                )
+                format!("no triangles ({} point or line primitives skipped)", report.skipped_primitives)
             } else {
                 "no triangles".to_string()
             }
         } else {
-            format!(
-                "no triangles (all {} triangles are degenerate)",
-                report.triangles_read
-            )
+            format!("no triangles (all {} triangles are degenerate)", report.triangles_read)
         };
         return Err(Error::input(path, None, msg));
     }

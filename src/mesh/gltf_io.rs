@@ -49,16 +49,11 @@ fn u32_at(data: &[u8], at: usize) -> u32 {
 fn parse_glb<'a>(path: &Path, data: &'a [u8]) -> Result<(&'a [u8], Option<&'a [u8]>)> {
     let err = |msg: String| Error::input(path, None, msg);
     if data.len() < 12 {
-        return Err(err(format!(
-            "truncated GLB: {} bytes, shorter than the 12-byte header",
-            data.len()
-        )));
+        return Err(err(format!("truncated GLB: {} bytes, shorter than the 12-byte header", data.len())));
     }
     let version = u32_at(data, 4);
     if version != 2 {
-        return Err(err(format!(
-            "GLB version {version} is not supported (only glTF 2.0)"
-        )));
+        return Err(err(format!("GLB version {version} is not supported (only glTF 2.0)")));
     }
     let length = u32_at(data, 8) as usize;
     if length > data.len() {
@@ -107,21 +102,15 @@ fn parse_document(path: &Path, json: &[u8], in_glb: bool) -> Result<gltf::Docume
     use gltf::json::validation::Validate;
     let json = json.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(json);
     // GLB JSON chunks are padded with spaces (or, by some writers, zeros).
-    let end = json
-        .iter()
-        .rposition(|&b| !(b == 0 || b.is_ascii_whitespace()))
-        .map_or(0, |i| i + 1);
+    let end = json.iter().rposition(|&b| !(b == 0 || b.is_ascii_whitespace())).map_or(0, |i| i + 1);
     let json = &json[..end];
     let root = match gltf::json::Root::from_slice(json) {
         Ok(root) => root,
         Err(e) => {
             // A glTF 1.0 file fails to parse as 2.0: say so rather than quote serde.
             if let Ok(v) = gltf::json::deserialize::from_slice::<gltf::json::Value>(json) {
-                let version = v
-                    .get("asset")
-                    .and_then(|a| a.get("version"))
-                    .and_then(|v| v.as_str())
-                    .unwrap_or("");
+                let version =
+                    v.get("asset").and_then(|a| a.get("version")).and_then(|v| v.as_str()).unwrap_or("");
                 // glTF 1.0 keeps its collections in objects keyed by name, not arrays.
                 let named = ["accessors", "meshes", "nodes", "buffers"]
                     .iter()
@@ -143,15 +132,9 @@ fn parse_document(path: &Path, json: &[u8], in_glb: bool) -> Result<gltf::Docume
             }
             let msg = e.to_string();
             let msg = msg.split(" at line ").next().unwrap_or(&msg).to_string();
-            let loc = (!in_glb && e.line() > 0).then_some(Location {
-                line: e.line(),
-                column: e.column().max(1),
-            });
-            let what = if in_glb {
-                "invalid glTF JSON chunk"
-            } else {
-                "invalid glTF JSON"
-            };
+            let loc =
+                (!in_glb && e.line() > 0).then_some(Location { line: e.line(), column: e.column().max(1) });
+            let what = if in_glb { "invalid glTF JSON chunk" } else { "invalid glTF JSON" };
             return Err(Error::input(path, loc, format!("{what}: {msg}")));
         }
     };
@@ -159,10 +142,7 @@ fn parse_document(path: &Path, json: &[u8], in_glb: bool) -> Result<gltf::Docume
         return Err(Error::input(
             path,
             None,
-            format!(
-                "glTF version {} is not supported (only glTF 2.0)",
-                root.asset.version
-            ),
+            format!("glTF version {} is not supported (only glTF 2.0)", root.asset.version),
         ));
     }
     for ext in &root.extensions_required {
@@ -170,9 +150,7 @@ fn parse_document(path: &Path, json: &[u8], in_glb: bool) -> Result<gltf::Docume
             return Err(Error::input(
                 path,
                 None,
-                format!(
-                    "the file requires glTF extension {ext}, which this loader does not support"
-                ),
+                format!("the file requires glTF extension {ext}, which this loader does not support"),
             ));
         }
     }
@@ -213,20 +191,14 @@ fn parse_document(path: &Path, json: &[u8], in_glb: bool) -> Result<gltf::Docume
             1 => String::new(),
             n => format!(" (and {} more problems)", n - 1),
         };
-        return Err(Error::input(
-            path,
-            None,
-            format!("invalid glTF: {first}{more}"),
-        ));
+        return Err(Error::input(path, None, format!("invalid glTF: {first}{more}")));
     }
     Ok(gltf::Document::from_json_without_validation(root))
 }
 
 /// Decodes the `data:` URI payload (`;base64,` only).
 fn decode_data_uri(uri: &str) -> std::result::Result<Vec<u8>, String> {
-    let (_, payload) = uri
-        .split_once(";base64,")
-        .ok_or("data URI is not base64-encoded")?;
+    let (_, payload) = uri.split_once(";base64,").ok_or("data URI is not base64-encoded")?;
     let val = |c: u8| -> Option<u32> {
         Some(match c {
             b'A'..=b'Z' => c - b'A',
@@ -287,9 +259,9 @@ impl<'a> Buffers<'a> {
         let declared = buffer.length();
         let err = |msg: String| Error::input(self.path, None, format!("buffer {i}: {msg}"));
         let data: &[u8] = match buffer.source() {
-            gltf::buffer::Source::Bin => self.bin.ok_or_else(|| {
-                err("refers to the GLB binary chunk, but the file has none".into())
-            })?,
+            gltf::buffer::Source::Bin => {
+                self.bin.ok_or_else(|| err("refers to the GLB binary chunk, but the file has none".into()))?
+            }
             gltf::buffer::Source::Uri(uri) => {
                 if !self.loaded.contains_key(&i) {
                     let bytes = if uri.starts_with("data:") {
@@ -300,9 +272,8 @@ impl<'a> Buffers<'a> {
                         let rel = PathBuf::from(percent_decode(uri));
                         let base = self.path.parent().unwrap_or(Path::new(""));
                         let file = base.join(&rel);
-                        std::fs::read(&file).map_err(|e| {
-                            err(format!("cannot read '{uri}' ({}): {e}", file.display()))
-                        })?
+                        std::fs::read(&file)
+                            .map_err(|e| err(format!("cannot read '{uri}' ({}): {e}", file.display())))?
                     };
                     self.loaded.insert(i, bytes);
                 }
@@ -333,21 +304,18 @@ impl<'a> Buffers<'a> {
         let (vi, off, len) = (view.index(), view.offset(), view.length());
         let path = self.path;
         let buf = self.get(&view.buffer())?;
-        let end = off
-            .checked_add(len)
-            .filter(|&e| e <= buf.len())
-            .ok_or_else(|| {
-                Error::input(
-                    path,
-                    None,
-                    format!(
-                        "buffer view {vi}: bytes {off}..{} lie outside buffer {} ({} bytes)",
-                        off as u128 + len as u128,
-                        view.buffer().index(),
-                        buf.len()
-                    ),
-                )
-            })?;
+        let end = off.checked_add(len).filter(|&e| e <= buf.len()).ok_or_else(|| {
+            Error::input(
+                path,
+                None,
+                format!(
+                    "buffer view {vi}: bytes {off}..{} lie outside buffer {} ({} bytes)",
+                    off as u128 + len as u128,
+                    view.buffer().index(),
+                    buf.len()
+                ),
+            )
+        })?;
         Ok(&buf[off..end])
     }
 }
@@ -436,15 +404,10 @@ impl Reader<'_> {
                 let bytes = self.buffers.view(&view)?;
                 let vlen = bytes.len();
                 // Checked against the data before allocating.
-                let fits = (count as u128).saturating_sub(1) * stride as u128
-                    + acc.offset() as u128
-                    + elem as u128
-                    <= vlen as u128;
-                out = if fits {
-                    Vec::with_capacity(count * dims)
-                } else {
-                    Vec::new()
-                };
+                let fits =
+                    (count as u128).saturating_sub(1) * stride as u128 + acc.offset() as u128 + elem as u128
+                        <= vlen as u128;
+                out = if fits { Vec::with_capacity(count * dims) } else { Vec::new() };
                 let res = for_each_element(bytes, acc.offset(), stride, elem, count, |_, b| {
                     for c in 0..dims {
                         out.push(component(dt, &b[c * csize..], norm));
@@ -548,10 +511,8 @@ impl Reader<'_> {
             )));
         }
         let values = self.read_components(acc, what)?;
-        let v: Vec<Vec3> = values
-            .chunks_exact(3)
-            .map(|c| Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32))
-            .collect();
+        let v: Vec<Vec3> =
+            values.chunks_exact(3).map(|c| Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32)).collect();
         let v = Rc::new(v);
         self.vec3_cache.insert(acc.index(), v.clone());
         Ok(v)
@@ -563,10 +524,7 @@ impl Reader<'_> {
         }
         let ai = acc.index();
         if acc.dimensions() != Dimensions::Scalar
-            || !matches!(
-                acc.data_type(),
-                DataType::U8 | DataType::U16 | DataType::U32
-            )
+            || !matches!(acc.data_type(), DataType::U8 | DataType::U16 | DataType::U32)
         {
             return Err(self.err(format!(
                 "{what}: index accessor {ai} is {:?} {:?}, expected SCALAR of unsigned integers",
@@ -575,11 +533,7 @@ impl Reader<'_> {
             )));
         }
         // Components are decoded as f64, which holds every u32 exactly.
-        let v: Vec<u32> = self
-            .read_components(acc, what)?
-            .iter()
-            .map(|&f| f as u32)
-            .collect();
+        let v: Vec<u32> = self.read_components(acc, what)?.iter().map(|&f| f as u32).collect();
         let v = Rc::new(v);
         self.index_cache.insert(ai, v.clone());
         Ok(v)
@@ -624,11 +578,7 @@ fn instances(path: &Path, doc: &gltf::Document, notes: &mut Vec<String>) -> Resu
         }
         return Ok(doc
             .meshes()
-            .map(|m| Instance {
-                node: usize::MAX,
-                mesh: m.index(),
-                world: Mat4::IDENTITY,
-            })
+            .map(|m| Instance { node: usize::MAX, mesh: m.index(), world: Mat4::IDENTITY })
             .collect());
     }
 
@@ -640,11 +590,7 @@ fn instances(path: &Path, doc: &gltf::Document, notes: &mut Vec<String>) -> Resu
     let mut on_path = vec![false; n_nodes];
     let mut visited = vec![false; n_nodes];
     let mut out = Vec::new();
-    let mut stack: Vec<Step> = roots
-        .iter()
-        .rev()
-        .map(|&r| Step::Enter(r, Mat4::IDENTITY))
-        .collect();
+    let mut stack: Vec<Step> = roots.iter().rev().map(|&r| Step::Enter(r, Mat4::IDENTITY)).collect();
     while let Some(step) = stack.pop() {
         match step {
             Step::Exit(n) => on_path[n] = false,
@@ -672,18 +618,10 @@ fn instances(path: &Path, doc: &gltf::Document, notes: &mut Vec<String>) -> Resu
                 let local = Mat4::from_cols_array_2d(&node.transform().matrix());
                 let world = parent * local;
                 if !world.is_finite() {
-                    return Err(Error::input(
-                        path,
-                        None,
-                        format!("node {n}: its transform is not finite"),
-                    ));
+                    return Err(Error::input(path, None, format!("node {n}: its transform is not finite")));
                 }
                 if let Some(mesh) = node.mesh() {
-                    out.push(Instance {
-                        node: n,
-                        mesh: mesh.index(),
-                        world,
-                    });
+                    out.push(Instance { node: n, mesh: mesh.index(), world });
                 }
                 stack.push(Step::Exit(n));
                 let children: Vec<usize> = node.children().map(|c| c.index()).collect();
@@ -701,11 +639,7 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
     // a panic there must still come out as an error naming the file.
     match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| read_inner(path, data))) {
         Ok(r) => r,
-        Err(_) => Err(Error::input(
-            path,
-            None,
-            "the glTF reader failed on this file (internal panic)",
-        )),
+        Err(_) => Err(Error::input(path, None, "the glTF reader failed on this file (internal panic)")),
     }
 }
 
@@ -714,21 +648,13 @@ fn read_inner(path: &Path, data: &[u8]) -> Result<RawMesh> {
         return Err(Error::input(path, None, "empty file"));
     }
     let glb = data.starts_with(GLB_MAGIC);
-    let (json, bin) = if glb {
-        parse_glb(path, data)?
-    } else {
-        (data, None)
-    };
+    let (json, bin) = if glb { parse_glb(path, data)? } else { (data, None) };
     let doc = parse_document(path, json, glb)?;
     let mut raw = RawMesh::default();
     let inst = instances(path, &doc, &mut raw.report.notes)?;
     let mut reader = Reader {
         path,
-        buffers: Buffers {
-            path,
-            bin,
-            loaded: HashMap::new(),
-        },
+        buffers: Buffers { path, bin, loaded: HashMap::new() },
         vec3_cache: HashMap::new(),
         index_cache: HashMap::new(),
     };
@@ -746,16 +672,13 @@ fn read_inner(path: &Path, data: &[u8]) -> Result<RawMesh> {
         for prim in mesh.primitives() {
             let what = format!("mesh {} primitive {}", ins.mesh, prim.index());
             let mode = prim.mode();
-            if matches!(
-                mode,
-                Mode::Points | Mode::Lines | Mode::LineLoop | Mode::LineStrip
-            ) {
+            if matches!(mode, Mode::Points | Mode::Lines | Mode::LineLoop | Mode::LineStrip) {
                 raw.report.skipped_primitives += 1;
                 continue;
             }
-            let pos_acc = prim.get(&Semantic::Positions).ok_or_else(|| {
-                Error::input(path, None, format!("{what}: no POSITION attribute"))
-            })?;
+            let pos_acc = prim
+                .get(&Semantic::Positions)
+                .ok_or_else(|| Error::input(path, None, format!("{what}: no POSITION attribute")))?;
             let pos = reader.read_vec3(&pos_acc, &format!("{what} POSITION"))?;
             for (i, p) in pos.iter().enumerate() {
                 if let Some(w) = non_finite(*p) {
@@ -820,8 +743,7 @@ fn read_inner(path: &Path, data: &[u8]) -> Result<RawMesh> {
                 Mode::Triangles => n / 3,
                 _ => n.saturating_sub(2),
             };
-            if tris.len() + new_tris > MAX_TRIANGLES || positions.len() + pos.len() > MAX_TRIANGLES
-            {
+            if tris.len() + new_tris > MAX_TRIANGLES || positions.len() + pos.len() > MAX_TRIANGLES {
                 return Err(Error::input(
                     path,
                     None,
@@ -874,26 +796,18 @@ fn read_inner(path: &Path, data: &[u8]) -> Result<RawMesh> {
                     return Err(Error::input(
                         path,
                         None,
-                        format!(
-                            "{what}: vertex {i} is not finite after the transform of node {}",
-                            ins.node
-                        ),
+                        format!("{what}: vertex {i} is not finite after the transform of node {}", ins.node),
                     ));
                 }
                 positions.push(q);
             }
             if let Some(nrm) = nrm {
-                normals.extend(
-                    nrm.iter()
-                        .map(|&v| Vec3::from(normal_matrix * Vec3A::from(v))),
-                );
+                normals.extend(nrm.iter().map(|&v| Vec3::from(normal_matrix * Vec3A::from(v))));
             }
         }
     }
     if !all_normals && any_normals {
-        raw.report
-            .notes
-            .push("normals ignored: not every primitive has a NORMAL attribute".into());
+        raw.report.notes.push("normals ignored: not every primitive has a NORMAL attribute".into());
     }
     raw.normals = (all_normals && normals.len() == positions.len()).then_some(normals);
     raw.positions = positions;
@@ -913,9 +827,7 @@ pub(crate) fn glb_bytes(mesh: &TriangleMesh) -> std::result::Result<Vec<u8>, Str
         }
     }
     let pos_len = bin.len();
-    let mut views = vec![format!(
-        r#"{{"buffer":0,"byteOffset":0,"byteLength":{pos_len},"target":34962}}"#
-    )];
+    let mut views = vec![format!(r#"{{"buffer":0,"byteOffset":0,"byteLength":{pos_len},"target":34962}}"#)];
     let mut accessors = vec![format!(
         r#"{{"bufferView":0,"componentType":5126,"count":{n},"type":"VEC3","min":[{},{},{}],"max":[{},{},{}]}}"#,
         lo.x, lo.y, lo.z, hi.x, hi.y, hi.z
@@ -932,9 +844,7 @@ pub(crate) fn glb_bytes(mesh: &TriangleMesh) -> std::result::Result<Vec<u8>, Str
             r#"{{"buffer":0,"byteOffset":{start},"byteLength":{},"target":34962}}"#,
             bin.len() - start
         ));
-        accessors.push(format!(
-            r#"{{"bufferView":1,"componentType":5126,"count":{n},"type":"VEC3"}}"#
-        ));
+        accessors.push(format!(r#"{{"bufferView":1,"componentType":5126,"count":{n},"type":"VEC3"}}"#));
         attributes.push_str(r#","NORMAL":1"#);
     }
     let start = bin.len();
@@ -974,9 +884,7 @@ pub(crate) fn glb_bytes(mesh: &TriangleMesh) -> std::result::Result<Vec<u8>, Str
     }
     let total = 12 + 8 + json.len() + 8 + bin.len();
     if total > u32::MAX as usize {
-        return Err(format!(
-            "{total} bytes is too large for a GLB file (4 GiB at most)"
-        ));
+        return Err(format!("{total} bytes is too large for a GLB file (4 GiB at most)"));
     }
     let mut out = Vec::with_capacity(total);
     out.extend_from_slice(GLB_MAGIC);
@@ -1002,10 +910,7 @@ mod tests {
             decode_data_uri("data:application/octet-stream;base64,aGVsbG8gd29ybGQ=").unwrap(),
             b"hello world"
         );
-        assert_eq!(
-            decode_data_uri("data:;base64,AAECAw").unwrap(),
-            [0, 1, 2, 3]
-        );
+        assert_eq!(decode_data_uri("data:;base64,AAECAw").unwrap(), [0, 1, 2, 3]);
         assert!(decode_data_uri("data:;base64,AA*A").is_err());
         assert!(decode_data_uri("data:text/plain,abc").is_err());
         assert_eq!(percent_decode("a%20b%2Fc%"), "a b/c%");
@@ -1036,10 +941,7 @@ mod tests {
         b.extend_from_slice(&2u32.to_le_bytes());
         b.extend_from_slice(&100u32.to_le_bytes());
         let e = parse_glb(p, &b).unwrap_err().to_string();
-        assert!(
-            e.contains("header says 100 bytes but the file has 12"),
-            "{e}"
-        );
+        assert!(e.contains("header says 100 bytes but the file has 12"), "{e}");
         b[8..12].copy_from_slice(&20u32.to_le_bytes());
         b.extend_from_slice(&[0xFF, 0xFF, 0xFF, 0xFF, b'J', b'S', b'O', b'N']);
         let e = parse_glb(p, &b).unwrap_err().to_string();

@@ -134,34 +134,23 @@ impl MeshFormat {
 }
 
 fn list_extensions(exts: &[&str]) -> String {
-    exts.iter()
-        .map(|e| format!(".{e}"))
-        .collect::<Vec<_>>()
-        .join(", ")
+    exts.iter().map(|e| format!(".{e}")).collect::<Vec<_>>().join(", ")
 }
 
 fn format_for(path: &Path, supported: &[&str], verb: &str) -> Result<MeshFormat> {
     let fmt = MeshFormat::from_path(path);
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
     match (fmt, ext) {
         (Some(f), Some(e)) if supported.contains(&e.as_str()) => Ok(f),
         (_, Some(e)) => Err(Error::input(
             path,
             None,
-            format!(
-                "cannot {verb} mesh format '.{e}' (supported: {})",
-                list_extensions(supported)
-            ),
+            format!("cannot {verb} mesh format '.{e}' (supported: {})", list_extensions(supported)),
         )),
         (_, None) => Err(Error::input(
             path,
             None,
-            format!(
-                "no file extension to tell the mesh format (supported: {})",
-                list_extensions(supported)
-            ),
+            format!("no file extension to tell the mesh format (supported: {})", list_extensions(supported)),
         )),
     }
 }
@@ -203,11 +192,7 @@ pub fn load_mesh(path: &Path) -> Result<(TriangleMesh, LoadReport)> {
 pub fn save_mesh(mesh: &TriangleMesh, path: &Path) -> Result<()> {
     let format = format_for(path, WRITABLE_EXTENSIONS, "write")?;
     if let Err(msg) = mesh.validate() {
-        return Err(Error::input(
-            path,
-            None,
-            format!("cannot write mesh: {msg}"),
-        ));
+        return Err(Error::input(path, None, format!("cannot write mesh: {msg}")));
     }
     if mesh.triangles.is_empty() {
         return Err(Error::input(path, None, "cannot write mesh: no triangles"));
@@ -228,15 +213,8 @@ pub fn save_mesh(mesh: &TriangleMesh, path: &Path) -> Result<()> {
 /// below about `1e-10` radians. Also true when two corners coincide. Scale-invariant.
 pub fn is_degenerate(a: Vec3, b: Vec3, c: Vec3) -> bool {
     let a = a.as_dvec3();
-    let (e1, e2, e3) = (
-        b.as_dvec3() - a,
-        c.as_dvec3() - a,
-        c.as_dvec3() - b.as_dvec3(),
-    );
-    let longest2 = e1
-        .length_squared()
-        .max(e2.length_squared())
-        .max(e3.length_squared());
+    let (e1, e2, e3) = (b.as_dvec3() - a, c.as_dvec3() - a, c.as_dvec3() - b.as_dvec3());
+    let longest2 = e1.length_squared().max(e2.length_squared()).max(e3.length_squared());
     let cross = e1.cross(e2).length();
     // Finite f32 inputs cannot overflow f64 here, so `cross` is never NaN.
     cross <= 1e-10 * longest2
@@ -246,11 +224,7 @@ impl TriangleMesh {
     /// The axis-aligned box of all positions, as `(min, max)`; `None` when there are none.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
         let first = *self.positions.first()?;
-        Some(
-            self.positions
-                .iter()
-                .fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p))),
-        )
+        Some(self.positions.iter().fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p))))
     }
 
     /// Number of triangles.
@@ -264,10 +238,7 @@ impl TriangleMesh {
         std::mem::size_of::<Self>()
             + self.positions.capacity() * std::mem::size_of::<Vec3>()
             + self.triangles.capacity() * std::mem::size_of::<[u32; 3]>()
-            + self
-                .normals
-                .as_ref()
-                .map_or(0, |n| n.capacity() * std::mem::size_of::<Vec3>())
+            + self.normals.as_ref().map_or(0, |n| n.capacity() * std::mem::size_of::<Vec3>())
     }
 
     /// Checks the [`TriangleMesh`] invariants, describing the first one broken.
@@ -284,9 +255,7 @@ impl TriangleMesh {
         for (i, t) in self.triangles.iter().enumerate() {
             for &v in t {
                 if v as usize >= n {
-                    return Err(format!(
-                        "triangle {i}: index {v} out of range ({n} vertices)"
-                    ));
+                    return Err(format!("triangle {i}: index {v} out of range ({n} vertices)"));
                 }
             }
         }
@@ -328,11 +297,7 @@ impl TriangleMesh {
             .map(|(s, f)| {
                 let v = s.normalize_or_zero();
                 let v = if v == Vec3A::ZERO { *f } else { v };
-                if v == Vec3A::ZERO {
-                    Vec3::Z
-                } else {
-                    Vec3::from(v)
-                }
+                if v == Vec3A::ZERO { Vec3::Z } else { Vec3::from(v) }
             })
             .collect();
         self.normals = Some(normals);
@@ -362,8 +327,7 @@ impl TriangleMesh {
             _ => None,
         };
         self.positions.extend_from_slice(&other.positions);
-        self.triangles
-            .extend(other.triangles.iter().map(|t| t.map(|i| i + offset)));
+        self.triangles.extend(other.triangles.iter().map(|t| t.map(|i| i + offset)));
     }
 
     /// Applies `m` to the positions; normals are transformed by the inverse transpose of
@@ -445,18 +409,8 @@ impl TriangleMesh {
         let key = |i: usize| -> [u32; 6] {
             // `+ 0.0` turns -0.0 into +0.0 so that the two zeros weld.
             let p = self.positions[i] + Vec3::ZERO;
-            let n = self
-                .normals
-                .as_ref()
-                .map_or(Vec3::ZERO, |n| n[i] + Vec3::ZERO);
-            [
-                p.x.to_bits(),
-                p.y.to_bits(),
-                p.z.to_bits(),
-                n.x.to_bits(),
-                n.y.to_bits(),
-                n.z.to_bits(),
-            ]
+            let n = self.normals.as_ref().map_or(Vec3::ZERO, |n| n[i] + Vec3::ZERO);
+            [p.x.to_bits(), p.y.to_bits(), p.z.to_bits(), n.x.to_bits(), n.y.to_bits(), n.z.to_bits()]
         };
         let n = self.positions.len();
         let mut map: HashMap<[u32; 6], u32> = HashMap::with_capacity(n);
@@ -500,15 +454,9 @@ mod tests {
     fn degenerate_test_is_scale_invariant() {
         for s in [1e-20f32, 1e-3, 1.0, 1e3, 1e18] {
             let (a, b) = (Vec3::ZERO, Vec3::X * s);
-            assert!(
-                is_degenerate(a, b, Vec3::X * 0.5 * s),
-                "collinear at scale {s}"
-            );
+            assert!(is_degenerate(a, b, Vec3::X * 0.5 * s), "collinear at scale {s}");
             assert!(is_degenerate(a, b, b), "repeated corner at scale {s}");
-            assert!(
-                !is_degenerate(a, b, Vec3::new(0.5, 1e-6, 0.0) * s),
-                "thin at scale {s}"
-            );
+            assert!(!is_degenerate(a, b, Vec3::new(0.5, 1e-6, 0.0) * s), "thin at scale {s}");
         }
         assert!(is_degenerate(Vec3::ONE, Vec3::ONE, Vec3::ONE));
     }
@@ -532,13 +480,7 @@ mod tests {
     #[test]
     fn weld_merges_identical_vertices_and_both_zeros() {
         let mut m = TriangleMesh {
-            positions: vec![
-                Vec3::ZERO,
-                Vec3::X,
-                Vec3::Y,
-                Vec3::new(-0.0, 0.0, 0.0),
-                Vec3::Y,
-            ],
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(-0.0, 0.0, 0.0), Vec3::Y],
             triangles: vec![[0, 1, 2], [3, 1, 4]],
             normals: None,
         };
@@ -565,34 +507,23 @@ mod tests {
         assert!(q.validate().unwrap_err().contains("index 7 out of range"));
         q.triangles.pop();
         q.positions[0].x = f32::NAN;
-        assert!(
-            q.validate()
-                .unwrap_err()
-                .contains("vertex 0: coordinate is NaN")
-        );
+        assert!(q.validate().unwrap_err().contains("vertex 0: coordinate is NaN"));
     }
 
     #[test]
     fn bytes_used_counts_capacity() {
         let mut m = quad();
         m.positions.reserve_exact(100);
-        let expected = std::mem::size_of::<TriangleMesh>()
-            + m.positions.capacity() * 12
-            + m.triangles.capacity() * 12;
+        let expected =
+            std::mem::size_of::<TriangleMesh>() + m.positions.capacity() * 12 + m.triangles.capacity() * 12;
         assert_eq!(m.bytes_used(), expected);
         assert!(m.positions.capacity() >= 104);
     }
 
     #[test]
     fn formats_by_extension() {
-        assert_eq!(
-            MeshFormat::from_path(Path::new("a/b.GLB")),
-            Some(MeshFormat::Glb)
-        );
-        assert_eq!(
-            MeshFormat::from_path(Path::new("a.Stl")),
-            Some(MeshFormat::Stl)
-        );
+        assert_eq!(MeshFormat::from_path(Path::new("a/b.GLB")), Some(MeshFormat::Glb));
+        assert_eq!(MeshFormat::from_path(Path::new("a.Stl")), Some(MeshFormat::Stl));
         assert_eq!(MeshFormat::from_path(Path::new("a.off")), None);
         assert_eq!(MeshFormat::from_path(Path::new("obj")), None);
     }

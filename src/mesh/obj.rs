@@ -51,48 +51,33 @@ fn scan(path: &Path, data: &mut [u8]) -> Result<Scan> {
     let mut line_no = 0usize;
     while start < data.len() {
         line_no += 1;
-        let end = data[start..]
-            .iter()
-            .position(|&b| b == b'\n')
-            .map_or(data.len(), |i| start + i);
+        let end = data[start..].iter().position(|&b| b == b'\n').map_or(data.len(), |i| start + i);
         let range = start..end;
         start = end + 1;
         let line = &data[range.clone()];
         let Ok(text) = std::str::from_utf8(line) else {
             // Names and comments are ignored: a line of them in another encoding is
             // blanked rather than refused.
-            let keyword = line
-                .split(|b| b.is_ascii_whitespace())
-                .find(|w| !w.is_empty())
-                .unwrap_or(b"");
-            let ignorable = keyword.starts_with(b"#")
-                || [&b"g"[..], b"o", b"s", b"usemtl", b"mtllib"].contains(&keyword);
+            let keyword = line.split(|b| b.is_ascii_whitespace()).find(|w| !w.is_empty()).unwrap_or(b"");
+            let ignorable =
+                keyword.starts_with(b"#") || [&b"g"[..], b"o", b"s", b"usemtl", b"mtllib"].contains(&keyword);
             if ignorable {
                 data[range].fill(b' ');
                 continue;
             }
             return Err(Error::input(
                 path,
-                Some(Location {
-                    line: line_no,
-                    column: 1,
-                }),
+                Some(Location { line: line_no, column: 1 }),
                 "line is not valid UTF-8 text",
             ));
         };
         // Words with their byte offsets in the line.
-        let mut words = text
-            .split_ascii_whitespace()
-            .map(|w| (w, w.as_ptr() as usize - text.as_ptr() as usize));
+        let mut words =
+            text.split_ascii_whitespace().map(|w| (w, w.as_ptr() as usize - text.as_ptr() as usize));
         let Some((keyword, _)) = words.next() else {
             continue;
         };
-        let loc = |col: usize| {
-            Some(Location {
-                line: line_no,
-                column: col + 1,
-            })
-        };
+        let loc = |col: usize| Some(Location { line: line_no, column: col + 1 });
         let mut blank = false;
         match keyword {
             "v" => {
@@ -101,9 +86,7 @@ fn scan(path: &Path, data: &mut [u8]) -> Result<Scan> {
                     Error::input(
                         path,
                         loc(0),
-                        format!(
-                            "vertex {nv}: expected 'v x y z', optionally followed by w or by r g b"
-                        ),
+                        format!("vertex {nv}: expected 'v x y z', optionally followed by w or by r g b"),
                     )
                 };
                 if rest.len() < 3 || rest.len() == 5 || rest.len() > 6 {
@@ -112,22 +95,14 @@ fn scan(path: &Path, data: &mut [u8]) -> Result<Scan> {
                 let mut p = [0f32; 3];
                 for (c, &(w, col)) in p.iter_mut().zip(&rest) {
                     *c = w.parse::<f32>().map_err(|_| {
-                        Error::input(
-                            path,
-                            loc(col),
-                            format!("vertex {nv}: '{w}' is not a number"),
-                        )
+                        Error::input(path, loc(col), format!("vertex {nv}: '{w}' is not a number"))
                     })?;
                 }
                 let mut p = Vec3::from(p);
                 if rest.len() == 4 {
                     let (w, col) = rest[3];
                     let wv = w.parse::<f32>().map_err(|_| {
-                        Error::input(
-                            path,
-                            loc(col),
-                            format!("vertex {nv}: w '{w}' is not a number"),
-                        )
+                        Error::input(path, loc(col), format!("vertex {nv}: w '{w}' is not a number"))
                     })?;
                     if wv == 0.0 {
                         return Err(Error::input(path, loc(col), format!("vertex {nv}: w is 0")));
@@ -135,11 +110,7 @@ fn scan(path: &Path, data: &mut [u8]) -> Result<Scan> {
                     p /= wv;
                 }
                 if let Some(what) = non_finite(p) {
-                    return Err(Error::input(
-                        path,
-                        loc(0),
-                        format!("vertex {nv}: coordinate is {what}"),
-                    ));
+                    return Err(Error::input(path, loc(0), format!("vertex {nv}: coordinate is {what}")));
                 }
                 if rest.len() == 6 {
                     // Vertex colours are ignored; removing them keeps tobj from failing
@@ -152,11 +123,7 @@ fn scan(path: &Path, data: &mut [u8]) -> Result<Scan> {
             "vn" => {
                 let rest: Vec<(&str, usize)> = words.collect();
                 if rest.len() < 3 || rest[..3].iter().any(|(w, _)| w.parse::<f32>().is_err()) {
-                    return Err(Error::input(
-                        path,
-                        loc(0),
-                        format!("normal {nn}: expected 'vn x y z'"),
-                    ));
+                    return Err(Error::input(path, loc(0), format!("normal {nn}: expected 'vn x y z'")));
                 }
                 nn += 1;
             }
@@ -168,9 +135,7 @@ fn scan(path: &Path, data: &mut [u8]) -> Result<Scan> {
                         return Err(Error::input(
                             path,
                             loc(col),
-                            format!(
-                                "face {nf}: '{w}' is not a vertex reference (v, v/vt, v//vn or v/vt/vn)"
-                            ),
+                            format!("face {nf}: '{w}' is not a vertex reference (v, v/vt, v//vn or v/vt/vn)"),
                         ));
                     }
                     for (k, part) in parts.iter().enumerate() {
@@ -211,10 +176,7 @@ fn scan(path: &Path, data: &mut [u8]) -> Result<Scan> {
                             *max = Some(Pending {
                                 value,
                                 face: nf,
-                                loc: Location {
-                                    line: line_no,
-                                    column: col + 1,
-                                },
+                                loc: Location { line: line_no, column: col + 1 },
                                 normal: k == 2,
                             });
                         }
@@ -244,25 +206,15 @@ fn scan(path: &Path, data: &mut [u8]) -> Result<Scan> {
             continue;
         }
         if p.value as u64 > count as u64 {
-            let (what, kind) = if p.normal {
-                ("normal index", "normals")
-            } else {
-                ("index", "vertices")
-            };
+            let (what, kind) = if p.normal { ("normal index", "normals") } else { ("index", "vertices") };
             return Err(Error::input(
                 path,
                 Some(p.loc),
-                format!(
-                    "face {}: {what} {} out of range ({count} {kind})",
-                    p.face, p.value
-                ),
+                format!("face {}: {what} {} out of range ({count} {kind})", p.face, p.value),
             ));
         }
     }
-    Ok(Scan {
-        vertices: nv,
-        skipped,
-    })
+    Ok(Scan { vertices: nv, skipped })
 }
 
 /// Feeds `tobj` and counts the bytes it has consumed, to name the line it fails on.
@@ -275,11 +227,7 @@ impl Counting<'_> {
     fn line(&self) -> usize {
         let done = &self.data[..self.pos];
         let lines = done.iter().filter(|&&b| b == b'\n').count();
-        if done.last().is_some_and(|&b| b != b'\n') {
-            lines + 1
-        } else {
-            lines.max(1)
-        }
+        if done.last().is_some_and(|&b| b != b'\n') { lines + 1 } else { lines.max(1) }
     }
 }
 
@@ -304,60 +252,36 @@ impl BufRead for Counting<'_> {
 pub(crate) fn read(path: &Path, mut data: Vec<u8>) -> Result<RawMesh> {
     let scan = scan(path, &mut data)?;
     check_vertex_count(path, scan.vertices)?;
-    let mut reader = Counting {
-        data: &data,
-        pos: 0,
-    };
+    let mut reader = Counting { data: &data, pos: 0 };
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        tobj::load_obj_buf(&mut reader, &tobj::GPU_LOAD_OPTIONS, |_| {
-            Err(tobj::LoadError::OpenFileFailed)
-        })
+        tobj::load_obj_buf(&mut reader, &tobj::GPU_LOAD_OPTIONS, |_| Err(tobj::LoadError::OpenFileFailed))
     }));
-    let here = Some(Location {
-        line: reader.line(),
-        column: 1,
-    });
+    let here = Some(Location { line: reader.line(), column: 1 });
     let models = match result {
         Ok(Ok((models, _materials))) => models,
         Ok(Err(e)) => return Err(Error::input(path, here, format!("OBJ parser: {e}"))),
         Err(_) => {
-            return Err(Error::input(
-                path,
-                here,
-                "OBJ parser failed on this file (internal panic in tobj)",
-            ));
+            return Err(Error::input(path, here, "OBJ parser failed on this file (internal panic in tobj)"));
         }
     };
 
     let mut raw = RawMesh::default();
     raw.report.skipped_primitives = scan.skipped;
-    let all_normals = models
-        .iter()
-        .all(|m| m.mesh.normals.len() == m.mesh.positions.len());
+    let all_normals = models.iter().all(|m| m.mesh.normals.len() == m.mesh.positions.len());
     let any_normals = models.iter().any(|m| !m.mesh.normals.is_empty());
     if all_normals {
         raw.normals = Some(Vec::new());
     } else if any_normals {
-        raw.report
-            .notes
-            .push("normals ignored: not every face corner has one".to_string());
+        raw.report.notes.push("normals ignored: not every face corner has one".to_string());
     }
     for m in &models {
         let mesh = &m.mesh;
         let offset = raw.positions.len();
         let n = mesh.positions.len() / 3;
         check_vertex_count(path, offset + n)?;
-        raw.positions.extend(
-            mesh.positions
-                .chunks_exact(3)
-                .map(|c| Vec3::new(c[0], c[1], c[2])),
-        );
+        raw.positions.extend(mesh.positions.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])));
         if let Some(normals) = &mut raw.normals {
-            normals.extend(
-                mesh.normals
-                    .chunks_exact(3)
-                    .map(|c| Vec3::new(c[0], c[1], c[2])),
-            );
+            normals.extend(mesh.normals.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])));
         }
         for t in mesh.indices.chunks_exact(3) {
             let tri = [t[0], t[1], t[2]];
@@ -365,10 +289,7 @@ pub(crate) fn read(path: &Path, mut data: Vec<u8>) -> Result<RawMesh> {
                 return Err(Error::input(
                     path,
                     None,
-                    format!(
-                        "object '{}': OBJ parser produced an index out of range",
-                        m.name
-                    ),
+                    format!("object '{}': OBJ parser produced an index out of range", m.name),
                 ));
             }
             raw.triangles.push(tri.map(|i| i + offset as u32));
@@ -399,17 +320,11 @@ mod tests {
         let mut data = b"v 0 0 0 1 0 0\nvt 0.5\nl 1 1\nusemtl \xE9\nf 1 1 1\n".to_vec();
         let s = scan(p, &mut data).unwrap();
         assert_eq!((s.vertices, s.skipped), (1, 1));
-        assert_eq!(
-            data,
-            b"v 0 0 0      \n      \n     \n        \nf 1 1 1\n".to_vec()
-        );
+        assert_eq!(data, b"v 0 0 0      \n      \n     \n        \nf 1 1 1\n".to_vec());
         let mut w0 = b"v 1 2 3 0\n".to_vec();
         assert!(scan(p, &mut w0).unwrap_err().to_string().contains("w is 0"));
         let mut fwd = b"f 1 2 3\nv 0 0 0\nv 1 0 0\nv 0 1 0\n".to_vec();
-        assert!(
-            scan(p, &mut fwd).is_ok(),
-            "forward references are left to tobj"
-        );
+        assert!(scan(p, &mut fwd).is_ok(), "forward references are left to tobj");
         let mut syntax = b"v 0 0 0\nf 1/2/3/4 1 1\n".to_vec();
         let e = scan(p, &mut syntax).unwrap_err().to_string();
         assert!(e.starts_with("s.obj:2:3: face 0: '1/2/3/4'"), "{e}");

@@ -56,11 +56,7 @@ impl Scalar {
         macro_rules! get {
             ($t:ty, $n:expr) => {{
                 let a: [u8; $n] = b.try_into().expect("size checked");
-                (if big {
-                    <$t>::from_be_bytes(a)
-                } else {
-                    <$t>::from_le_bytes(a)
-                }) as f64
+                (if big { <$t>::from_be_bytes(a) } else { <$t>::from_le_bytes(a) }) as f64
             }};
         }
         match self {
@@ -115,9 +111,7 @@ impl Element {
     }
 
     fn scalar(&self, name: &str) -> Option<usize> {
-        self.props
-            .iter()
-            .position(|p| p.name == name && matches!(p.kind, Kind::Scalar(_)))
+        self.props.iter().position(|p| p.name == name && matches!(p.kind, Kind::Scalar(_)))
     }
 }
 
@@ -139,8 +133,7 @@ struct Header {
 }
 
 fn parse_header(path: &Path, data: &[u8]) -> Result<Header> {
-    let err =
-        |line: usize, msg: String| Error::input(path, Some(Location { line, column: 1 }), msg);
+    let err = |line: usize, msg: String| Error::input(path, Some(Location { line, column: 1 }), msg);
     let mut pos = 0usize;
     let mut line_no = 0usize;
     let mut encoding = None;
@@ -152,16 +145,10 @@ fn parse_header(path: &Path, data: &[u8]) -> Result<Header> {
             return Err(if line_no == 1 {
                 Error::input(path, None, "empty file")
             } else {
-                err(
-                    line_no,
-                    "truncated: the header has no 'end_header' line".into(),
-                )
+                err(line_no, "truncated: the header has no 'end_header' line".into())
             });
         }
-        let end = data[pos..]
-            .iter()
-            .position(|&b| b == b'\n')
-            .map_or(data.len(), |i| pos + i);
+        let end = data[pos..].iter().position(|&b| b == b'\n').map_or(data.len(), |i| pos + i);
         let raw = &data[pos..end];
         pos = (end + 1).min(data.len());
         let Ok(line) = std::str::from_utf8(raw) else {
@@ -174,11 +161,7 @@ fn parse_header(path: &Path, data: &[u8]) -> Result<Header> {
         let words: Vec<&str> = line.split_ascii_whitespace().collect();
         if line_no == 1 {
             if words != ["ply"] {
-                return Err(Error::input(
-                    path,
-                    None,
-                    "not a PLY file (the first line is not 'ply')",
-                ));
+                return Err(Error::input(path, None, "not a PLY file (the first line is not 'ply')"));
             }
             continue;
         }
@@ -213,28 +196,19 @@ fn parse_header(path: &Path, data: &[u8]) -> Result<Header> {
                     return Err(err(line_no, "expected 'element NAME COUNT'".into()));
                 };
                 let count: u64 = count.parse().map_err(|_| {
-                    err(
-                        line_no,
-                        format!("element '{name}': count '{count}' is not a non-negative integer"),
-                    )
+                    err(line_no, format!("element '{name}': count '{count}' is not a non-negative integer"))
                 })?;
                 if elements.iter().any(|e| e.name == name) {
                     return Err(err(line_no, format!("element '{name}' declared twice")));
                 }
-                elements.push(Element {
-                    name: name.to_string(),
-                    count,
-                    props: Vec::new(),
-                    line: line_no,
-                });
+                elements.push(Element { name: name.to_string(), count, props: Vec::new(), line: line_no });
             }
             "property" => {
                 let Some(element) = elements.last_mut() else {
                     return Err(err(line_no, "'property' before any 'element'".into()));
                 };
                 let ty = |name: &str| {
-                    Scalar::parse(name)
-                        .ok_or_else(|| err(line_no, format!("unknown property type '{name}'")))
+                    Scalar::parse(name).ok_or_else(|| err(line_no, format!("unknown property type '{name}'")))
                 };
                 let (kind, name) = match words[..] {
                     [_, "list", count, item, name] => {
@@ -245,13 +219,7 @@ fn parse_header(path: &Path, data: &[u8]) -> Result<Header> {
                                 format!("list '{name}': the count type must be an integer type"),
                             ));
                         }
-                        (
-                            Kind::List {
-                                count,
-                                item: ty(item)?,
-                            },
-                            name,
-                        )
+                        (Kind::List { count, item: ty(item)? }, name)
                     }
                     [_, t, name] if t != "list" => (Kind::Scalar(ty(t)?), name),
                     _ => {
@@ -263,39 +231,23 @@ fn parse_header(path: &Path, data: &[u8]) -> Result<Header> {
                         ));
                     }
                 };
-                element.props.push(Property {
-                    name: name.to_string(),
-                    kind,
-                });
+                element.props.push(Property { name: name.to_string(), kind });
             }
             "end_header" => break,
             other => {
                 // Not PLY, but some exporters write free text (e.g. "Created by ...").
-                notes.push(format!(
-                    "header line {line_no} ignored (unknown keyword '{other}')"
-                ));
+                notes.push(format!("header line {line_no} ignored (unknown keyword '{other}')"));
             }
         }
     }
-    let encoding =
-        encoding.ok_or_else(|| Error::input(path, None, "the header has no 'format' line"))?;
-    Ok(Header {
-        encoding,
-        elements,
-        notes,
-        data_start: pos,
-        data_line: line_no + 1,
-    })
+    let encoding = encoding.ok_or_else(|| Error::input(path, None, "the header has no 'format' line"))?;
+    Ok(Header { encoding, elements, notes, data_start: pos, data_line: line_no + 1 })
 }
 
 /// Where values come from: text tokens (one element per line) or binary bytes.
 enum Source<'a> {
     Ascii(Tokens<'a>),
-    Binary {
-        data: &'a [u8],
-        pos: usize,
-        big: bool,
-    },
+    Binary { data: &'a [u8], pos: usize, big: bool },
 }
 
 /// Why a value could not be read.
@@ -345,12 +297,9 @@ impl Source<'_> {
                 let v = if matches!(ty, Scalar::F32 | Scalar::F64) {
                     tok.parse_f64()
                 } else {
-                    tok.parse_i64()
-                        .map(|i| i as f64)
-                        .or_else(|| tok.parse_f64())
+                    tok.parse_i64().map(|i| i as f64).or_else(|| tok.parse_f64())
                 };
-                v.map(|v| (v, Some(tok.loc)))
-                    .ok_or_else(|| Fail::Bad(tok.text(), tok.loc))
+                v.map(|v| (v, Some(tok.loc))).ok_or_else(|| Fail::Bad(tok.text(), tok.loc))
             }
             Source::Binary { data, pos, big } => {
                 let n = ty.size();
@@ -407,18 +356,10 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
     let mut xyz = [0usize; 3];
     for (slot, name) in xyz.iter_mut().zip(["x", "y", "z"]) {
         *slot = vertex.scalar(name).ok_or_else(|| {
-            Error::input(
-                path,
-                at(vertex.line),
-                format!("element 'vertex' has no scalar property '{name}'"),
-            )
+            Error::input(path, at(vertex.line), format!("element 'vertex' has no scalar property '{name}'"))
         })?;
     }
-    let nxyz = match (
-        vertex.scalar("nx"),
-        vertex.scalar("ny"),
-        vertex.scalar("nz"),
-    ) {
+    let nxyz = match (vertex.scalar("nx"), vertex.scalar("ny"), vertex.scalar("nz")) {
         (Some(a), Some(b), Some(c)) => Some([a, b, c]),
         _ => None,
     };
@@ -431,27 +372,17 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
             "no triangles: the file has no 'face' element (a point cloud?)",
         ));
     };
-    let list_props: Vec<usize> = (0..face.props.len())
-        .filter(|&i| matches!(face.props[i].kind, Kind::List { .. }))
-        .collect();
+    let list_props: Vec<usize> =
+        (0..face.props.len()).filter(|&i| matches!(face.props[i].kind, Kind::List { .. })).collect();
     let face_list = face
         .props
         .iter()
         .position(|p| {
-            matches!(p.kind, Kind::List { .. })
-                && (p.name == "vertex_indices" || p.name == "vertex_index")
+            matches!(p.kind, Kind::List { .. }) && (p.name == "vertex_indices" || p.name == "vertex_index")
         })
-        .or(if list_props.len() == 1 {
-            Some(list_props[0])
-        } else {
-            None
-        })
+        .or(if list_props.len() == 1 { Some(list_props[0]) } else { None })
         .ok_or_else(|| {
-            Error::input(
-                path,
-                at(face.line),
-                "element 'face' has no list property 'vertex_indices'",
-            )
+            Error::input(path, at(face.line), "element 'face' has no list property 'vertex_indices'")
         })?;
 
     let mut raw = RawMesh::default();
@@ -465,11 +396,7 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
 
     let mut src = match header.encoding {
         Encoding::Ascii => Source::Ascii(Tokens::new(data, header.data_start, header.data_line)),
-        Encoding::Binary { big } => Source::Binary {
-            data,
-            pos: header.data_start,
-            big,
-        },
+        Encoding::Binary { big } => Source::Binary { data, pos: header.data_start, big },
     };
     let mut values = vec![0f64; 0];
     let mut polygon: Vec<u32> = Vec::new();
@@ -480,10 +407,7 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
         let is_vertex = std::ptr::eq(e, vertex);
         let is_face = std::ptr::eq(e, face);
         if !is_vertex && !is_face {
-            raw.report.notes.push(format!(
-                "element '{}' ({} entries) ignored",
-                e.name, e.count
-            ));
+            raw.report.notes.push(format!("element '{}' ({} entries) ignored", e.name, e.count));
         }
         values.clear();
         values.resize(e.props.len(), 0.0);
@@ -492,26 +416,18 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
                 return Err(Error::input(
                     path,
                     src.location(),
-                    format!(
-                        "truncated: the file ends after {i} of {} '{}' entries",
-                        e.count, e.name
-                    ),
+                    format!("truncated: the file ends after {i} of {} '{}' entries", e.count, e.name),
                 ));
             }
             let elem_loc = src.location();
             let fail = |f: Fail, src: &Source, what: &str| match f {
-                Fail::End if ascii => Error::input(
-                    path,
-                    src.location(),
-                    format!("{} {i}: the line ends before {what}", e.name),
-                ),
+                Fail::End if ascii => {
+                    Error::input(path, src.location(), format!("{} {i}: the line ends before {what}", e.name))
+                }
                 Fail::End => Error::input(
                     path,
                     None,
-                    format!(
-                        "truncated: the file ends inside {} {i} (of {})",
-                        e.name, e.count
-                    ),
+                    format!("truncated: the file ends inside {} {i} (of {})", e.name, e.count),
                 ),
                 Fail::Bad(tok, loc) => Error::input(
                     path,
@@ -522,9 +438,8 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
             for (k, p) in e.props.iter().enumerate() {
                 match p.kind {
                     Kind::Scalar(ty) => {
-                        values[k] = src
-                            .value(ty)
-                            .map_err(|f| fail(f, &src, &format!("property '{}'", p.name)))?;
+                        values[k] =
+                            src.value(ty).map_err(|f| fail(f, &src, &format!("property '{}'", p.name)))?;
                     }
                     Kind::List { count, item } => {
                         let what = format!("list '{}'", p.name);
@@ -590,25 +505,13 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
                 ));
             }
             if is_vertex {
-                let p = Vec3::new(
-                    values[xyz[0]] as f32,
-                    values[xyz[1]] as f32,
-                    values[xyz[2]] as f32,
-                );
+                let p = Vec3::new(values[xyz[0]] as f32, values[xyz[1]] as f32, values[xyz[2]] as f32);
                 if let Some(what) = non_finite(p) {
-                    return Err(Error::input(
-                        path,
-                        elem_loc,
-                        format!("vertex {i}: coordinate is {what}"),
-                    ));
+                    return Err(Error::input(path, elem_loc, format!("vertex {i}: coordinate is {what}")));
                 }
                 raw.positions.push(p);
                 if let (Some(n), Some(normals)) = (nxyz, raw.normals.as_mut()) {
-                    normals.push(Vec3::new(
-                        values[n[0]] as f32,
-                        values[n[1]] as f32,
-                        values[n[2]] as f32,
-                    ));
+                    normals.push(Vec3::new(values[n[0]] as f32, values[n[1]] as f32, values[n[2]] as f32));
                 }
             }
         }
@@ -616,10 +519,7 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
     if let Source::Binary { data, pos, .. } = src
         && pos < data.len()
     {
-        raw.report.notes.push(format!(
-            "{} bytes after the last element ignored",
-            data.len() - pos
-        ));
+        raw.report.notes.push(format!("{} bytes after the last element ignored", data.len() - pos));
     }
     Ok(raw)
 }
@@ -644,9 +544,7 @@ mod tests {
             Ok(_) => panic!("accepted {text:?}"),
             Err(e) => e.to_string(),
         };
-        assert!(
-            err("ply\nformat ascii 1.0\nproperty float x\nend_header\n").contains("before any")
-        );
+        assert!(err("ply\nformat ascii 1.0\nproperty float x\nend_header\n").contains("before any"));
         assert!(err("ply\nformat ascii 1.0\nelement vertex -3\nend_header\n").contains("'-3'"));
         assert!(
             err("ply\nformat ascii 1.0\nelement f 1\nproperty list float int v\nend_header\n")

@@ -23,13 +23,8 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
         return Err(Error::input(path, None, "empty file"));
     }
     let starts_solid = {
-        let start = data
-            .iter()
-            .position(|b| !b.is_ascii_whitespace())
-            .unwrap_or(0);
-        data[start..]
-            .get(..5)
-            .is_some_and(|s| s.eq_ignore_ascii_case(b"solid"))
+        let start = data.iter().position(|b| !b.is_ascii_whitespace()).unwrap_or(0);
+        data[start..].get(..5).is_some_and(|s| s.eq_ignore_ascii_case(b"solid"))
     };
     if data.len() >= HEADER {
         let n = u32::from_le_bytes([data[80], data[81], data[82], data[83]]);
@@ -49,16 +44,10 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
             return read_binary(path, data, n as usize, None);
         }
         // Binary data has control bytes an ASCII STL never has.
-        let looks_binary = data
-            .iter()
-            .take(4096)
-            .any(|&b| b == 0 || (b < 0x20 && !b.is_ascii_whitespace()));
+        let looks_binary = data.iter().take(4096).any(|&b| b == 0 || (b < 0x20 && !b.is_ascii_whitespace()));
         if !starts_solid || looks_binary {
             if len > expected {
-                let note = format!(
-                    "{} bytes after the last of the {n} triangles ignored",
-                    len - expected
-                );
+                let note = format!("{} bytes after the last of the {n} triangles ignored", len - expected);
                 return read_binary(path, data, n as usize, Some(note));
             }
             return Err(size_error());
@@ -113,11 +102,7 @@ fn read_ascii(path: &Path, data: &[u8]) -> Result<RawMesh> {
     let mut solids = 0;
     while let Some(tok) = t.next_token() {
         if !tok.is("solid") {
-            let want = if solids == 0 {
-                "'solid'"
-            } else {
-                "'solid' or the end of the file"
-            };
+            let want = if solids == 0 { "'solid'" } else { "'solid' or the end of the file" };
             return Err(at(&tok, format!("expected {want}, found '{}'", tok.text())));
         }
         solids += 1;
@@ -127,9 +112,7 @@ fn read_ascii(path: &Path, data: &[u8]) -> Result<RawMesh> {
                 Error::input(
                     path,
                     Some(t.location()),
-                    format!(
-                        "truncated: the file ends before 'endsolid' (in or after facet {facet})"
-                    ),
+                    format!("truncated: the file ends before 'endsolid' (in or after facet {facet})"),
                 )
             };
             let tok = t.next_token().ok_or_else(|| eof(&t))?;
@@ -138,20 +121,14 @@ fn read_ascii(path: &Path, data: &[u8]) -> Result<RawMesh> {
                 break;
             }
             if !tok.is("facet") {
-                return Err(at(
-                    &tok,
-                    format!("expected 'facet' or 'endsolid', found '{}'", tok.text()),
-                ));
+                return Err(at(&tok, format!("expected 'facet' or 'endsolid', found '{}'", tok.text())));
             }
             let expect = |t: &mut Tokens, word: &str| -> Result<()> {
                 let tok = t.next_token().ok_or_else(|| eof(t))?;
                 if tok.is(word) {
                     Ok(())
                 } else {
-                    Err(at(
-                        &tok,
-                        format!("facet {facet}: expected '{word}', found '{}'", tok.text()),
-                    ))
+                    Err(at(&tok, format!("facet {facet}: expected '{word}', found '{}'", tok.text())))
                 }
             };
             expect(&mut t, "normal")?;
@@ -160,10 +137,7 @@ fn read_ascii(path: &Path, data: &[u8]) -> Result<RawMesh> {
                 if tok.parse_f64().is_none() {
                     return Err(at(
                         &tok,
-                        format!(
-                            "facet {facet}: normal: expected a number, found '{}'",
-                            tok.text()
-                        ),
+                        format!("facet {facet}: normal: expected a number, found '{}'", tok.text()),
                     ));
                 }
             }
@@ -178,31 +152,19 @@ fn read_ascii(path: &Path, data: &[u8]) -> Result<RawMesh> {
                 if !tok.is("vertex") {
                     return Err(at(
                         &tok,
-                        format!(
-                            "facet {facet}: expected 'vertex' or 'endloop', found '{}'",
-                            tok.text()
-                        ),
+                        format!("facet {facet}: expected 'vertex' or 'endloop', found '{}'", tok.text()),
                     ));
                 }
                 let mut p = [0f32; 3];
                 for c in &mut p {
                     let tok = t.next_token().ok_or_else(|| eof(&t))?;
                     let v = tok.parse_f64().ok_or_else(|| {
-                        at(
-                            &tok,
-                            format!(
-                                "facet {facet}: expected a coordinate, found '{}'",
-                                tok.text()
-                            ),
-                        )
+                        at(&tok, format!("facet {facet}: expected a coordinate, found '{}'", tok.text()))
                     })? as f32;
                     if let Some(what) = non_finite(Vec3::splat(v)) {
                         return Err(at(
                             &tok,
-                            format!(
-                                "facet {facet} vertex {}: coordinate is {what}",
-                                corners.len()
-                            ),
+                            format!("facet {facet} vertex {}: coordinate is {what}", corners.len()),
                         ));
                     }
                     *c = v;
@@ -258,10 +220,7 @@ mod tests {
         assert!(raw.report.notes[0].contains("5 bytes after the last"));
         // A "solid" header does not make binary data text: trailing bytes are still
         // ignored, and missing ones are still an error.
-        assert_eq!(
-            read(p, &binary(2, b"solid x", 5)).unwrap().triangles.len(),
-            2
-        );
+        assert_eq!(read(p, &binary(2, b"solid x", 5)).unwrap().triangles.len(), 2);
         let cut = binary(2, b"solid x", 0);
         let e = read(p, &cut[..cut.len() - 10]).unwrap_err().to_string();
         assert!(e.contains("truncated binary STL"), "{e}");
@@ -276,9 +235,7 @@ mod tests {
         let bad = quad.replace("outer loop", "outer lop");
         let e = read(p, bad.as_bytes()).unwrap_err().to_string();
         assert!(e.starts_with("t.stl:3:7: facet 0: expected 'loop'"), "{e}");
-        let e = read(p, b"solid x\nfacet normal a b c\n")
-            .unwrap_err()
-            .to_string();
+        let e = read(p, b"solid x\nfacet normal a b c\n").unwrap_err().to_string();
         assert!(e.contains("normal: expected a number, found 'a'"), "{e}");
     }
 }

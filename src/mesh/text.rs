@@ -48,20 +48,12 @@ pub(crate) struct Tokens<'a> {
 impl<'a> Tokens<'a> {
     /// Tokens of `data[start..]`, where `data[start]` is at the start of line `line`.
     pub fn new(data: &'a [u8], start: usize, line: usize) -> Self {
-        Tokens {
-            data,
-            pos: start.min(data.len()),
-            line,
-            line_start: start.min(data.len()),
-        }
+        Tokens { data, pos: start.min(data.len()), line, line_start: start.min(data.len()) }
     }
 
     /// Where the next byte is.
     pub fn location(&self) -> Location {
-        Location {
-            line: self.line,
-            column: self.pos - self.line_start + 1,
-        }
+        Location { line: self.line, column: self.pos - self.line_start + 1 }
     }
 
     fn skip_space(&mut self, stop_at_newline: bool) {
@@ -83,10 +75,7 @@ impl<'a> Tokens<'a> {
         while self.pos < self.data.len() && !is_space(self.data[self.pos]) {
             self.pos += 1;
         }
-        (self.pos > start).then(|| Token {
-            bytes: &self.data[start..self.pos],
-            loc,
-        })
+        (self.pos > start).then(|| Token { bytes: &self.data[start..self.pos], loc })
     }
 
     /// The next token, across line ends.

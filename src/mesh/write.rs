@@ -52,9 +52,8 @@ pub(crate) fn ply_bytes(mesh: &TriangleMesh) -> Vec<u8> {
     let _ = writeln!(header, "element face {}", mesh.triangles.len());
     header.push_str("property list uchar uint vertex_indices\nend_header\n");
     let per_vertex = if mesh.normals.is_some() { 24 } else { 12 };
-    let mut out = Vec::with_capacity(
-        header.len() + mesh.positions.len() * per_vertex + mesh.triangles.len() * 13,
-    );
+    let mut out =
+        Vec::with_capacity(header.len() + mesh.positions.len() * per_vertex + mesh.triangles.len() * 13);
     out.extend_from_slice(header.as_bytes());
     for (i, p) in mesh.positions.iter().enumerate() {
         for c in p.to_array() {
@@ -80,18 +79,13 @@ static COUNTER: AtomicUsize = AtomicUsize::new(0);
 /// Writes `bytes` to a temporary file beside `path`, flushes it to disk and renames it
 /// over `path`. On failure the temporary file is removed and `path` is untouched.
 pub(crate) fn atomic_write(path: &Path, bytes: &[u8]) -> Result<()> {
-    let name = path
-        .file_name()
-        .ok_or_else(|| Error::io(path, "cannot write: the path names no file"))?;
+    let name = path.file_name().ok_or_else(|| Error::io(path, "cannot write: the path names no file"))?;
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
     if !dir.is_dir() {
-        return Err(Error::io(
-            path,
-            format!("cannot write: directory '{}' does not exist", dir.display()),
-        ));
+        return Err(Error::io(path, format!("cannot write: directory '{}' does not exist", dir.display())));
     }
     let tmp = dir.join(format!(
         ".{}.tmp-{}-{}",
@@ -100,10 +94,7 @@ pub(crate) fn atomic_write(path: &Path, bytes: &[u8]) -> Result<()> {
         COUNTER.fetch_add(1, Ordering::Relaxed)
     ));
     let result = (|| -> std::io::Result<()> {
-        let mut f = std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&tmp)?;
+        let mut f = std::fs::OpenOptions::new().write(true).create_new(true).open(&tmp)?;
         f.write_all(bytes)?;
         f.sync_all()?;
         drop(f);

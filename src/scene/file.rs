@@ -121,33 +121,20 @@ pub fn parse_scene(text: &str, path: &Path) -> Result<Scene> {
     let mut materials = Materials::default();
     for (name, m) in entries {
         let material = cx.material(name.get_ref(), m)?;
-        materials
-            .by_name
-            .insert(name.get_ref().clone(), materials.list.len() as MaterialId);
+        materials.by_name.insert(name.get_ref().clone(), materials.list.len() as MaterialId);
         materials.list.push(material);
     }
 
     let mut objects = Vec::new();
     for (i, o) in raw.objects.iter().flatten().enumerate() {
-        objects.push(cx.object(
-            &o.get_ref().0,
-            &format!("objects[{i}]"),
-            None,
-            &mut materials,
-        )?);
+        objects.push(cx.object(&o.get_ref().0, &format!("objects[{i}]"), None, &mut materials)?);
     }
     if materials.list.is_empty() {
         // `Scene::materials` is never empty.
         materials.default_id();
     }
 
-    Ok(Scene {
-        camera,
-        settings,
-        lights,
-        materials: materials.list,
-        objects,
-    })
+    Ok(Scene { camera, settings, lights, materials: materials.list, objects })
 }
 
 // ---------------------------------------------------------------------------------------
@@ -167,9 +154,7 @@ fn finite_f32<E: de::Error>(v: f64) -> Result<f32, E> {
     }
     let f = v as f32;
     if !f.is_finite() {
-        return Err(E::custom(format!(
-            "{v:e} is out of range (magnitude must be below 3.4e38)"
-        )));
+        return Err(E::custom(format!("{v:e} is out of range (magnitude must be below 3.4e38)")));
     }
     Ok(f)
 }
@@ -285,9 +270,7 @@ impl<'de> Deserialize<'de> for Int {
                 Ok(Int(v))
             }
             fn visit_u64<E: de::Error>(self, v: u64) -> Result<Int, E> {
-                i64::try_from(v)
-                    .map(Int)
-                    .map_err(|_| E::custom(format!("integer {v} is out of range")))
+                i64::try_from(v).map(Int).map_err(|_| E::custom(format!("integer {v} is out of range")))
             }
         }
         d.deserialize_any(V)
@@ -510,20 +493,12 @@ impl Cx<'_> {
 
     fn positive(&self, v: &Spanned<Num>, what: &str) -> Result<f32> {
         let x = v.get_ref().0;
-        if x > 0.0 {
-            Ok(x)
-        } else {
-            Err(self.err(v.span(), format!("{what}: must be > 0, got {x}")))
-        }
+        if x > 0.0 { Ok(x) } else { Err(self.err(v.span(), format!("{what}: must be > 0, got {x}"))) }
     }
 
     fn non_negative(&self, v: &Spanned<Num>, what: &str) -> Result<f32> {
         let x = v.get_ref().0;
-        if x >= 0.0 {
-            Ok(x)
-        } else {
-            Err(self.err(v.span(), format!("{what}: must be >= 0, got {x}")))
-        }
+        if x >= 0.0 { Ok(x) } else { Err(self.err(v.span(), format!("{what}: must be >= 0, got {x}"))) }
     }
 
     fn unit_interval(&self, v: &Spanned<Num>, what: &str) -> Result<f32> {
@@ -531,10 +506,7 @@ impl Cx<'_> {
         if (0.0..=1.0).contains(&x) {
             Ok(x)
         } else {
-            Err(self.err(
-                v.span(),
-                format!("{what}: must be between 0 and 1, got {x}"),
-            ))
+            Err(self.err(v.span(), format!("{what}: must be between 0 and 1, got {x}")))
         }
     }
 
@@ -543,10 +515,7 @@ impl Cx<'_> {
         if x.cmpgt(Vec3::ZERO).all() {
             Ok(x)
         } else {
-            Err(self.err(
-                v.span(),
-                format!("{what}: every component must be > 0, got {}", fmt_v3(x)),
-            ))
+            Err(self.err(v.span(), format!("{what}: every component must be > 0, got {}", fmt_v3(x))))
         }
     }
 
@@ -557,10 +526,7 @@ impl Cx<'_> {
         } else {
             Err(self.err(
                 v.span(),
-                format!(
-                    "{what}: every colour channel must be between 0 and 1, got {}",
-                    fmt_v3(x)
-                ),
+                format!("{what}: every colour channel must be between 0 and 1, got {}", fmt_v3(x)),
             ))
         }
     }
@@ -569,10 +535,7 @@ impl Cx<'_> {
         normalized(v.get_ref().0.as_dvec3()).ok_or_else(|| {
             self.err(
                 v.span(),
-                format!(
-                    "{what}: must not be a zero-length vector, got {}",
-                    fmt_v3(v.get_ref().0)
-                ),
+                format!("{what}: must not be a zero-length vector, got {}", fmt_v3(v.get_ref().0)),
             )
         })
     }
@@ -586,10 +549,7 @@ impl Cx<'_> {
         let mut view_span = raw.span();
         match (&c.look_at, &c.direction) {
             (Some(_), Some(d)) => {
-                return Err(self.err(
-                    d.span(),
-                    "camera: give either `look_at` or `direction`, not both",
-                ));
+                return Err(self.err(d.span(), "camera: give either `look_at` or `direction`, not both"));
             }
             (Some(l), None) => {
                 view_span = l.span();
@@ -651,10 +611,7 @@ impl Cx<'_> {
         if (1..=MAX_IMAGE_SIZE as i64).contains(&x) {
             Ok(x as u32)
         } else {
-            Err(self.err(
-                v.span(),
-                format!("{what}: must be between 1 and {MAX_IMAGE_SIZE} pixels, got {x}"),
-            ))
+            Err(self.err(v.span(), format!("{what}: must be between 1 and {MAX_IMAGE_SIZE} pixels, got {x}")))
         }
     }
 
@@ -666,9 +623,7 @@ impl Cx<'_> {
             if !(0..=MAX_RECURSION_DEPTH as i64).contains(&x) {
                 return Err(self.err(
                     d.span(),
-                    format!(
-                        "settings.max_depth: must be between 0 and {MAX_RECURSION_DEPTH}, got {x}"
-                    ),
+                    format!("settings.max_depth: must be between 0 and {MAX_RECURSION_DEPTH}, got {x}"),
                 ));
             }
             out.max_depth = x as u32;
@@ -688,10 +643,7 @@ impl Cx<'_> {
         let Some(allowed) = light_type_keys(ty) else {
             return Err(self.err(
                 l.kind.span(),
-                format!(
-                    "{at}.type: unknown light type `{ty}`; valid types: {}",
-                    LIGHT_TYPES.join(", ")
-                ),
+                format!("{at}.type: unknown light type `{ty}`; valid types: {}", LIGHT_TYPES.join(", ")),
             ));
         };
         for (key, span) in l.specific_keys() {
@@ -706,12 +658,8 @@ impl Cx<'_> {
                 ));
             }
         }
-        let missing = |key: &str| {
-            self.err(
-                l.kind.span(),
-                format!("{at}: {} {ty} light needs `{key}`", article(ty)),
-            )
-        };
+        let missing =
+            |key: &str| self.err(l.kind.span(), format!("{at}: {} {ty} light needs `{key}`", article(ty)));
         let intensity = match &l.intensity {
             Some(i) => self.non_negative(i, &format!("{at}.intensity"))?,
             None => return Err(missing("intensity")),
@@ -723,12 +671,7 @@ impl Cx<'_> {
         Ok(match ty {
             "ambient" => Light::Ambient { intensity },
             "point" => Light::Point {
-                position: l
-                    .position
-                    .as_ref()
-                    .ok_or_else(|| missing("position"))?
-                    .get_ref()
-                    .0,
+                position: l.position.as_ref().ok_or_else(|| missing("position"))?.get_ref().0,
                 intensity,
                 color,
             },
@@ -789,10 +732,7 @@ impl Cx<'_> {
         let Some(allowed) = object_type_keys(ty) else {
             return Err(self.err(
                 o.kind.span(),
-                format!(
-                    "{at}.type: unknown object type `{ty}`; valid types: {}",
-                    OBJECT_TYPES.join(", ")
-                ),
+                format!("{at}.type: unknown object type `{ty}`; valid types: {}", OBJECT_TYPES.join(", ")),
             ));
         };
         for (key, span) in o.specific_keys() {
@@ -810,12 +750,8 @@ impl Cx<'_> {
         }
         let w = |key: &str| format!("{at}.{key}");
         let type_span = o.kind.span();
-        let missing = |key: &str| {
-            self.err(
-                type_span.clone(),
-                format!("{at}: {} {ty} needs `{key}`", article(ty)),
-            )
-        };
+        let missing =
+            |key: &str| self.err(type_span.clone(), format!("{at}: {} {ty} needs `{key}`", article(ty)));
         let req_num = |v, key| need(v, &missing, key);
         let req_v3 = |v, key| need(v, &missing, key);
         let req_str = |v, key| need(v, &missing, key);
@@ -831,11 +767,7 @@ impl Cx<'_> {
                 };
                 self.err(
                     name.span(),
-                    format!(
-                        "{}: unknown material `{}` ({known})",
-                        w("material"),
-                        name.get_ref()
-                    ),
+                    format!("{}: unknown material `{}` ({known})", w("material"), name.get_ref()),
                 )
             })?),
             None => None,
@@ -859,10 +791,9 @@ impl Cx<'_> {
                     Scale::Uniform(x) => x.to_string(),
                     Scale::PerAxis(v) => fmt_v3(v),
                 };
-                return Err(self.err(
-                    s.span(),
-                    format!("{}: every scale factor must be > 0, got {got}", w("scale")),
-                ));
+                return Err(
+                    self.err(s.span(), format!("{}: every scale factor must be > 0, got {got}", w("scale")))
+                );
             }
             transform.scale = v;
         }
@@ -883,10 +814,9 @@ impl Cx<'_> {
                 };
                 let offset = match (&o.offset, &o.point) {
                     (Some(_), Some(p)) => {
-                        return Err(self.err(
-                            p.span(),
-                            format!("{at}: give either `offset` or `point`, not both"),
-                        ));
+                        return Err(
+                            self.err(p.span(), format!("{at}: give either `offset` or `point`, not both"))
+                        );
                     }
                     (Some(d), None) => d.get_ref().0,
                     (None, Some(p)) => normal.dot(p.get_ref().0),
@@ -897,9 +827,9 @@ impl Cx<'_> {
             "box" => Some(Primitive::Box {
                 half: self.positive3(req_v3(&o.half_size, "half_size")?, &w("half_size"))?,
             }),
-            "ellipsoid" => Some(Primitive::Ellipsoid {
-                radii: self.positive3(req_v3(&o.radii, "radii")?, &w("radii"))?,
-            }),
+            "ellipsoid" => {
+                Some(Primitive::Ellipsoid { radii: self.positive3(req_v3(&o.radii, "radii")?, &w("radii"))? })
+            }
             "cylinder" => Some(Primitive::Cylinder {
                 radius: self.positive(req_num(&o.radius, "radius")?, &w("radius"))?,
                 half_height: 0.5 * self.positive(req_num(&o.height, "height")?, &w("height"))?,
@@ -920,28 +850,18 @@ impl Cx<'_> {
                 Some(Primitive::Cone {
                     radius_bottom,
                     radius_top,
-                    half_height: 0.5
-                        * self.positive(req_num(&o.height, "height")?, &w("height"))?,
+                    half_height: 0.5 * self.positive(req_num(&o.height, "height")?, &w("height"))?,
                 })
             }
             "torus" => Some(Primitive::Torus {
-                major: self.positive(
-                    req_num(&o.major_radius, "major_radius")?,
-                    &w("major_radius"),
-                )?,
-                minor: self.positive(
-                    req_num(&o.minor_radius, "minor_radius")?,
-                    &w("minor_radius"),
-                )?,
+                major: self.positive(req_num(&o.major_radius, "major_radius")?, &w("major_radius"))?,
+                minor: self.positive(req_num(&o.minor_radius, "minor_radius")?, &w("minor_radius"))?,
             }),
             "triangle" => {
                 let a = req_v3(&o.a, "a")?.get_ref().0;
                 let b = req_v3(&o.b, "b")?.get_ref().0;
                 let c = req_v3(&o.c, "c")?;
-                let (e1, e2) = (
-                    b.as_dvec3() - a.as_dvec3(),
-                    c.get_ref().0.as_dvec3() - a.as_dvec3(),
-                );
+                let (e1, e2) = (b.as_dvec3() - a.as_dvec3(), c.get_ref().0.as_dvec3() - a.as_dvec3());
                 if e1.cross(e2).length() <= 1e-6 * e1.length() * e2.length() {
                     return Err(self.err(
                         c.span(),
@@ -953,11 +873,7 @@ impl Cx<'_> {
                         ),
                     ));
                 }
-                Some(Primitive::Triangle {
-                    a,
-                    b,
-                    c: c.get_ref().0,
-                })
+                Some(Primitive::Triangle { a, b, c: c.get_ref().0 })
             }
             "capsule" => Some(Primitive::Capsule {
                 a: req_v3(&o.a, "a")?.get_ref().0,
@@ -968,12 +884,7 @@ impl Cx<'_> {
         };
         if let Some(p) = primitive {
             let material = material.unwrap_or_else(|| materials.default_id());
-            return Ok(Object {
-                kind: ObjectKind::Primitive(p),
-                transform,
-                material,
-                label,
-            });
+            return Ok(Object { kind: ObjectKind::Primitive(p), transform, material, label });
         }
 
         if ty == "mesh" {
@@ -981,7 +892,9 @@ impl Cx<'_> {
             if at.contains(".child") {
                 return Err(self.err(
                     o.kind.span(),
-                    format!("{at}: a mesh can only be a top-level object (meshes have no analytic SDF for CSG)"),
+                    format!(
+                        "{at}: a mesh can only be a top-level object (meshes have no analytic SDF for CSG)"
+                    ),
                 ));
             }
             let shading = match o.shading.as_ref().map(|s| (s.get_ref().as_str(), s.span())) {
@@ -990,27 +903,16 @@ impl Cx<'_> {
                 Some((other, span)) => {
                     return Err(self.err(
                         span,
-                        format!(
-                            "{}: must be \"flat\" or \"smooth\", got \"{other}\"",
-                            w("shading")
-                        ),
+                        format!("{}: must be \"flat\" or \"smooth\", got \"{other}\"", w("shading")),
                     ));
                 }
             };
             // Relative to the scene file's folder.
-            let source = self
-                .path
-                .parent()
-                .unwrap_or(Path::new(""))
-                .join(file.get_ref());
+            let source = self.path.parent().unwrap_or(Path::new("")).join(file.get_ref());
             let (mesh, _report) = crate::mesh::load_mesh(&source)?;
             let material = material.unwrap_or_else(|| materials.default_id());
             return Ok(Object {
-                kind: ObjectKind::Mesh {
-                    mesh: Arc::new(mesh),
-                    source,
-                    shading,
-                },
+                kind: ObjectKind::Mesh { mesh: Arc::new(mesh), source, shading },
                 transform,
                 material,
                 label,
@@ -1053,11 +955,7 @@ impl Cx<'_> {
                 return Err(missing("child"));
             };
             let child = self.object(&child.get_ref().0, &w("child"), material, materials)?;
-            ObjectKind::Repeat {
-                period: pv,
-                count,
-                child: Box::new(child),
-            }
+            ObjectKind::Repeat { period: pv, count, child: Box::new(child) }
         } else {
             let op = match ty {
                 "union" => CsgOp::Union,
@@ -1090,12 +988,7 @@ impl Cx<'_> {
             }
             let mut out = Vec::with_capacity(n);
             for (i, c) in children.get_ref().iter().enumerate() {
-                out.push(self.object(
-                    &c.get_ref().0,
-                    &format!("{at}.children[{i}]"),
-                    material,
-                    materials,
-                )?);
+                out.push(self.object(&c.get_ref().0, &format!("{at}.children[{i}]"), material, materials)?);
             }
             ObjectKind::Csg { op, children: out }
         };
@@ -1108,12 +1001,7 @@ impl Cx<'_> {
                 unreachable!("primitives and meshes returned above")
             }
         });
-        Ok(Object {
-            kind,
-            transform,
-            material,
-            label,
-        })
+        Ok(Object { kind, transform, material, label })
     }
 }
 
@@ -1149,15 +1037,8 @@ fn fmt_v3(v: Vec3) -> String {
 
 /// A table key as it would be written in TOML (quoted unless it is a bare key).
 fn key_text(key: &str) -> String {
-    let bare = !key.is_empty()
-        && key
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
-    if bare {
-        key.to_string()
-    } else {
-        format!("{key:?}")
-    }
+    let bare = !key.is_empty() && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+    if bare { key.to_string() } else { format!("{key:?}") }
 }
 
 /// The 1-based line and column (in characters) of byte offset `offset` in `text`.
@@ -1168,10 +1049,7 @@ fn location(text: &str, offset: usize) -> Location {
     }
     let before = &text[..offset];
     let line_start = before.rfind('\n').map_or(0, |i| i + 1);
-    Location {
-        line: before.matches('\n').count() + 1,
-        column: before[line_start..].chars().count() + 1,
-    }
+    Location { line: before.matches('\n').count() + 1, column: before[line_start..].chars().count() + 1 }
 }
 
 // ---------------------------------------------------------------------------------------
@@ -1223,11 +1101,7 @@ impl Finder {
                 .as_ref()
                 .is_none_or(|b| len < b.len || (len == b.len && self.path.len() >= b.segs.len()));
             if better {
-                self.best = Some(Hit {
-                    segs: self.path.clone(),
-                    is_key,
-                    len,
-                });
+                self.best = Some(Hit { segs: self.path.clone(), is_key, len });
             }
         }
     }
@@ -1259,11 +1133,7 @@ impl Finder {
 
 /// Where `span` is in the document `tree`.
 fn locate(tree: &DeTable<'_>, span: Range<usize>) -> Option<Hit> {
-    let mut f = Finder {
-        target: span,
-        path: Vec::new(),
-        best: None,
-    };
+    let mut f = Finder { target: span, path: Vec::new(), best: None };
     f.table(tree);
     f.best
 }
@@ -1307,11 +1177,7 @@ fn typed_table_keys(tree: &DeTable<'_>, segs: &[Seg]) -> Option<String> {
         }
         "lights" => {
             let keys = light_type_keys(ty)?;
-            Some(format!(
-                "valid keys for {} {ty} light: type, {}",
-                article(ty),
-                keys.join(", ")
-            ))
+            Some(format!("valid keys for {} {ty} light: type, {}", article(ty), keys.join(", ")))
         }
         _ => None,
     }
@@ -1344,21 +1210,11 @@ fn translate_de_error(text: &str, path: &Path, e: &toml::de::Error) -> Error {
         segs.pop();
     }
     let prefix = |segs: &[Seg]| {
-        if segs.is_empty() {
-            String::new()
-        } else {
-            format!("{}: ", fmt_path(segs))
-        }
+        if segs.is_empty() { String::new() } else { format!("{}: ", fmt_path(segs)) }
     };
-    if let Some((name, expected)) = msg
-        .strip_prefix("unknown field `")
-        .and_then(|rest| rest.split_once('`'))
+    if let Some((name, expected)) = msg.strip_prefix("unknown field `").and_then(|rest| rest.split_once('`'))
     {
-        let parent = if is_key {
-            &segs[..segs.len().saturating_sub(1)]
-        } else {
-            &segs[..]
-        };
+        let parent = if is_key { &segs[..segs.len().saturating_sub(1)] } else { &segs[..] };
         let valid = typed_table_keys(&tree, parent).unwrap_or_else(|| {
             expected
                 .trim_start_matches(',')
@@ -1367,11 +1223,7 @@ fn translate_de_error(text: &str, path: &Path, e: &toml::de::Error) -> Error {
                 .replace("expected", "valid keys:")
                 .replace('`', "")
         });
-        return Error::input(
-            path,
-            loc,
-            format!("{}unknown key `{name}`; {valid}", prefix(parent)),
-        );
+        return Error::input(path, loc, format!("{}unknown key `{name}`; {valid}", prefix(parent)));
     }
     if let Some(rest) = msg.strip_prefix("missing field `") {
         let name = rest.split('`').next().unwrap_or(rest);
@@ -1402,18 +1254,15 @@ mod tests {
 
     #[test]
     fn documented_example_parses() {
-        let doc = std::fs::read_to_string(
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/scene-format.md"),
-        )
-        .unwrap();
+        let doc = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/scene-format.md"))
+            .unwrap();
         let example = doc
             .split("## Complete example")
             .nth(1)
             .and_then(|rest| rest.split("```toml\n").nth(1))
             .and_then(|block| block.split("```").next())
             .expect("docs/scene-format.md has a complete example");
-        let scene =
-            parse_scene(example, Path::new("scene-format.md")).unwrap_or_else(|e| panic!("{e}"));
+        let scene = parse_scene(example, Path::new("scene-format.md")).unwrap_or_else(|e| panic!("{e}"));
         // Every object type except the CSG-only ones appears at the top level.
         assert!(scene.objects.len() >= 12);
         assert_eq!(scene.lights.len(), 3);

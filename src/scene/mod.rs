@@ -53,11 +53,7 @@ pub struct Settings {
 
 impl Default for Settings {
     fn default() -> Self {
-        Settings {
-            max_depth: 3,
-            background: Vec3::ZERO,
-            max_distance: 1.0e5,
-        }
+        Settings { max_depth: 3, background: Vec3::ZERO, max_distance: 1.0e5 }
     }
 }
 
@@ -67,17 +63,9 @@ pub enum Light {
     /// Uniform ambient light.
     Ambient { intensity: f32 },
     /// A point light at `position` with RGB `color` in [0, 1].
-    Point {
-        position: Vec3,
-        intensity: f32,
-        color: Vec3,
-    },
+    Point { position: Vec3, intensity: f32, color: Vec3 },
     /// A light at infinity shining along `direction` (unit; from the light into the scene).
-    Directional {
-        direction: Vec3,
-        intensity: f32,
-        color: Vec3,
-    },
+    Directional { direction: Vec3, intensity: f32, color: Vec3 },
 }
 
 /// A Phong material with mirror reflection and refraction.
@@ -150,22 +138,10 @@ pub fn mesh_preview_scene(
     let distance = radius / (0.5 * fov_y_deg).to_radians().sin() * 1.05;
     let view = Vec3::new(0.35, 0.3, 1.0).normalize();
     let position = centre + view * distance;
-    let label = source
-        .file_name()
-        .map_or_else(|| "mesh".into(), |n| n.to_string_lossy().into_owned());
+    let label = source.file_name().map_or_else(|| "mesh".into(), |n| n.to_string_lossy().into_owned());
     Scene {
-        camera: Camera {
-            position,
-            forward: -view,
-            up: Vec3::Y,
-            fov_y_deg,
-            width: 500,
-            height: 500,
-        },
-        settings: Settings {
-            max_distance: 4.0 * distance + 4.0 * radius,
-            ..Settings::default()
-        },
+        camera: Camera { position, forward: -view, up: Vec3::Y, fov_y_deg, width: 500, height: 500 },
+        settings: Settings { max_distance: 4.0 * distance + 4.0 * radius, ..Settings::default() },
         lights: vec![
             Light::Ambient { intensity: 0.15 },
             Light::Point {
@@ -187,11 +163,7 @@ pub fn mesh_preview_scene(
             ..Material::default()
         }],
         objects: vec![Object {
-            kind: crate::shape::ObjectKind::Mesh {
-                mesh,
-                source,
-                shading,
-            },
+            kind: crate::shape::ObjectKind::Mesh { mesh, source, shading },
             transform: crate::transform::TransformDesc::default(),
             material: 0,
             label,
