@@ -6,10 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn toolkit(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_toolkit"))
-        .args(args)
-        .output()
-        .expect("run toolkit")
+    Command::new(env!("CARGO_BIN_EXE_toolkit")).args(args).output().expect("run toolkit")
 }
 
 fn temp_dir(name: &str) -> PathBuf {
@@ -55,21 +52,11 @@ fn render_writes_png_and_reports_statistics() {
     let dir = temp_dir("ok");
     let s = scene(&dir, "s.toml", GOOD);
     let out = dir.join("out.png");
-    for repr in ["analytic", "sdf"] {
-        let o = toolkit(&[
-            "render",
-            s.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-            "--repr",
-            repr,
-        ]);
+    for repr in ["analytic", "sdf", "mesh"] {
+        let o = toolkit(&["render", s.to_str().unwrap(), "-o", out.to_str().unwrap(), "--repr", repr]);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         let text = String::from_utf8_lossy(&o.stdout);
-        assert!(
-            text.contains("Mrays/s") && text.contains("steps/ray"),
-            "{text}"
-        );
+        assert!(text.contains("Mrays/s") && text.contains("steps/ray"), "{text}");
         let img = image::open(&out).unwrap().to_rgb8();
         assert_eq!(img.dimensions(), (64, 48));
         // The red sphere is in the middle, the background is black.
@@ -84,39 +71,14 @@ fn bad_input_fails_cleanly_without_touching_the_output() {
     let out = dir.join("keep.png");
     std::fs::write(&out, b"precious").unwrap();
     let cases: Vec<(PathBuf, &str)> = vec![
-        (
-            scene(&dir, "neg.toml", &GOOD.replace("radius = 1", "radius = -1")),
-            "neg.toml:",
-        ),
-        (
-            scene(
-                &dir,
-                "nan.toml",
-                &GOOD.replace("radius = 1", "radius = nan"),
-            ),
-            "nan.toml:",
-        ),
-        (
-            scene(
-                &dir,
-                "unknown.toml",
-                &GOOD.replace("radius = 1", "radius = 1\ncolour = 3"),
-            ),
-            "unknown.toml:",
-        ),
-        (
-            scene(&dir, "syntax.toml", "[camera\nposition = [0,0,0]"),
-            "syntax.toml:",
-        ),
+        (scene(&dir, "neg.toml", &GOOD.replace("radius = 1", "radius = -1")), "neg.toml:"),
+        (scene(&dir, "nan.toml", &GOOD.replace("radius = 1", "radius = nan")), "nan.toml:"),
+        (scene(&dir, "unknown.toml", &GOOD.replace("radius = 1", "radius = 1\ncolour = 3")), "unknown.toml:"),
+        (scene(&dir, "syntax.toml", "[camera\nposition = [0,0,0]"), "syntax.toml:"),
         (dir.join("missing.toml"), "missing.toml"),
     ];
     for (path, expect) in cases {
-        let o = toolkit(&[
-            "render",
-            path.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-        ]);
+        let o = toolkit(&["render", path.to_str().unwrap(), "-o", out.to_str().unwrap()]);
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{}: {err}", path.display());
         assert!(err.contains(expect), "{err}");
@@ -133,25 +95,17 @@ fn bad_input_fails_cleanly_without_touching_the_output() {
         vec!["--relax", "2.5"],
         vec!["--epsilon", "0"],
         vec!["--max-steps", "0"],
+        vec!["--repr", "mesh", "--res", "0"],
+        vec!["--repr", "mesh", "--res", "1000000"],
     ] {
-        let mut all = vec![
-            "render",
-            good.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-        ];
+        let mut all = vec!["render", good.to_str().unwrap(), "-o", out.to_str().unwrap()];
         all.extend(args.iter());
         let o = toolkit(&all);
         assert_eq!(o.status.code(), Some(2), "{args:?}");
         assert_eq!(std::fs::read(&out).unwrap(), b"precious");
     }
     let nowhere = dir.join("no/such/dir/out.png");
-    let o = toolkit(&[
-        "render",
-        good.to_str().unwrap(),
-        "-o",
-        nowhere.to_str().unwrap(),
-    ]);
+    let o = toolkit(&["render", good.to_str().unwrap(), "-o", nowhere.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("does not exist"));
     // No temporary files were left behind.
@@ -161,4 +115,25 @@ fn bad_input_fails_cleanly_without_touching_the_output() {
         .filter(|e| e.file_name().to_string_lossy().contains(".tmp"))
         .collect();
     assert!(leftovers.is_empty());
+}
+
+#[test]
+fn a_mesh_file_renders_without_a_scene_and_broken_meshes_fail_cleanly() {
+    let dir = temp_dir("mesh");
+    let obj = dir.join("tet.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n").unwrap();
+    let out = dir.join("tet.png");
+    let o = toolkit(&["render", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--width", "80", "--height", "60"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("4 triangles"));
+    let img = image::open(&out).unwrap().to_rgb8();
+    // The framed tetrahedron covers the middle of the image.
+    assert_ne!(img.get_pixel(40, 30).0, [0, 0, 0]);
+    let bad = dir.join("bad.obj");
+    std::fs::write(&bad, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n").unwrap();
+    let o = toolkit(&["render", bad.to_str().unwrap(), "-o", dir.join("bad.png").to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("bad.obj") && err.contains("out of range"), "{err}");
+    assert!(!dir.join("bad.png").exists());
 }
