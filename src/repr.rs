@@ -332,7 +332,13 @@ pub fn build_objects(scene: &Scene, repr: Representation) -> Vec<Box<dyn Geometr
                         return Box::new(g);
                     }
                     let kind = o.kind_name();
-                    (march, format!("{kind} '{}': sphere traced (no parametric tessellation for {kind})", o.label))
+                    (
+                        march,
+                        format!(
+                            "{kind} '{}': sphere traced (no parametric tessellation for {kind})",
+                            o.label
+                        ),
+                    )
                 }
             };
             if let ObjectKind::Mesh { mesh, shading, .. } = &o.kind {
@@ -372,6 +378,9 @@ fn tessellated(scene: &Scene, o: &Object, resolution: u32, shading: Shading) -> 
         return Some(MeshGeometry::new(mesh, Shading::Flat, Transform::IDENTITY, o.material, label));
     }
     let mesh = tessellate(prim, resolution, None);
+    // Sharp-edged shapes come without vertex normals: they stay flat even when smooth
+    // shading is asked for (averaged normals would round their edges off).
+    let shading = if mesh.normals.is_some() { shading } else { Shading::Flat };
     Some(MeshGeometry::new(mesh, shading, o.compiled_transform(), o.material, label))
 }
 

@@ -123,7 +123,16 @@ fn a_mesh_file_renders_without_a_scene_and_broken_meshes_fail_cleanly() {
     let obj = dir.join("tet.obj");
     std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n").unwrap();
     let out = dir.join("tet.png");
-    let o = toolkit(&["render", obj.to_str().unwrap(), "-o", out.to_str().unwrap(), "--width", "80", "--height", "60"]);
+    let o = toolkit(&[
+        "render",
+        obj.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--width",
+        "80",
+        "--height",
+        "60",
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(String::from_utf8_lossy(&o.stdout).contains("4 triangles"));
     let img = image::open(&out).unwrap().to_rgb8();

@@ -39,19 +39,12 @@ fn load(path: &Path) -> (TriangleMesh, LoadReport) {
 #[track_caller]
 fn fails(path: &Path, needles: &[&str]) -> Error {
     let err = match load_mesh(path) {
-        Ok((m, _)) => panic!(
-            "{} loaded ({} triangles)",
-            path.display(),
-            m.triangle_count()
-        ),
+        Ok((m, _)) => panic!("{} loaded ({} triangles)", path.display(), m.triangle_count()),
         Err(e) => e,
     };
     assert_eq!(err.exit_code(), 2, "{err}");
     let msg = err.to_string();
-    assert!(
-        msg.contains(&path.display().to_string()),
-        "no file name in {msg:?}"
-    );
+    assert!(msg.contains(&path.display().to_string()), "no file name in {msg:?}");
     assert!(!msg.contains('\n'), "not one line: {msg:?}");
     for n in needles {
         assert!(msg.contains(n), "expected {n:?} in {msg:?}");
@@ -128,11 +121,7 @@ fn icosphere(subdivisions: usize, c: Vec3, r: f32) -> TriangleMesh {
 #[track_caller]
 fn assert_same(a: &TriangleMesh, b: &TriangleMesh, what: &str) {
     assert_eq!(a.positions.len(), b.positions.len(), "{what}: vertex count");
-    assert_eq!(
-        a.triangles.len(),
-        b.triangles.len(),
-        "{what}: triangle count"
-    );
+    assert_eq!(a.triangles.len(), b.triangles.len(), "{what}: triangle count");
     let map: Vec<u32> = b
         .positions
         .iter()
@@ -140,8 +129,7 @@ fn assert_same(a: &TriangleMesh, b: &TriangleMesh, what: &str) {
             a.positions
                 .iter()
                 .position(|q| (*p - *q).abs().max_element() <= 1e-6)
-                .unwrap_or_else(|| panic!("{what}: vertex {p} not in the original"))
-                as u32
+                .unwrap_or_else(|| panic!("{what}: vertex {p} not in the original")) as u32
         })
         .collect();
     let canon = |t: [u32; 3]| {
@@ -149,11 +137,7 @@ fn assert_same(a: &TriangleMesh, b: &TriangleMesh, what: &str) {
         [t[k], t[(k + 1) % 3], t[(k + 2) % 3]]
     };
     let mut ta: Vec<[u32; 3]> = a.triangles.iter().map(|&t| canon(t)).collect();
-    let mut tb: Vec<[u32; 3]> = b
-        .triangles
-        .iter()
-        .map(|t| canon(t.map(|i| map[i as usize])))
-        .collect();
+    let mut tb: Vec<[u32; 3]> = b.triangles.iter().map(|t| canon(t.map(|i| map[i as usize]))).collect();
     ta.sort();
     tb.sort();
     assert_eq!(ta, tb, "{what}: connectivity");
@@ -170,10 +154,7 @@ fn assert_same(a: &TriangleMesh, b: &TriangleMesh, what: &str) {
 }
 
 /// Loads `path` on another thread, catching panics and giving up after `limit`.
-fn load_guarded(
-    path: &Path,
-    limit: Duration,
-) -> Result<Result<(usize, LoadReport), Error>, &'static str> {
+fn load_guarded(path: &Path, limit: Duration) -> Result<Result<(usize, LoadReport), Error>, &'static str> {
     let (tx, rx) = mpsc::channel();
     let owned = path.to_path_buf();
     std::thread::spawn(move || {
@@ -210,10 +191,7 @@ fn mesh_methods() {
     assert!(m.validate().is_ok());
     let (lo, hi) = m.bounds().unwrap();
     let c = Vec3::new(1.0, 2.0, 3.0);
-    assert!(
-        lo.cmpge(c - 2.0001).all() && hi.cmple(c + 2.0001).all(),
-        "{lo} {hi}"
-    );
+    assert!(lo.cmpge(c - 2.0001).all() && hi.cmple(c + 2.0001).all(), "{lo} {hi}");
     assert!((hi - lo).min_element() > 3.5, "{lo} {hi}");
     for p in &m.positions {
         assert!(p.cmpge(lo).all() && p.cmple(hi).all());
@@ -240,10 +218,7 @@ fn mesh_methods() {
         let [a, b, c] = t.map(|i| mirrored.positions[i as usize]);
         let centre = Vec3::new(-1.0, 4.0, 3.0);
         let face = (b - a).cross(c - a);
-        assert!(
-            face.dot((a + b + c) / 3.0 - centre) > 0.0,
-            "triangle {i} faces in"
-        );
+        assert!(face.dot((a + b + c) / 3.0 - centre) > 0.0, "triangle {i} faces in");
         let n = mirrored.normals.as_ref().unwrap()[t[0] as usize];
         assert!((n.length() - 1.0).abs() < 1e-5);
         assert!(n.dot(face) > 0.0);
@@ -335,10 +310,7 @@ fn save_errors() {
     assert!(err.to_string().contains("does not exist"), "{err}");
     assert!(err.to_string().contains("out.ply"), "{err}");
     let err = save_mesh(&sphere, &dir.path().join("out.stl")).unwrap_err();
-    assert!(
-        err.to_string().contains("supported: .obj, .ply, .glb"),
-        "{err}"
-    );
+    assert!(err.to_string().contains("supported: .obj, .ply, .glb"), "{err}");
     let mut broken = sphere.clone();
     broken.triangles.push([0, 1, 99]);
     let err = save_mesh(&broken, &dir.path().join("b.obj")).unwrap_err();
@@ -389,12 +361,7 @@ fn ascii_ply_with_quads_and_pentagons() {
     assert!((hi.z - 1.0).abs() < 1e-6 && lo.z == 0.0 && (hi.x - 1.0).abs() < 1e-6);
 }
 
-const TETRA: [[f32; 3]; 4] = [
-    [0.0, 0.0, 0.0],
-    [1.0, 0.0, 0.0],
-    [0.0, 1.0, 0.0],
-    [0.0, 0.0, 1.0],
-];
+const TETRA: [[f32; 3]; 4] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 const TETRA_FACES: [[u32; 3]; 4] = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
 
 fn assert_tetra(m: &TriangleMesh) {
@@ -440,10 +407,7 @@ fn binary_big_endian_ply() {
     let (m, report) = load(&put(dir.path(), "tetra_be.ply", &b));
     assert_tetra(&m);
     assert_eq!(m.triangles, TETRA_FACES.to_vec());
-    assert!(
-        report.notes.iter().any(|n| n.contains("'edge'")),
-        "{report:?}"
-    );
+    assert!(report.notes.iter().any(|n| n.contains("'edge'")), "{report:?}");
 
     // Truncating the binary data anywhere gives a "truncated" error, never a panic.
     let header_len = b.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
@@ -530,10 +494,7 @@ fn base64(b: &[u8]) -> String {
     const A: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut s = String::new();
     for c in b.chunks(3) {
-        let n = c
-            .iter()
-            .enumerate()
-            .fold(0u32, |n, (i, &x)| n | (x as u32) << (16 - 8 * i));
+        let n = c.iter().enumerate().fold(0u32, |n, (i, &x)| n | (x as u32) << (16 - 8 * i));
         for k in 0..=c.len() {
             s.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
         }
@@ -594,19 +555,13 @@ fn gltf_hierarchy_and_triangle_strip() {
     let dir = tmp();
     put(dir.path(), "geom data.bin", hierarchy_bin());
     let external = put(dir.path(), "scene.gltf", hierarchy_gltf("geom%20data.bin"));
-    let embedded_uri = format!(
-        "data:application/octet-stream;base64,{}",
-        base64(&hierarchy_bin())
-    );
+    let embedded_uri = format!("data:application/octet-stream;base64,{}", base64(&hierarchy_bin()));
     let embedded = put(dir.path(), "embedded.gltf", hierarchy_gltf(&embedded_uri));
     for path in [external, embedded] {
         let (m, report) = load(&path);
         assert_eq!(m.triangle_count(), 3, "{}", path.display());
         assert_eq!(report.skipped_primitives, 1);
-        assert_eq!(
-            m.bounds(),
-            Some((Vec3::new(10.0, 5.0, 0.0), Vec3::new(11.0, 6.0, 1.0)))
-        );
+        assert_eq!(m.bounds(), Some((Vec3::new(10.0, 5.0, 0.0), Vec3::new(11.0, 6.0, 1.0))));
         // Every triangle faces +z (the strip's odd triangle has its winding swapped).
         for t in &m.triangles {
             let [a, b, c] = t.map(|i| m.positions[i as usize]);
@@ -667,20 +622,9 @@ fn degenerate_triangles_are_dropped_and_counted() {
 
     let all_bad = "solid x\nfacet normal 0 0 0\nouter loop\nvertex 0 0 0\nvertex 1 1 1\n\
         vertex 2 2 2\nendloop\nendfacet\nendsolid x\n";
-    fails(
-        &put(dir.path(), "line.stl", all_bad),
-        &["no triangles (all 1 triangles are degenerate)"],
-    );
-    assert!(sdfmesh::mesh::is_degenerate(
-        Vec3::ZERO,
-        Vec3::X,
-        Vec3::X * 2.0
-    ));
-    assert!(!sdfmesh::mesh::is_degenerate(
-        Vec3::ZERO,
-        Vec3::X,
-        Vec3::new(0.5, 1e-4, 0.0)
-    ));
+    fails(&put(dir.path(), "line.stl", all_bad), &["no triangles (all 1 triangles are degenerate)"]);
+    assert!(sdfmesh::mesh::is_degenerate(Vec3::ZERO, Vec3::X, Vec3::X * 2.0));
+    assert!(!sdfmesh::mesh::is_degenerate(Vec3::ZERO, Vec3::X, Vec3::new(0.5, 1e-4, 0.0)));
 }
 
 // ---------------------------------------------------------------------------------------
@@ -697,41 +641,23 @@ fn non_finite_vertex() {
     fails(&p, &["vertex 1: coordinate is NaN", ":13:1:"]);
 
     let obj = "v 0 0 0\nv 1 0 0\nv 0 1 nan\nf 1 2 3\n";
-    fails(
-        &put(dir.path(), "nan.obj", obj),
-        &["vertex 2: coordinate is NaN", ":3:"],
-    );
+    fails(&put(dir.path(), "nan.obj", obj), &["vertex 2: coordinate is NaN", ":3:"]);
     let stl = stl_ascii("t").replace("vertex 1e0 0 0", "vertex 1e0 inf 0");
-    fails(
-        &put(dir.path(), "inf.stl", stl),
-        &["coordinate is infinite"],
-    );
+    fails(&put(dir.path(), "inf.stl", stl), &["coordinate is infinite"]);
     let mut bin = stl_binary(b"x", &TETRA_FACES);
     bin[84 + 12 + 4..84 + 12 + 8].copy_from_slice(&f32::NAN.to_le_bytes());
-    fails(
-        &put(dir.path(), "nan.stl", bin),
-        &["triangle 0 vertex 0: coordinate is NaN"],
-    );
+    fails(&put(dir.path(), "nan.stl", bin), &["triangle 0 vertex 0: coordinate is NaN"]);
 }
 
 #[test]
 fn index_out_of_range() {
     let dir = tmp();
     let ply = prism_ascii_ply().replace("5 4 3 2 1 0", "5 4 3 999 1 0");
-    fails(
-        &put(dir.path(), "range.ply", ply),
-        &["face 0: index 999 out of range (10 vertices)", ":22:7:"],
-    );
+    fails(&put(dir.path(), "range.ply", ply), &["face 0: index 999 out of range (10 vertices)", ":22:7:"]);
     let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 3\nf 1 2 3\nf 1 999 3\n";
-    fails(
-        &put(dir.path(), "range.obj", obj),
-        &["face 3: index 999 out of range (3 vertices)", ":7:"],
-    );
+    fails(&put(dir.path(), "range.obj", obj), &["face 3: index 999 out of range (3 vertices)", ":7:"]);
     let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 -4\n";
-    fails(
-        &put(dir.path(), "neg.obj", obj),
-        &["face 0: index -4 out of range"],
-    );
+    fails(&put(dir.path(), "neg.obj", obj), &["face 0: index -4 out of range"]);
     let gltf = hierarchy_gltf("b.bin");
     let mut bin = hierarchy_bin();
     bin[88..90].copy_from_slice(&7u16.to_le_bytes());
@@ -749,15 +675,9 @@ fn absurd_ply_count_fails_fast() {
         property float x\nproperty float y\nproperty float z\nelement face 1\n\
         property list uchar int vertex_indices\nend_header\n0123456789";
     let start = Instant::now();
-    fails(
-        &put(dir.path(), "absurd.ply", ply),
-        &["1099511627776", ":3:"],
-    );
+    fails(&put(dir.path(), "absurd.ply", ply), &["1099511627776", ":3:"]);
     let ascii = ply.replace("binary_little_endian", "ascii");
-    fails(
-        &put(dir.path(), "absurd_ascii.ply", ascii),
-        &["1099511627776"],
-    );
+    fails(&put(dir.path(), "absurd_ascii.ply", ascii), &["1099511627776"]);
     let faces = "ply\nformat binary_big_endian 1.0\nelement vertex 3\nproperty float x\n\
         property float y\nproperty float z\nelement face 4000000000\n\
         property list uchar int vertex_indices\nend_header\n"
@@ -766,49 +686,23 @@ fn absurd_ply_count_fails_fast() {
         .chain(&[0u8; 36])
         .copied()
         .collect::<Vec<u8>>();
-    fails(
-        &put(dir.path(), "absurd_faces.ply", faces),
-        &["element 'face' declares 4000000000"],
-    );
-    assert!(
-        start.elapsed() < Duration::from_secs(1),
-        "{:?}",
-        start.elapsed()
-    );
+    fails(&put(dir.path(), "absurd_faces.ply", faces), &["element 'face' declares 4000000000"]);
+    assert!(start.elapsed() < Duration::from_secs(1), "{:?}", start.elapsed());
 }
 
 #[test]
 fn truncated_and_empty_stl() {
     let dir = tmp();
     let bin = stl_binary(b"binary", &TETRA_FACES);
-    fails(
-        &put(dir.path(), "cut.stl", &bin[..bin.len() - 30]),
-        &["truncated binary STL", "4 triangles"],
-    );
+    fails(&put(dir.path(), "cut.stl", &bin[..bin.len() - 30]), &["truncated binary STL", "4 triangles"]);
     let solid_header = stl_binary(b"solid but binary", &TETRA_FACES);
-    fails(
-        &put(dir.path(), "cut_solid.stl", &solid_header[..150]),
-        &["truncated"],
-    );
+    fails(&put(dir.path(), "cut_solid.stl", &solid_header[..150]), &["truncated"]);
     fails(&put(dir.path(), "short.stl", [1u8, 2, 3]), &["truncated"]);
-    fails(
-        &put(
-            dir.path(),
-            "empty_solid.stl",
-            "solid empty\nendsolid empty\n",
-        ),
-        &["no triangles"],
-    );
-    fails(
-        &put(dir.path(), "zero.stl", stl_binary(b"none", &[])),
-        &["no triangles"],
-    );
+    fails(&put(dir.path(), "empty_solid.stl", "solid empty\nendsolid empty\n"), &["no triangles"]);
+    fails(&put(dir.path(), "zero.stl", stl_binary(b"none", &[])), &["no triangles"]);
     let ascii = stl_ascii("t");
     let cut = ascii.match_indices("endloop").nth(1).unwrap().0;
-    fails(
-        &put(dir.path(), "cut_ascii.stl", &ascii[..cut]),
-        &["truncated"],
-    );
+    fails(&put(dir.path(), "cut_ascii.stl", &ascii[..cut]), &["truncated"]);
     fails(&put(dir.path(), "nothing.stl", ""), &["empty file"]);
 }
 
@@ -816,11 +710,7 @@ fn truncated_and_empty_stl() {
 fn gltf_errors() {
     let dir = tmp();
     fails(
-        &put(
-            dir.path(),
-            "nobuf.gltf",
-            hierarchy_gltf("missing-buffer.bin"),
-        ),
+        &put(dir.path(), "nobuf.gltf", hierarchy_gltf("missing-buffer.bin")),
         &["buffer 0", "missing-buffer.bin"],
     );
     put(dir.path(), "short.bin", &hierarchy_bin()[..50]);
@@ -830,48 +720,26 @@ fn gltf_errors() {
     );
     let recursive = r#"{"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
         "nodes": [{"children": [1]}, {"children": [2]}, {"children": [1]}]}"#;
-    fails(
-        &put(dir.path(), "recursive.gltf", recursive),
-        &["node 1 is its own ancestor"],
-    );
+    fails(&put(dir.path(), "recursive.gltf", recursive), &["node 1 is its own ancestor"]);
     let self_child = r#"{"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}],
         "nodes": [{"children": [0]}]}"#;
     fails(&put(dir.path(), "self.gltf", self_child), &["node 0"]);
     fails(
-        &put(
-            dir.path(),
-            "bad.gltf",
-            "{\"asset\": {\"version\": \"2.0\"},\n  \"nodes\": [1,]}",
-        ),
+        &put(dir.path(), "bad.gltf", "{\"asset\": {\"version\": \"2.0\"},\n  \"nodes\": [1,]}"),
         &["invalid glTF JSON", ":2:"],
     );
     fails(
-        &put(
-            dir.path(),
-            "v1.gltf",
-            r#"{"asset": {"version": "1.0"}, "meshes": {"a": {}}}"#,
-        ),
+        &put(dir.path(), "v1.gltf", r#"{"asset": {"version": "1.0"}, "meshes": {"a": {}}}"#),
         &["glTF version 1.0 is not supported"],
     );
     let lines_only = hierarchy_gltf("data:;base64,").replace(r#""mode": 4"#, r#""mode": 1"#);
     let lines_only = lines_only.replace(r#""mode": 5"#, r#""mode": 3"#);
-    fails(
-        &put(dir.path(), "lines.gltf", lines_only),
-        &["no triangles (3 point or line primitives skipped)"],
-    );
+    fails(&put(dir.path(), "lines.gltf", lines_only), &["no triangles (3 point or line primitives skipped)"]);
     let bad_index = hierarchy_gltf("x.bin").replace(r#""indices": 2"#, r#""indices": 9"#);
-    fails(
-        &put(dir.path(), "badindex.gltf", bad_index),
-        &["invalid glTF", "indices"],
-    );
-    let draco = hierarchy_gltf("x.bin").replace(
-        r#""asset""#,
-        r#""extensionsRequired": ["KHR_draco_mesh_compression"], "asset""#,
-    );
-    fails(
-        &put(dir.path(), "draco.gltf", draco),
-        &["KHR_draco_mesh_compression"],
-    );
+    fails(&put(dir.path(), "badindex.gltf", bad_index), &["invalid glTF", "indices"]);
+    let draco = hierarchy_gltf("x.bin")
+        .replace(r#""asset""#, r#""extensionsRequired": ["KHR_draco_mesh_compression"], "asset""#);
+    fails(&put(dir.path(), "draco.gltf", draco), &["KHR_draco_mesh_compression"]);
 }
 
 #[test]
@@ -884,39 +752,21 @@ fn other_errors() {
     let err = fails(&missing, &["cannot read"]);
     assert!(matches!(err, Error::Io { .. }));
     fails(&put(dir.path(), "empty.obj", ""), &["no triangles"]);
-    fails(
-        &put(dir.path(), "points.obj", "v 0 0 0\nv 1 1 1\np 1 2\n"),
-        &["no triangles"],
-    );
-    fails(
-        &put(dir.path(), "utf16.obj", [0xFF, 0xFE, b'v', 0]),
-        &["UTF-16"],
-    );
-    fails(
-        &put(dir.path(), "notply.ply", "solid x\n"),
-        &["not a PLY file"],
-    );
+    fails(&put(dir.path(), "points.obj", "v 0 0 0\nv 1 1 1\np 1 2\n"), &["no triangles"]);
+    fails(&put(dir.path(), "utf16.obj", [0xFF, 0xFE, b'v', 0]), &["UTF-16"]);
+    fails(&put(dir.path(), "notply.ply", "solid x\n"), &["not a PLY file"]);
     fails(&put(dir.path(), "empty.ply", ""), &["empty file"]);
     let cloud = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
         property float z\nend_header\n1 2 3\n";
-    fails(
-        &put(dir.path(), "cloud.ply", cloud),
-        &["no triangles", "'face'"],
-    );
+    fails(&put(dir.path(), "cloud.ply", cloud), &["no triangles", "'face'"]);
     let extra = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
         property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n\
         0 0 0\n1 0 0 9\n0 1 0\n3 0 1 2\n";
-    fails(
-        &put(dir.path(), "extra.ply", extra),
-        &["vertex 1: unexpected value '9'", ":11:7:"],
-    );
+    fails(&put(dir.path(), "extra.ply", extra), &["vertex 1: unexpected value '9'", ":11:7:"]);
     let badnum = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
         property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n\
         0 0 0\n1 zero 0\n0 1 0\n3 0 1 2\n";
-    fails(
-        &put(dir.path(), "badnum.ply", badnum),
-        &["vertex 1: property 'y': 'zero'", ":11:3:"],
-    );
+    fails(&put(dir.path(), "badnum.ply", badnum), &["vertex 1: property 'y': 'zero'", ":11:3:"]);
 }
 
 // ---------------------------------------------------------------------------------------
@@ -927,10 +777,7 @@ fn shared_meshes() -> Option<PathBuf> {
     if dir.is_dir() {
         Some(dir)
     } else {
-        println!(
-            "note: {} is absent; real-mesh checks skipped",
-            dir.display()
-        );
+        println!("note: {} is absent; real-mesh checks skipped", dir.display());
         None
     }
 }
@@ -947,11 +794,7 @@ fn real_meshes() {
         let (m, report) = load(&path);
         println!("{name}: {} triangles; {report}", m.triangle_count());
         assert_eq!(report.triangles_read, triangles, "{name}");
-        assert_eq!(
-            m.triangle_count() + report.degenerate_dropped,
-            triangles,
-            "{name}"
-        );
+        assert_eq!(m.triangle_count() + report.degenerate_dropped, triangles, "{name}");
         assert!(m.validate().is_ok());
     }
     // Every mesh in the folder loads; print what the loaders made of it.
@@ -980,10 +823,7 @@ fn real_meshes() {
         let r = std::panic::catch_unwind(|| load_mesh(&bunny));
         match r {
             Ok(Ok((m, report))) => {
-                println!(
-                    "trimesh_bunny.ply: {} triangles; {report}",
-                    m.triangle_count()
-                )
+                println!("trimesh_bunny.ply: {} triangles; {report}", m.triangle_count())
             }
             Ok(Err(e)) => println!("trimesh_bunny.ply: error: {e}"),
             Err(_) => panic!("trimesh_bunny.ply: panicked"),
@@ -1060,10 +900,7 @@ fn assimp_corpus_never_panics_or_hangs() {
             Ok(Err(e)) => {
                 println!("error {rel}: {e}");
                 check_error(&e, f);
-                kinds
-                    .entry(error_kind(&e.to_string(), f))
-                    .or_default()
-                    .push(rel);
+                kinds.entry(error_kind(&e.to_string(), f)).or_default().push(rel);
             }
             Err(what) => bad.push(format!("{what} {rel}")),
         }
@@ -1095,11 +932,7 @@ impl Rng {
         self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
     }
     fn below(&mut self, n: usize) -> usize {
-        if n == 0 {
-            0
-        } else {
-            (self.next() % n as u64) as usize
-        }
+        if n == 0 { 0 } else { (self.next() % n as u64) as usize }
     }
 }
 
@@ -1132,10 +965,8 @@ fn mutate(rng: &mut Rng, data: &[u8]) -> Vec<u8> {
 #[test]
 fn mutated_files_never_panic_or_hang() {
     let dir = tmp();
-    let embedded = hierarchy_gltf(&format!(
-        "data:application/octet-stream;base64,{}",
-        base64(&hierarchy_bin())
-    ));
+    let embedded =
+        hierarchy_gltf(&format!("data:application/octet-stream;base64,{}", base64(&hierarchy_bin())));
     let sphere = icosphere(1, Vec3::new(0.5, 0.25, -1.0), 2.0);
     let mut seeds: Vec<(&str, Vec<u8>)> = vec![
         ("ply", prism_ascii_ply().into_bytes()),
@@ -1153,17 +984,12 @@ fn mutated_files_never_panic_or_hang() {
         save_mesh(&sphere, &p).unwrap();
         seeds.push((ext, std::fs::read(&p).unwrap()));
     }
-    let mut rng = Rng(std::env::var("SDFMESH_SEED")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(0x9E37_79B9_7F4A_7C15));
+    let mut rng =
+        Rng(std::env::var("SDFMESH_SEED").ok().and_then(|v| v.parse().ok()).unwrap_or(0x9E37_79B9_7F4A_7C15));
     let (mut ok, mut err) = (0, 0);
     let start = Instant::now();
     // SDFMESH_MUTATIONS raises the count for a longer hunt.
-    let per_seed: usize = std::env::var("SDFMESH_MUTATIONS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(250);
+    let per_seed: usize = std::env::var("SDFMESH_MUTATIONS").ok().and_then(|v| v.parse().ok()).unwrap_or(250);
     for (k, (ext, seed)) in seeds.iter().enumerate() {
         for i in 0..per_seed {
             let data = mutate(&mut rng, seed);
@@ -1177,19 +1003,13 @@ fn mutated_files_never_panic_or_hang() {
                 Err(what) => {
                     let keep = std::env::temp_dir().join(format!("sdfmesh-mutant-{k}-{i}.{ext}"));
                     let _ = std::fs::write(&keep, &data);
-                    panic!(
-                        "{what} on a mutant of seed {k} (saved to {})",
-                        keep.display()
-                    );
+                    panic!("{what} on a mutant of seed {k} (saved to {})", keep.display());
                 }
             }
             let _ = std::fs::remove_file(&path);
         }
     }
-    println!(
-        "mutated files: {ok} loaded, {err} errors, in {:?}",
-        start.elapsed()
-    );
+    println!("mutated files: {ok} loaded, {err} errors, in {:?}", start.elapsed());
 }
 
 // ---------------------------------------------------------------------------------------
@@ -1198,10 +1018,7 @@ fn mutated_files_never_panic_or_hang() {
 /// A one-node, one-mesh glTF whose buffer 0 is the hierarchy test's data (90 bytes: two
 /// VEC3 float blocks of 3 and 4 vertices at 0 and 36, three u16 indices at 84).
 fn mini_gltf(prim: &str, accessors: &str, views: &str, extra_buffers: &str) -> String {
-    let uri = format!(
-        "data:application/octet-stream;base64,{}",
-        base64(&hierarchy_bin())
-    );
+    let uri = format!("data:application/octet-stream;base64,{}", base64(&hierarchy_bin()));
     format!(
         r#"{{"asset": {{"version": "2.0"}}, "scene": 0, "scenes": [{{"nodes": [0]}}],
   "nodes": [{{"mesh": 0}}], "meshes": [{{"primitives": [{prim}]}}],
@@ -1231,9 +1048,7 @@ fn gltf_sparse_and_quantized_accessors() {
     assert_eq!(m.bounds(), Some((Vec3::ZERO, Vec3::new(1.0, 1.0, 0.0))));
 
     // KHR_mesh_quantization: u8 positions, 4-byte stride, and normalized i8 normals.
-    let q = [
-        0u8, 0, 0, 0, 2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 127, 0, 0, 0, 127, 0, 0, 0, 127, 0,
-    ];
+    let q = [0u8, 0, 0, 0, 2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 127, 0, 0, 0, 127, 0, 0, 0, 127, 0];
     let quant = mini_gltf(
         r#"{"attributes": {"POSITION": 0, "NORMAL": 1}}"#,
         r#"{"bufferView": 3, "componentType": 5121, "count": 3, "type": "VEC3"},
@@ -1242,18 +1057,11 @@ fn gltf_sparse_and_quantized_accessors() {
             r#"{VIEWS}, {{"buffer": 1, "byteOffset": 0, "byteLength": 12, "byteStride": 4}},
             {{"buffer": 1, "byteOffset": 12, "byteLength": 12, "byteStride": 4}}"#
         ),
-        &format!(
-            r#", {{"uri": "data:application/octet-stream;base64,{}", "byteLength": 24}}"#,
-            base64(&q)
-        ),
+        &format!(r#", {{"uri": "data:application/octet-stream;base64,{}", "byteLength": 24}}"#, base64(&q)),
     )
     .replace(r#""asset""#, r#""extensionsRequired": ["KHR_mesh_quantization"], "asset""#);
     let (m, report) = load(&put(dir.path(), "quant.gltf", quant));
-    assert_eq!(
-        m.bounds(),
-        Some((Vec3::ZERO, Vec3::new(2.0, 2.0, 0.0))),
-        "{report:?}"
-    );
+    assert_eq!(m.bounds(), Some((Vec3::ZERO, Vec3::new(2.0, 2.0, 0.0))), "{report:?}");
     assert_eq!(m.normals.as_ref().unwrap(), &vec![Vec3::Z; 3]);
 }
 
@@ -1270,21 +1078,14 @@ fn gltf_accessors_out_of_bounds() {
                 VIEWS,
                 "",
             ),
-            &[
-                "accessor 0 (4000000000 elements) needs",
-                "buffer view 0, which has 36",
-            ],
+            &["accessor 0 (4000000000 elements) needs", "buffer view 0, which has 36"],
         ),
         (
             "stride.gltf",
             mini_gltf(
                 tri,
                 r#"{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3"}"#,
-                &VIEWS.replacen(
-                    r#""byteLength": 36"#,
-                    r#""byteLength": 36, "byteStride": 4"#,
-                    1,
-                ),
+                &VIEWS.replacen(r#""byteLength": 36"#, r#""byteLength": 36, "byteStride": 4"#, 1),
                 "",
             ),
             &["byteStride 4", "smaller than one element (12 bytes)"],
@@ -1353,10 +1154,7 @@ fn gltf_accessors_out_of_bounds() {
                 "",
             )
             .replace(r#""nodes": [0]"#, r#""nodes": [1, 0]"#)
-            .replace(
-                r#""nodes": [{"mesh": 0}]"#,
-                r#""nodes": [{"mesh": 0}, {"children": [0]}]"#,
-            ),
+            .replace(r#""nodes": [{"mesh": 0}]"#, r#""nodes": [{"mesh": 0}, {"children": [0]}]"#),
             &["node 0 is reached twice"],
         ),
         (
@@ -1376,20 +1174,11 @@ fn gltf_accessors_out_of_bounds() {
     }
 
     // A deep (non-recursive) chain of 20,000 nodes is walked without recursion.
-    let mut nodes: Vec<String> = (0..20_000)
-        .map(|i| format!(r#"{{"children": [{}]}}"#, i + 1))
-        .collect();
+    let mut nodes: Vec<String> = (0..20_000).map(|i| format!(r#"{{"children": [{}]}}"#, i + 1)).collect();
     nodes.push(r#"{"mesh": 0, "translation": [1, 2, 3]}"#.into());
-    let deep = mini_gltf(
-        tri,
-        r#"{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3"}"#,
-        VIEWS,
-        "",
-    )
-    .replace(
-        r#""nodes": [{"mesh": 0}]"#,
-        &format!(r#""nodes": [{}]"#, nodes.join(",")),
-    );
+    let deep =
+        mini_gltf(tri, r#"{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3"}"#, VIEWS, "")
+            .replace(r#""nodes": [{"mesh": 0}]"#, &format!(r#""nodes": [{}]"#, nodes.join(",")));
     let (m, _) = load(&put(dir.path(), "deep.gltf", deep));
     assert_eq!(m.bounds().unwrap().0, Vec3::new(1.0, 2.0, 3.0));
 }

@@ -62,20 +62,12 @@ fn icosphere(levels: u32) -> TriangleMesh {
             })
         };
         for [a, b, c] in tris {
-            let (ab, bc, ca) = (
-                m(a, b, &mut positions),
-                m(b, c, &mut positions),
-                m(c, a, &mut positions),
-            );
+            let (ab, bc, ca) = (m(a, b, &mut positions), m(b, c, &mut positions), m(c, a, &mut positions));
             next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
         }
         tris = next;
     }
-    TriangleMesh {
-        positions,
-        triangles: tris,
-        normals: None,
-    }
+    TriangleMesh { positions, triangles: tris, normals: None }
 }
 
 fn geometry(mesh: &TriangleMesh, transform: Transform) -> MeshGeometry {
@@ -109,26 +101,12 @@ fn rays_at_shared_edges_and_vertices_all_hit() {
     for (k, tri) in mesh.triangles.iter().enumerate() {
         let [a, b, c] = tri.map(|i| mesh.positions[i as usize]);
         // The vertices, the edge midpoints and points at 1/3 along each edge.
-        let targets = [
-            a,
-            b,
-            c,
-            (a + b) * 0.5,
-            (b + c) * 0.5,
-            (c + a) * 0.5,
-            a + (b - a) / 3.0,
-            b + (c - b) / 3.0,
-        ];
-        for (n, (j, target)) in targets
-            .iter()
-            .enumerate()
-            .flat_map(|jt| [jt; 4])
-            .enumerate()
-        {
+        let targets =
+            [a, b, c, (a + b) * 0.5, (b + c) * 0.5, (c + a) * 0.5, a + (b - a) / 3.0, b + (c - b) / 3.0];
+        for (n, (j, target)) in targets.iter().enumerate().flat_map(|jt| [jt; 4]).enumerate() {
             // Origins all around, including steep and shallow views.
             let s = (k * 32 + n) as f32;
-            let origin =
-                Vec3::new((s * 0.37).sin(), (s * 0.71).cos(), (s * 0.13).sin()).normalize() * 3.0;
+            let origin = Vec3::new((s * 0.37).sin(), (s * 0.71).cos(), (s * 0.13).sin()).normalize() * 3.0;
             let dir = (*target - origin).normalize();
             // Silhouette targets (some face at the target's edge or vertex seen edge-on or
             // from behind) may rightly be missed: keep rays that every incident face faces.
@@ -140,14 +118,10 @@ fn rays_at_shared_edges_and_vertices_all_hit() {
                 4 | 7 => &tri[1..3],
                 _ => &[tri[2], tri[0]],
             };
-            let front = mesh
-                .triangles
-                .iter()
-                .filter(|t| verts.iter().all(|v| t.contains(v)))
-                .all(|t| {
-                    let [p, q, r] = t.map(|i| mesh.positions[i as usize]);
-                    dir.dot((q - p).cross(r - p).normalize()) < -0.01
-                });
+            let front = mesh.triangles.iter().filter(|t| verts.iter().all(|v| t.contains(v))).all(|t| {
+                let [p, q, r] = t.map(|i| mesh.positions[i as usize]);
+                dir.dot((q - p).cross(r - p).normalize()) < -0.01
+            });
             if !front {
                 continue;
             }

@@ -58,6 +58,13 @@ fn closed_form_and_sphere_traced_renders_agree_for_every_primitive() {
         let agree = fraction_within(&a.frame.image, &s.frame.image, 2);
         common::dump(&format!("{}-{}", prim.kind_name(), rot.x), &[&a.frame.image, &s.frame.image]);
         assert!(agree >= 0.995, "{}: only {:.3}% of pixels agree", prim.kind_name(), agree * 100.0);
+        // Finely tessellated, the polygon representation agrees too (a little less: facets).
+        let mesh = Representation::Mesh { resolution: 512, shading: sdfmesh::shape::Shading::Smooth, march };
+        let m = render_scene(&scene, mesh);
+        let agree = fraction_within(&a.frame.image, &m.frame.image, 2);
+        common::dump(&format!("{}-{}-mesh", prim.kind_name(), rot.x), &[&a.frame.image, &m.frame.image]);
+        eprintln!("{}: mesh at 512 agrees on {:.3}% of pixels", prim.kind_name(), agree * 100.0);
+        assert!(agree >= 0.99, "{} as a mesh: only {:.3}% of pixels agree", prim.kind_name(), agree * 100.0);
         // The object is really there (not an empty image agreeing with an empty image).
         let bg = [26u8, 26, 38];
         assert!(covered(&a.frame.image, bg) > 2000, "{}: nothing rendered", prim.kind_name());
@@ -100,7 +107,8 @@ fn rendering_is_deterministic() {
 #[test]
 fn finely_tessellated_sphere_renders_like_the_closed_form_sphere() {
     let sphere = object(Primitive::Sphere { radius: 1.2 }, Vec3::ZERO, Vec3::ZERO, Vec3::ONE);
-    let mut ground = object(Primitive::Plane { normal: Vec3::Y, offset: -1.6 }, Vec3::ZERO, Vec3::ZERO, Vec3::ONE);
+    let mut ground =
+        object(Primitive::Plane { normal: Vec3::Y, offset: -1.6 }, Vec3::ZERO, Vec3::ZERO, Vec3::ONE);
     ground.material = 0;
     let scene = lit_scene(vec![sphere, ground], 200);
     let march = MarchParams::default();

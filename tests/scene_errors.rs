@@ -22,10 +22,7 @@ fn fails(text: &str, line: usize, column: usize, needle: &str) {
     assert!(matches!(err, Error::Input { .. }), "{err:?}");
     let msg = err.to_string();
     let prefix = format!("bad.toml:{line}:{column}: ");
-    assert!(
-        msg.starts_with(&prefix),
-        "expected prefix {prefix:?}, got {msg:?}"
-    );
+    assert!(msg.starts_with(&prefix), "expected prefix {prefix:?}, got {msg:?}");
     assert!(msg.contains(needle), "expected {needle:?} in {msg:?}");
     assert!(!msg.contains('\n'), "not one line: {msg:?}");
 }
@@ -43,35 +40,15 @@ fn close(a: Vec3, b: Vec3) -> bool {
 #[test]
 fn toml_syntax_errors() {
     fails("[camera\n", 1, 8, "invalid TOML");
-    fails(
-        "[camera]\nfov = 1\nfov = 2\n",
-        3,
-        1,
-        "invalid TOML: duplicate key",
-    );
+    fails("[camera]\nfov = 1\nfov = 2\n", 3, 1, "invalid TOML: duplicate key");
     fails("[camera]\nfov = \n", 2, 7, "invalid TOML");
 }
 
 #[test]
 fn unknown_keys() {
-    fails(
-        "bogus = 1\n",
-        1,
-        1,
-        "unknown key `bogus`; valid keys: camera, settings",
-    );
-    fails(
-        "[camera]\nfoo = 1\n",
-        2,
-        1,
-        "camera: unknown key `foo`; valid keys: position, look_at, direction",
-    );
-    fails(
-        "[settings]\n\ndepth = 3\n",
-        3,
-        1,
-        "settings: unknown key `depth`",
-    );
+    fails("bogus = 1\n", 1, 1, "unknown key `bogus`; valid keys: camera, settings");
+    fails("[camera]\nfoo = 1\n", 2, 1, "camera: unknown key `foo`; valid keys: position, look_at, direction");
+    fails("[settings]\n\ndepth = 3\n", 3, 1, "settings: unknown key `depth`");
     fails(
         "[[lights]]\ntype = 'ambient'\nintensity = 1\nfoo = 1\n",
         4,
@@ -147,12 +124,7 @@ fn keys_not_valid_for_the_type() {
 
 #[test]
 fn wrong_types() {
-    fails(
-        "[camera]\nfov = 'wide'\n",
-        2,
-        7,
-        "camera.fov: invalid type: string \"wide\", expected a number",
-    );
+    fails("[camera]\nfov = 'wide'\n", 2, 7, "camera.fov: invalid type: string \"wide\", expected a number");
     fails(
         "[camera]\nwidth = 1.5\n",
         2,
@@ -165,36 +137,11 @@ fn wrong_types() {
         19,
         "camera.position[2]: invalid type: string \"x\", expected a number",
     );
-    fails(
-        "camera = 5\n",
-        1,
-        10,
-        "camera: invalid type: integer `5`, expected a table",
-    );
-    fails(
-        "[[camera]]\nfov = 60\n",
-        1,
-        1,
-        "camera: expected a single table, got an array",
-    );
-    fails(
-        "objects = 3\n",
-        1,
-        11,
-        "objects: invalid type: integer `3`, expected an array",
-    );
-    fails(
-        "[objects]\ntype = 'sphere'\n",
-        1,
-        1,
-        "objects: invalid type: table, expected an array",
-    );
-    fails(
-        "[materials]\nred = 3\n",
-        2,
-        7,
-        "materials.red: invalid type: integer `3`, expected a table",
-    );
+    fails("camera = 5\n", 1, 10, "camera: invalid type: integer `5`, expected a table");
+    fails("[[camera]]\nfov = 60\n", 1, 1, "camera: expected a single table, got an array");
+    fails("objects = 3\n", 1, 11, "objects: invalid type: integer `3`, expected an array");
+    fails("[objects]\ntype = 'sphere'\n", 1, 1, "objects: invalid type: table, expected an array");
+    fails("[materials]\nred = 3\n", 2, 7, "materials.red: invalid type: integer `3`, expected a table");
     fails(
         "[[objects]]\ntype = 'sphere'\nradius = 1\nname = 3\n",
         4,
@@ -219,12 +166,7 @@ fn wrong_types() {
         12,
         "objects[0].material: invalid type: integer `1`, expected a string",
     );
-    fails(
-        "[[objects]]\ntype = 3\n",
-        2,
-        8,
-        "objects[0].type: invalid type: integer `3`, expected a string",
-    );
+    fails("[[objects]]\ntype = 3\n", 2, 8, "objects[0].type: invalid type: integer `3`, expected a string");
     fails(
         "[[objects]]\ntype = 'repeat'\nperiod = [1, 0, 0]\n[[objects.child]]\ntype = 'sphere'\nradius = 1\n",
         4,
@@ -263,102 +205,27 @@ fn vectors_need_three_components() {
 
 #[test]
 fn missing_required_keys() {
-    fails(
-        "[[lights]]\nintensity = 1\n",
-        1,
-        1,
-        "lights[0]: missing key `type`",
-    );
-    fails(
-        "[[lights]]\ntype = 'ambient'\n",
-        2,
-        8,
-        "lights[0]: an ambient light needs `intensity`",
-    );
-    fails(
-        "[[lights]]\ntype = 'point'\nintensity = 1\n",
-        2,
-        8,
-        "a point light needs `position`",
-    );
-    fails(
-        "[[lights]]\ntype = 'directional'\nintensity = 1\n",
-        2,
-        8,
-        "a directional light needs `direction`",
-    );
-    fails(
-        "[materials.red]\nka = 1\n",
-        1,
-        1,
-        "materials.red: missing key `color`",
-    );
-    fails(
-        "[[objects]]\nradius = 1\n",
-        1,
-        1,
-        "objects[0]: missing key `type`",
-    );
+    fails("[[lights]]\nintensity = 1\n", 1, 1, "lights[0]: missing key `type`");
+    fails("[[lights]]\ntype = 'ambient'\n", 2, 8, "lights[0]: an ambient light needs `intensity`");
+    fails("[[lights]]\ntype = 'point'\nintensity = 1\n", 2, 8, "a point light needs `position`");
+    fails("[[lights]]\ntype = 'directional'\nintensity = 1\n", 2, 8, "a directional light needs `direction`");
+    fails("[materials.red]\nka = 1\n", 1, 1, "materials.red: missing key `color`");
+    fails("[[objects]]\nradius = 1\n", 1, 1, "objects[0]: missing key `type`");
     fails(
         "[[objects]]\ntype = 'union'\nchildren = [{ radius = 1 }]\n",
         3,
         13,
         "objects[0].children[0]: missing key `type`",
     );
-    fails(
-        "[[objects]]\ntype = 'sphere'\n",
-        2,
-        8,
-        "objects[0]: a sphere needs `radius`",
-    );
-    fails(
-        "[[objects]]\ntype = 'box'\n",
-        2,
-        8,
-        "a box needs `half_size`",
-    );
-    fails(
-        "[[objects]]\ntype = 'ellipsoid'\n",
-        2,
-        8,
-        "an ellipsoid needs `radii`",
-    );
-    fails(
-        "[[objects]]\ntype = 'cylinder'\nradius = 1\n",
-        2,
-        8,
-        "a cylinder needs `height`",
-    );
-    fails(
-        "[[objects]]\ntype = 'cone'\nheight = 1\n",
-        2,
-        8,
-        "a cone needs `radius_bottom`",
-    );
-    fails(
-        "[[objects]]\ntype = 'torus'\nmajor_radius = 1\n",
-        2,
-        8,
-        "a torus needs `minor_radius`",
-    );
-    fails(
-        "[[objects]]\ntype = 'triangle'\na = [0, 0, 0]\nb = [1, 0, 0]\n",
-        2,
-        8,
-        "a triangle needs `c`",
-    );
-    fails(
-        "[[objects]]\ntype = 'capsule'\na = [0, 0, 0]\nradius = 1\n",
-        2,
-        8,
-        "a capsule needs `b`",
-    );
-    fails(
-        "[[objects]]\ntype = 'union'\n",
-        2,
-        8,
-        "objects[0]: a union needs `children`",
-    );
+    fails("[[objects]]\ntype = 'sphere'\n", 2, 8, "objects[0]: a sphere needs `radius`");
+    fails("[[objects]]\ntype = 'box'\n", 2, 8, "a box needs `half_size`");
+    fails("[[objects]]\ntype = 'ellipsoid'\n", 2, 8, "an ellipsoid needs `radii`");
+    fails("[[objects]]\ntype = 'cylinder'\nradius = 1\n", 2, 8, "a cylinder needs `height`");
+    fails("[[objects]]\ntype = 'cone'\nheight = 1\n", 2, 8, "a cone needs `radius_bottom`");
+    fails("[[objects]]\ntype = 'torus'\nmajor_radius = 1\n", 2, 8, "a torus needs `minor_radius`");
+    fails("[[objects]]\ntype = 'triangle'\na = [0, 0, 0]\nb = [1, 0, 0]\n", 2, 8, "a triangle needs `c`");
+    fails("[[objects]]\ntype = 'capsule'\na = [0, 0, 0]\nradius = 1\n", 2, 8, "a capsule needs `b`");
+    fails("[[objects]]\ntype = 'union'\n", 2, 8, "objects[0]: a union needs `children`");
     fails(
         "[[objects]]\ntype = 'smooth_union'\nchildren = [{ type = 'sphere', radius = 1 }]\n",
         2,
@@ -371,12 +238,7 @@ fn missing_required_keys() {
         8,
         "a repeat needs `period`",
     );
-    fails(
-        "[[objects]]\ntype = 'repeat'\nperiod = [1, 0, 0]\n",
-        2,
-        8,
-        "objects[0]: a repeat needs `child`",
-    );
+    fails("[[objects]]\ntype = 'repeat'\nperiod = [1, 0, 0]\n", 2, 8, "objects[0]: a repeat needs `child`");
 }
 
 #[test]
@@ -405,30 +267,15 @@ fn unknown_types() {
 
 #[test]
 fn non_finite_numbers_are_rejected_everywhere() {
-    fails(
-        "[camera]\nfov = nan\n",
-        2,
-        7,
-        "camera.fov: must be a finite number, got nan",
-    );
-    fails(
-        "[camera]\nfov = -inf\n",
-        2,
-        7,
-        "camera.fov: must be a finite number, got -inf",
-    );
+    fails("[camera]\nfov = nan\n", 2, 7, "camera.fov: must be a finite number, got nan");
+    fails("[camera]\nfov = -inf\n", 2, 7, "camera.fov: must be a finite number, got -inf");
     fails(
         "[camera]\nposition = [0, inf, 0]\n",
         2,
         16,
         "camera.position[1]: must be a finite number, got inf",
     );
-    fails(
-        "[settings]\nmax_distance = inf\n",
-        2,
-        16,
-        "settings.max_distance: must be a finite number",
-    );
+    fails("[settings]\nmax_distance = inf\n", 2, 16, "settings.max_distance: must be a finite number");
     fails(
         "[[lights]]\ntype = 'ambient'\nintensity = +inf\n",
         3,
@@ -460,12 +307,7 @@ fn non_finite_numbers_are_rejected_everywhere() {
         "objects[0].translate[2]: must be a finite number",
     );
     // Finite in TOML but not in single precision.
-    fails(
-        "[camera]\nfov = 1e39\n",
-        2,
-        7,
-        "camera.fov: 1e39 is out of range",
-    );
+    fails("[camera]\nfov = 1e39\n", 2, 7, "camera.fov: 1e39 is out of range");
 }
 
 #[test]
@@ -488,12 +330,7 @@ fn camera_values() {
         13,
         "camera.direction: must not be a zero-length vector, got [0, 0, 0]",
     );
-    fails(
-        "[camera]\nup = [0, 0, 0]\n",
-        2,
-        6,
-        "camera.up: must not be a zero-length vector",
-    );
+    fails("[camera]\nup = [0, 0, 0]\n", 2, 6, "camera.up: must not be a zero-length vector");
     fails(
         "[camera]\nup = [0, 0, 2]\n",
         2,
@@ -507,12 +344,7 @@ fn camera_values() {
         11,
         "camera: the up vector [0, 1, 0] is parallel to the view direction [0, -1, 0]",
     );
-    fails(
-        "[camera]\nfov = 0\n",
-        2,
-        7,
-        "camera.fov: must be between 0 and 180 degrees (exclusive), got 0",
-    );
+    fails("[camera]\nfov = 0\n", 2, 7, "camera.fov: must be between 0 and 180 degrees (exclusive), got 0");
     fails(
         "[camera]\nfov = 180\n",
         2,
@@ -520,34 +352,19 @@ fn camera_values() {
         "camera.fov: must be between 0 and 180 degrees (exclusive), got 180",
     );
     fails("[camera]\nfov = -30\n", 2, 7, "got -30");
-    fails(
-        "[camera]\nwidth = 0\n",
-        2,
-        9,
-        "camera.width: must be between 1 and 16384 pixels, got 0",
-    );
+    fails("[camera]\nwidth = 0\n", 2, 9, "camera.width: must be between 1 and 16384 pixels, got 0");
     fails(
         "[camera]\nheight = 16385\n",
         2,
         10,
         "camera.height: must be between 1 and 16384 pixels, got 16385",
     );
-    fails(
-        "[camera]\nwidth = -5\n",
-        2,
-        9,
-        "camera.width: must be between 1 and 16384 pixels, got -5",
-    );
+    fails("[camera]\nwidth = -5\n", 2, 9, "camera.width: must be between 1 and 16384 pixels, got -5");
 }
 
 #[test]
 fn settings_values() {
-    fails(
-        "[settings]\nmax_depth = -1\n",
-        2,
-        13,
-        "settings.max_depth: must be between 0 and 100, got -1",
-    );
+    fails("[settings]\nmax_depth = -1\n", 2, 13, "settings.max_depth: must be between 0 and 100, got -1");
     fails(
         "[settings]\nmax_depth = 2.5\n",
         2,
@@ -560,12 +377,7 @@ fn settings_values() {
         14,
         "settings.background: every colour channel must be between 0 and 1, got [2, 0, 0]",
     );
-    fails(
-        "[settings]\nmax_distance = 0\n",
-        2,
-        16,
-        "settings.max_distance: must be > 0, got 0",
-    );
+    fails("[settings]\nmax_distance = 0\n", 2, 16, "settings.max_distance: must be > 0, got 0");
 }
 
 #[test]
@@ -593,55 +405,15 @@ fn light_values() {
 #[test]
 fn material_values() {
     let m = |line: &str| format!("[materials.red]\ncolor = [1, 0, 0]\n{line}\n");
-    fails(
-        &m("reflectivity = 1.5"),
-        3,
-        16,
-        "materials.red.reflectivity: must be between 0 and 1, got 1.5",
-    );
-    fails(
-        &m("reflectivity = -0.5"),
-        3,
-        16,
-        "materials.red.reflectivity: must be between 0 and 1, got -0.5",
-    );
-    fails(
-        &m("transparency = -0.1"),
-        3,
-        16,
-        "materials.red.transparency: must be between 0 and 1, got -0.1",
-    );
-    fails(
-        &m("transparency = 2"),
-        3,
-        16,
-        "materials.red.transparency: must be between 0 and 1, got 2",
-    );
+    fails(&m("reflectivity = 1.5"), 3, 16, "materials.red.reflectivity: must be between 0 and 1, got 1.5");
+    fails(&m("reflectivity = -0.5"), 3, 16, "materials.red.reflectivity: must be between 0 and 1, got -0.5");
+    fails(&m("transparency = -0.1"), 3, 16, "materials.red.transparency: must be between 0 and 1, got -0.1");
+    fails(&m("transparency = 2"), 3, 16, "materials.red.transparency: must be between 0 and 1, got 2");
     fails(&m("ior = 0"), 3, 7, "materials.red.ior: must be > 0, got 0");
-    fails(
-        &m("shininess = 0"),
-        3,
-        13,
-        "materials.red.shininess: must be > 0, got 0",
-    );
-    fails(
-        &m("ka = -1"),
-        3,
-        6,
-        "materials.red.ka: must be >= 0, got -1",
-    );
-    fails(
-        &m("kd = -1"),
-        3,
-        6,
-        "materials.red.kd: must be >= 0, got -1",
-    );
-    fails(
-        &m("ks = -1"),
-        3,
-        6,
-        "materials.red.ks: must be >= 0, got -1",
-    );
+    fails(&m("shininess = 0"), 3, 13, "materials.red.shininess: must be > 0, got 0");
+    fails(&m("ka = -1"), 3, 6, "materials.red.ka: must be >= 0, got -1");
+    fails(&m("kd = -1"), 3, 6, "materials.red.kd: must be >= 0, got -1");
+    fails(&m("ks = -1"), 3, 6, "materials.red.ks: must be >= 0, got -1");
     fails(
         "[materials.red]\ncolor = [1, 0, -0.5]\n",
         2,
@@ -675,24 +447,9 @@ fn unknown_material() {
 #[test]
 fn object_values() {
     let sphere = |extra: &str| format!("[[objects]]\ntype = 'sphere'\nradius = 1\n{extra}\n");
-    fails(
-        "[[objects]]\ntype = 'sphere'\nradius = -1\n",
-        3,
-        10,
-        "objects[0].radius: must be > 0, got -1",
-    );
-    fails(
-        "[[objects]]\ntype = 'sphere'\nradius = 0\n",
-        3,
-        10,
-        "objects[0].radius: must be > 0, got 0",
-    );
-    fails(
-        &sphere("scale = 0"),
-        4,
-        9,
-        "objects[0].scale: every scale factor must be > 0, got 0",
-    );
+    fails("[[objects]]\ntype = 'sphere'\nradius = -1\n", 3, 10, "objects[0].radius: must be > 0, got -1");
+    fails("[[objects]]\ntype = 'sphere'\nradius = 0\n", 3, 10, "objects[0].radius: must be > 0, got 0");
+    fails(&sphere("scale = 0"), 4, 9, "objects[0].scale: every scale factor must be > 0, got 0");
     fails(
         &sphere("scale = [1, -1, 1]"),
         4,
@@ -846,12 +603,7 @@ fn csg_and_repeat_values() {
 #[test]
 fn positions_count_characters_and_later_objects() {
     // Non-ASCII text before the value on the same line counts one column per character.
-    fails(
-        "objects = [{ name = \"éé\", type = 'sphere', radius = -1 }]\n",
-        1,
-        53,
-        "objects[0].radius",
-    );
+    fails("objects = [{ name = \"éé\", type = 'sphere', radius = -1 }]\n", 1, 53, "objects[0].radius");
     fails(
         "# ünïcode comment\n[materials.m]\ncolor = [1, 1, 1]\nior = -1 # négatif\n",
         4,
@@ -870,30 +622,22 @@ fn unreadable_file_is_an_io_error() {
     let path = Path::new("/nonexistent/dir/scene.toml");
     let err = load_scene(path).unwrap_err();
     assert!(matches!(err, Error::Io { .. }), "{err:?}");
-    assert!(
-        err.to_string().starts_with("/nonexistent/dir/scene.toml: "),
-        "{err}"
-    );
+    assert!(err.to_string().starts_with("/nonexistent/dir/scene.toml: "), "{err}");
 }
 
 #[test]
 fn no_panic_on_mangled_input() {
-    let text = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("data/scenes/showcase.toml"),
-    )
-    .unwrap();
+    let text =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("data/scenes/showcase.toml"))
+            .unwrap();
     // Every prefix (cut at character boundaries), and every line removed in turn.
     for (i, _) in text.char_indices() {
         let _ = parse_scene(&text[..i], Path::new("cut.toml"));
     }
     let lines: Vec<&str> = text.lines().collect();
     for skip in 0..lines.len() {
-        let mangled: Vec<&str> = lines
-            .iter()
-            .enumerate()
-            .filter(|&(i, _)| i != skip)
-            .map(|(_, l)| *l)
-            .collect();
+        let mangled: Vec<&str> =
+            lines.iter().enumerate().filter(|&(i, _)| i != skip).map(|(_, l)| *l).collect();
         let _ = parse_scene(&mangled.join("\n"), Path::new("cut.toml"));
     }
     // Deeply nested CSG up to (and past) the TOML parser's nesting limit.
@@ -1021,29 +765,17 @@ fn full_scene_round_trips() {
     assert!((s.camera.fov_y_deg - 53.130_104).abs() < 1e-4);
     assert_eq!(
         s.settings,
-        Settings {
-            max_depth: 3,
-            background: Vec3::new(0.1, 0.2, 0.3),
-            max_distance: 1.0e5,
-        }
+        Settings { max_depth: 3, background: Vec3::new(0.1, 0.2, 0.3), max_distance: 1.0e5 }
     );
 
     assert_eq!(s.lights.len(), 3);
     assert_eq!(s.lights[0], Light::Ambient { intensity: 0.25 });
     assert_eq!(
         s.lights[1],
-        Light::Point {
-            position: Vec3::new(0.0, 5.0, 0.0),
-            intensity: 1.5,
-            color: Vec3::ONE,
-        }
+        Light::Point { position: Vec3::new(0.0, 5.0, 0.0), intensity: 1.5, color: Vec3::ONE }
     );
     match s.lights[2] {
-        Light::Directional {
-            direction,
-            intensity,
-            color,
-        } => {
+        Light::Directional { direction, intensity, color } => {
             assert!(close(direction, Vec3::new(0.0, -0.6, 0.8)), "{direction}");
             assert_eq!(intensity, 0.5);
             assert_eq!(color, Vec3::new(1.0, 0.5, 0.25));
@@ -1053,14 +785,7 @@ fn full_scene_round_trips() {
 
     let names: Vec<&str> = s.materials.iter().map(|m| m.name.as_str()).collect();
     assert_eq!(names, ["zeta", "alpha", "default"]);
-    assert_eq!(
-        s.materials[0],
-        Material {
-            name: "zeta".into(),
-            color: Vec3::X,
-            ..Material::default()
-        }
-    );
+    assert_eq!(s.materials[0], Material { name: "zeta".into(), color: Vec3::X, ..Material::default() });
     assert_eq!(
         s.materials[1],
         Material {
@@ -1082,17 +807,8 @@ fn full_scene_round_trips() {
 
     // objects[0]: uniform scale from a number, the default material, positional label.
     let o = &s.objects[0];
-    assert_eq!(
-        o.kind,
-        ObjectKind::Primitive(Primitive::Sphere { radius: 2.0 })
-    );
-    assert_eq!(
-        o.transform,
-        TransformDesc {
-            scale: Vec3::splat(3.0),
-            ..Default::default()
-        }
-    );
+    assert_eq!(o.kind, ObjectKind::Primitive(Primitive::Sphere { radius: 2.0 }));
+    assert_eq!(o.transform, TransformDesc { scale: Vec3::splat(3.0), ..Default::default() });
     assert_eq!(o.material, default);
     assert_eq!(o.label, "objects[0]");
 
@@ -1108,133 +824,69 @@ fn full_scene_round_trips() {
             scale: Vec3::new(1.0, 2.0, 0.5),
         }
     );
-    let ObjectKind::Csg { op, children } = &o.kind else {
-        panic!("{:?}", o.kind)
-    };
+    let ObjectKind::Csg { op, children } = &o.kind else { panic!("{:?}", o.kind) };
     assert_eq!(*op, CsgOp::Union);
     assert_eq!(children.len(), 3);
-    assert_eq!(
-        children[0].kind,
-        ObjectKind::Primitive(Primitive::Box {
-            half: Vec3::new(1.0, 2.0, 3.0)
-        })
-    );
+    assert_eq!(children[0].kind, ObjectKind::Primitive(Primitive::Box { half: Vec3::new(1.0, 2.0, 3.0) }));
     assert_eq!(children[0].material, alpha);
     assert_eq!(children[0].label, "objects[1].children[0]");
     assert_eq!(children[0].transform, TransformDesc::default());
     assert_eq!(
         children[1].kind,
-        ObjectKind::Primitive(Primitive::Cylinder {
-            radius: 1.0,
-            half_height: 2.0
-        })
+        ObjectKind::Primitive(Primitive::Cylinder { radius: 1.0, half_height: 2.0 })
     );
     assert_eq!(children[1].material, zeta);
-    let ObjectKind::Csg {
-        op,
-        children: grandchildren,
-    } = &children[2].kind
-    else {
+    let ObjectKind::Csg { op, children: grandchildren } = &children[2].kind else {
         panic!("{:?}", children[2].kind)
     };
     assert_eq!(*op, CsgOp::SmoothSubtraction { k: 0.5 });
     assert_eq!(children[2].material, alpha);
     assert_eq!(
         grandchildren[0].kind,
-        ObjectKind::Primitive(Primitive::Cone {
-            radius_bottom: 1.0,
-            radius_top: 0.0,
-            half_height: 1.0
-        })
+        ObjectKind::Primitive(Primitive::Cone { radius_bottom: 1.0, radius_top: 0.0, half_height: 1.0 })
     );
     assert_eq!(grandchildren[0].material, alpha);
     assert_eq!(grandchildren[0].label, "objects[1].children[2].children[0]");
-    assert_eq!(
-        grandchildren[1].kind,
-        ObjectKind::Primitive(Primitive::Torus {
-            major: 2.0,
-            minor: 3.0
-        })
-    );
+    assert_eq!(grandchildren[1].kind, ObjectKind::Primitive(Primitive::Torus { major: 2.0, minor: 3.0 }));
     assert_eq!(grandchildren[1].material, zeta);
 
     // objects[2]: finite repetition of a plane given by a point; normal normalised.
     let o = &s.objects[2];
-    let ObjectKind::Repeat {
-        period,
-        count,
-        child,
-    } = &o.kind
-    else {
-        panic!("{:?}", o.kind)
-    };
+    let ObjectKind::Repeat { period, count, child } = &o.kind else { panic!("{:?}", o.kind) };
     assert_eq!(*period, Vec3::new(2.0, 0.0, 0.0));
     assert_eq!(*count, Some(UVec3::new(3, 1, 1)));
-    assert_eq!(
-        child.kind,
-        ObjectKind::Primitive(Primitive::Plane {
-            normal: Vec3::Y,
-            offset: 2.0
-        })
-    );
+    assert_eq!(child.kind, ObjectKind::Primitive(Primitive::Plane { normal: Vec3::Y, offset: 2.0 }));
     assert_eq!(child.material, zeta);
     assert_eq!(child.label, "objects[2].child");
-    assert_eq!(
-        o.material, zeta,
-        "a repeat without material takes its child's"
-    );
+    assert_eq!(o.material, zeta, "a repeat without material takes its child's");
 
     // objects[3]: no material of its own: the first child's.
     let o = &s.objects[3];
-    let ObjectKind::Csg { op, children } = &o.kind else {
-        panic!("{:?}", o.kind)
-    };
+    let ObjectKind::Csg { op, children } = &o.kind else { panic!("{:?}", o.kind) };
     assert_eq!(*op, CsgOp::Intersection);
     assert_eq!(o.material, alpha);
     assert_eq!(
         children[0].kind,
-        ObjectKind::Primitive(Primitive::Ellipsoid {
-            radii: Vec3::new(1.0, 2.0, 3.0)
-        })
+        ObjectKind::Primitive(Primitive::Ellipsoid { radii: Vec3::new(1.0, 2.0, 3.0) })
     );
     assert_eq!(
         children[1].kind,
-        ObjectKind::Primitive(Primitive::Capsule {
-            a: Vec3::ZERO,
-            b: Vec3::Y,
-            radius: 0.5
-        })
+        ObjectKind::Primitive(Primitive::Capsule { a: Vec3::ZERO, b: Vec3::Y, radius: 0.5 })
     );
     assert_eq!(
         children[2].kind,
-        ObjectKind::Primitive(Primitive::Triangle {
-            a: Vec3::ZERO,
-            b: Vec3::X,
-            c: Vec3::Y
-        })
+        ObjectKind::Primitive(Primitive::Triangle { a: Vec3::ZERO, b: Vec3::X, c: Vec3::Y })
     );
     assert_eq!(children[2].material, zeta);
 
     // objects[4]: the plane's defaults; a cone with its apex at the bottom.
-    let ObjectKind::Csg { op, children } = &s.objects[4].kind else {
-        panic!()
-    };
+    let ObjectKind::Csg { op, children } = &s.objects[4].kind else { panic!() };
     assert_eq!(*op, CsgOp::SmoothIntersection { k: 0.25 });
-    assert_eq!(
-        children[0].kind,
-        ObjectKind::Primitive(Primitive::Plane {
-            normal: Vec3::Y,
-            offset: 0.0
-        })
-    );
+    assert_eq!(children[0].kind, ObjectKind::Primitive(Primitive::Plane { normal: Vec3::Y, offset: 0.0 }));
     assert_eq!(children[0].material, zeta);
     assert_eq!(
         children[1].kind,
-        ObjectKind::Primitive(Primitive::Cone {
-            radius_bottom: 0.0,
-            radius_top: 2.0,
-            half_height: 0.5
-        })
+        ObjectKind::Primitive(Primitive::Cone { radius_bottom: 0.0, radius_top: 2.0, half_height: 0.5 })
     );
 }
 
@@ -1280,14 +932,11 @@ fn camera_direction_and_up() {
 
 #[test]
 fn thesis_scene_values() {
-    let s = load_scene(&Path::new(env!("CARGO_MANIFEST_DIR")).join("data/scenes/thesis_rt.toml"))
-        .unwrap();
+    let s = load_scene(&Path::new(env!("CARGO_MANIFEST_DIR")).join("data/scenes/thesis_rt.toml")).unwrap();
     assert_eq!(s.camera, Camera::default());
     assert_eq!(s.settings.max_depth, 3);
     assert_eq!(s.objects.len(), 4);
-    let Light::Directional { direction, .. } = s.lights[2] else {
-        panic!()
-    };
+    let Light::Directional { direction, .. } = s.lights[2] else { panic!() };
     assert!(close(direction, -Vec3::new(1.0, 4.0, 4.0).normalize()));
 }
 
@@ -1323,8 +972,5 @@ fn mesh_objects_load_relative_to_the_scene_and_fail_cleanly() {
     assert!(err.contains("top-level"), "{err}");
     std::fs::write(&scene_path, text.replace("smooth", "glossy")).unwrap();
     let err = load_scene(&scene_path).unwrap_err().to_string();
-    assert!(
-        err.contains("s.toml:4:") && err.contains("shading"),
-        "{err}"
-    );
+    assert!(err.contains("s.toml:4:") && err.contains("shading"), "{err}");
 }

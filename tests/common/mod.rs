@@ -11,11 +11,7 @@ use sdfmesh::transform::TransformDesc;
 pub fn object(prim: Primitive, translate: Vec3, rotate_deg: Vec3, scale: Vec3) -> Object {
     Object {
         kind: ObjectKind::Primitive(prim),
-        transform: TransformDesc {
-            translate,
-            rotate_deg,
-            scale,
-        },
+        transform: TransformDesc { translate, rotate_deg, scale },
         material: 1,
         label: prim.kind_name().into(),
     }
@@ -33,18 +29,10 @@ pub fn lit_scene(objects: Vec<Object>, size: u32) -> Scene {
             width: size,
             height: size,
         },
-        settings: Settings {
-            max_depth: 2,
-            background: Vec3::new(0.1, 0.1, 0.15),
-            max_distance: 1e5,
-        },
+        settings: Settings { max_depth: 2, background: Vec3::new(0.1, 0.1, 0.15), max_distance: 1e5 },
         lights: vec![
             Light::Ambient { intensity: 0.2 },
-            Light::Point {
-                position: Vec3::new(3.0, 4.0, -4.0),
-                intensity: 0.6,
-                color: Vec3::ONE,
-            },
+            Light::Point { position: Vec3::new(3.0, 4.0, -4.0), intensity: 0.6, color: Vec3::ONE },
             Light::Directional {
                 direction: Vec3::new(-1.0, -4.0, 2.0).normalize(),
                 intensity: 0.3,
@@ -71,11 +59,7 @@ pub fn fraction_within(a: &RgbImage, b: &RgbImage, tol: u8) -> f64 {
     let ok = a
         .pixels()
         .zip(b.pixels())
-        .filter(|(p, q)| {
-            p.0.iter()
-                .zip(q.0.iter())
-                .all(|(x, y)| x.abs_diff(*y) <= tol)
-        })
+        .filter(|(p, q)| p.0.iter().zip(q.0.iter()).all(|(x, y)| x.abs_diff(*y) <= tol))
         .count();
     ok as f64 / (a.width() * a.height()) as f64
 }
@@ -105,6 +89,5 @@ pub fn dump(name: &str, images: &[&RgbImage]) {
         out.put_pixel(x + images.len() as u32 * w, y, image::Rgb([v, v, v]));
     }
     std::fs::create_dir_all(&dir).unwrap();
-    out.save(std::path::Path::new(&dir).join(format!("{name}.png")))
-        .unwrap();
+    out.save(std::path::Path::new(&dir).join(format!("{name}.png"))).unwrap();
 }
