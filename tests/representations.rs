@@ -125,3 +125,28 @@ fn finely_tessellated_sphere_renders_like_the_closed_form_sphere() {
     }
     assert!(previous >= 0.99, "only {:.2}% of pixels agree at resolution 512", previous * 100.0);
 }
+
+#[test]
+fn top_level_bvh_keeps_per_ray_work_logarithmic_in_the_object_count() {
+    // n x n spheres on a grid in the xz plane, seen from above: work per ray (BVH nodes
+    // plus intersection tests) must grow far slower than n^2.
+    let work = |n: i32| {
+        let objects = (0..n * n)
+            .map(|i| {
+                let at = Vec3::new((i % n - n / 2) as f32 * 2.0, 0.0, (i / n - n / 2) as f32 * 2.0);
+                object(Primitive::Sphere { radius: 0.8 }, at, Vec3::ZERO, Vec3::ONE)
+            })
+            .collect();
+        let mut scene = lit_scene(objects, 64);
+        scene.camera.position = Vec3::new(0.0, 3.0 * n as f32, -0.5);
+        scene.camera.forward = -Vec3::Y;
+        scene.camera.up = Vec3::Z;
+        let r = render_scene(&scene, Representation::Analytic { march: MarchParams::default() });
+        let s = r.frame.stats;
+        (s.bvh_nodes + s.prim_tests) as f64 / s.rays as f64
+    };
+    let (small, large) = (work(4), work(32));
+    eprintln!("work per ray: {small:.2} with 16 spheres, {large:.2} with 1024");
+    // 64x the objects; a linear scan would cost ~64x per ray.
+    assert!(large < 4.0 * small, "work per ray {small:.1} with 16 objects, {large:.1} with 1024");
+}

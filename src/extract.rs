@@ -1,0 +1,1 @@
+//! Extraction of triangle meshes from signed distance functions (in progress).

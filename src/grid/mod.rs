@@ -1,0 +1,1 @@
+//! Discrete signed distance grids (in progress).
