@@ -76,9 +76,13 @@ pub struct Hit {
     pub t: f32,
     /// Hit point, world space.
     pub point: Vec3,
-    /// Unit surface normal pointing out of the solid (for open surfaces such as a
-    /// triangle, an arbitrary but consistent side). The tracer flips it to face the ray.
+    /// Unit geometric surface normal pointing out of the solid (for open surfaces such as a
+    /// triangle, an arbitrary but consistent side). Decides which side the ray is on and
+    /// where spawned rays start; the tracer flips it to face the ray.
     pub normal: Vec3,
+    /// Unit normal used for shading: equal to `normal` except for smoothly shaded meshes,
+    /// whose interpolated vertex normals may lean away from the facet's.
+    pub shading_normal: Vec3,
     /// Material of the surface at the hit.
     pub material: MaterialId,
     /// Absolute bound on the error of `point` (scene units). Spawned rays start at least

@@ -138,7 +138,7 @@ impl Geometry for MeshGeometry {
         let (i, h) = best?;
         let [a, b, c] = self.corners(i);
         let geometric = (b - a).cross(c - a);
-        let mut n = geometric;
+        let mut shading = geometric;
         if let Some(normals) = &self.normals {
             let t = self.triangles[i as usize];
             let s = normals[t[0] as usize] * h.bary[0]
@@ -146,7 +146,7 @@ impl Geometry for MeshGeometry {
                 + normals[t[2] as usize] * h.bary[2];
             // Keep the side the geometric normal is on, so inside/outside stays consistent.
             if s.dot(geometric) > 0.0 {
-                n = s;
+                shading = s;
             }
         }
         let point = ray.at(h.t);
@@ -155,7 +155,8 @@ impl Geometry for MeshGeometry {
         Some(Hit {
             t: h.t,
             point,
-            normal: self.transform.normal_to_world(n),
+            normal: self.transform.normal_to_world(geometric),
+            shading_normal: self.transform.normal_to_world(shading),
             material: self.material,
             error: 32.0 * f32::EPSILON * m.max(1e-3),
         })

@@ -88,6 +88,7 @@ impl Geometry for AnalyticObject {
             t,
             point,
             normal: self.transform.normal_to_world(n),
+            shading_normal: self.transform.normal_to_world(n),
             material: self.material,
             error: f32_error(max_abs(point).max(max_abs(ray.origin))),
         })
@@ -183,6 +184,7 @@ impl Geometry for SdfObject {
             t: t as f32,
             point,
             normal,
+            shading_normal: normal,
             material,
             error: 4.0 * eps as f32 + f32_error(max_abs(point)),
         })

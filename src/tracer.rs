@@ -51,11 +51,15 @@ impl<'a> Tracer<'a> {
 
     fn shade(&self, ray: &Ray, hit: &Hit, depth: u32, weight: f32, stats: &mut RayStats) -> Vec3 {
         let m: &Material = &self.scene.materials[hit.material as usize];
-        // Face the normal towards the viewer; remember whether we are leaving the solid.
+        // Face the geometric normal towards the viewer; remember whether we are leaving the
+        // solid. Spawned rays start off the surface along it. Shading uses the shading
+        // normal turned to the same side.
         let leaving = hit.normal.dot(ray.dir) > 0.0;
-        let n = if leaving { -hit.normal } else { hit.normal };
+        let face = if leaving { -hit.normal } else { hit.normal };
+        let n = if leaving { -hit.shading_normal } else { hit.shading_normal };
+        let n = if n.dot(face) > 0.0 { n } else { face };
         let offset = spawn_offset(hit);
-        let above = hit.point + n * offset;
+        let above = hit.point + face * offset;
         let view = -ray.dir;
 
         let mut local = m.ka * self.ambient * m.color;
@@ -96,7 +100,12 @@ impl<'a> Tracer<'a> {
         if depth == 0 || (m.reflectivity <= 0.0 && m.transparency <= 0.0) {
             return local;
         }
-        let refl_dir = ray.dir - 2.0 * ray.dir.dot(n) * n;
+        let mut refl_dir = ray.dir - 2.0 * ray.dir.dot(n) * n;
+        if refl_dir.dot(face) <= 0.0 {
+            // A shading normal leaning far from the facet would send the mirror ray into the
+            // surface; mirror about the facet instead.
+            refl_dir = ray.dir - 2.0 * ray.dir.dot(face) * face;
+        }
         let reflected = |w: f32, stats: &mut RayStats| {
             if w < MIN_CONTRIBUTION {
                 Vec3::ZERO
@@ -117,7 +126,7 @@ impl<'a> Tracer<'a> {
             let eta = if leaving { m.ior } else { 1.0 / m.ior };
             match refract(ray.dir, n, eta) {
                 Some(dir) => {
-                    let below = hit.point - n * offset;
+                    let below = hit.point - face * offset;
                     self.trace_rec(&Ray::new(below, dir), depth - 1, w, stats)
                 }
                 // Total internal reflection: all of it is reflected.
