@@ -5,8 +5,8 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use sdfmesh::commands::{self, Overrides};
-use sdfmesh::repr::Representation;
 use sdfmesh::march::MarchParams;
+use sdfmesh::repr::Representation;
 use sdfmesh::shape::Shading;
 
 #[derive(Parser)]
@@ -149,8 +149,9 @@ fn main() -> ExitCode {
             commands::render_command(&opts).map(|r| print!("{}", r.text))
         }
         Command::Gallery { scenes, output, mesh, settings, march } => {
-            let reprs: Vec<Representation> =
-                [Repr::Analytic, Repr::Sdf, Repr::Mesh].map(|r| representation(r, &mesh, march.params())).into();
+            let reprs: Vec<Representation> = [Repr::Analytic, Repr::Sdf, Repr::Mesh]
+                .map(|r| representation(r, &mesh, march.params()))
+                .into();
             commands::gallery_command(&scenes, &output, &reprs, settings.overrides()).map(|t| print!("{t}"))
         }
     };
