@@ -34,12 +34,15 @@
 //!   the plane, grown by a relative margin of `1e-4`.
 //!
 //! Flat and ruled regions (caps, cylinder and cone sides, the capsule's body) carry no
-//! geometric error, so their triangle count is a matter of shape: long slivers cost a
-//! BVH many overlapping boxes (a 1024-segment cylinder with fan caps and one side band
-//! costs 175 triangle tests per ray down onto a cap). [`tessellate`] therefore splits
-//! them so that no triangle there is more than [`DEFAULT_MAX_ASPECT`] times longer than
-//! the longest ring segment; [`tessellate_with`] takes the bound (`f32::INFINITY` gives
-//! the minimal mesh: one side band and fan caps).
+//! geometric error, so how they are split is a matter of triangle shape only, and long
+//! slivers cost a BVH dearly: measured with [`crate::mesh_geometry::MeshGeometry`] on a
+//! unit cylinder at resolution 1024 tilted by (30, 45, 0) degrees, fan caps and one side band (4096 triangles) cost
+//! 160-340 triangle tests per ray, against 4-5 when no triangle there is longer than 4
+//! ring segments (252k triangles) and 3.3 for the icosphere (655k). [`tessellate`]
+//! therefore splits those regions so that their triangles are at most
+//! [`DEFAULT_MAX_ASPECT`] ring segments long (and a side into at most `resolution` bands,
+//! so that a needle does not become millions of rings); [`tessellate_with`] takes the
+//! bound, and `f32::INFINITY` gives the minimal mesh (one side band, fan caps).
 //!
 //! Normals: smooth primitives (sphere, ellipsoid, torus, capsule) get per-vertex normals
 //! from the exact surface normal. Primitives with sharp edges (box, cylinder, cone) get
@@ -93,45 +96,22 @@ pub fn tessellate_with(
     clip: Option<&Aabb>,
 ) -> TriangleMesh {
     let n = resolution.max(MIN_RESOLUTION);
-    let aspect = if max_aspect >= 1.0 {
-        max_aspect as f64
-    } else {
-        1.0
-    };
+    let aspect = if max_aspect >= 1.0 { max_aspect as f64 } else { 1.0 };
     match *prim {
         Primitive::Sphere { radius } => ellipsoid(DVec3::splat(radius as f64), n),
         Primitive::Ellipsoid { radii } => ellipsoid(radii.as_dvec3(), n),
         Primitive::Box { half } => box_mesh(half),
-        Primitive::Cylinder {
-            radius,
-            half_height,
-        } => cone(
-            radius as f64,
-            radius as f64,
-            half_height as f64,
-            n,
-            aspect,
-        ),
-        Primitive::Cone {
-            radius_bottom,
-            radius_top,
-            half_height,
-        } => cone(
-            radius_bottom as f64,
-            radius_top as f64,
-            half_height as f64,
-            n,
-            aspect,
-        ),
-        Primitive::Torus { major, minor } => torus(major as f64, minor as f64, n),
-        Primitive::Capsule { a, b, radius } => {
-            capsule(a.as_dvec3(), b.as_dvec3(), radius as f64, n, aspect)
+        Primitive::Cylinder { radius, half_height } => {
+            cone(radius as f64, radius as f64, half_height as f64, n, aspect)
         }
-        Primitive::Triangle { a, b, c } => TriangleMesh {
-            positions: vec![a, b, c],
-            triangles: vec![[0, 1, 2]],
-            normals: None,
-        },
+        Primitive::Cone { radius_bottom, radius_top, half_height } => {
+            cone(radius_bottom as f64, radius_top as f64, half_height as f64, n, aspect)
+        }
+        Primitive::Torus { major, minor } => torus(major as f64, minor as f64, n),
+        Primitive::Capsule { a, b, radius } => capsule(a.as_dvec3(), b.as_dvec3(), radius as f64, n, aspect),
+        Primitive::Triangle { a, b, c } => {
+            TriangleMesh { positions: vec![a, b, c], triangles: vec![[0, 1, 2]], normals: None }
+        }
         Primitive::Plane { normal, offset } => match clip {
             Some(clip) => plane_quad(normal, offset, clip),
             None => TriangleMesh::default(),
@@ -146,11 +126,7 @@ pub fn tessellate_with(
 ///
 /// `None` for CSG, repetition and mesh objects (they need SDF-to-mesh extraction), and for
 /// a plane without a usable `clip`.
-pub fn tessellate_object(
-    object: &Object,
-    resolution: u32,
-    clip: Option<&Aabb>,
-) -> Option<TriangleMesh> {
+pub fn tessellate_object(object: &Object, resolution: u32, clip: Option<&Aabb>) -> Option<TriangleMesh> {
     tessellate_object_with(object, resolution, DEFAULT_MAX_ASPECT, clip)
 }
 
@@ -165,6 +141,9 @@ pub fn tessellate_object_with(
         return None;
     };
     let t = object.compiled_transform();
+    if t.identity {
+        return Some(tessellate_with(prim, resolution, max_aspect, clip)).filter(|m| !m.triangles.is_empty());
+    }
     // The local box around the parent-frame box's corners.
     let local_clip = clip.map(|c| {
         let mut b = Aabb::empty();
@@ -221,10 +200,7 @@ impl Builder {
 
     fn push(&mut self, p: DVec3, n: DVec3) -> u32 {
         let i = self.positions.len();
-        assert!(
-            i < u32::MAX as usize,
-            "tessellation has more vertices than u32 indices can address"
-        );
+        assert!(i < u32::MAX as usize, "tessellation has more vertices than u32 indices can address");
         self.positions.push(p);
         self.normals.push(n);
         i as u32
@@ -235,12 +211,7 @@ impl Builder {
         TriangleMesh {
             positions: self.positions.iter().map(|p| p.as_vec3()).collect(),
             triangles: self.triangles,
-            normals: smooth.then(|| {
-                self.normals
-                    .iter()
-                    .map(|n| n.normalize().as_vec3())
-                    .collect()
-            }),
+            normals: smooth.then(|| self.normals.iter().map(|n| n.normalize().as_vec3()).collect()),
         }
     }
 }
@@ -262,12 +233,7 @@ struct ProfilePoint {
 
 impl ProfilePoint {
     fn new(rho: f64, h: f64, normal: DVec2, count: u32) -> Self {
-        ProfilePoint {
-            rho,
-            h,
-            normal,
-            count: count.max(3),
-        }
+        ProfilePoint { rho, h, normal, count: count.max(3) }
     }
 
     fn is_pole(&self) -> bool {
@@ -284,22 +250,12 @@ struct Frame {
 }
 
 impl Frame {
-    const Y: Frame = Frame {
-        origin: DVec3::ZERO,
-        axis: DVec3::Y,
-        e1: DVec3::X,
-        e2: DVec3::Z,
-    };
+    const Y: Frame = Frame { origin: DVec3::ZERO, axis: DVec3::Y, e1: DVec3::X, e2: DVec3::Z };
 
     /// A frame around unit `axis` through `origin`.
     fn along(origin: DVec3, axis: DVec3) -> Frame {
         let e1 = axis.any_orthonormal_vector();
-        Frame {
-            origin,
-            axis,
-            e1,
-            e2: e1.cross(axis),
-        }
+        Frame { origin, axis, e1, e2: e1.cross(axis) }
     }
 }
 
@@ -331,10 +287,7 @@ fn revolve(b: &mut Builder, frame: &Frame, profile: &[ProfilePoint], closed: boo
         for j in 0..p.count {
             let (s, c) = (TAU * j as f64 / p.count as f64).sin_cos();
             let radial = frame.e1 * c + frame.e2 * s;
-            b.push(
-                centre + radial * p.rho,
-                radial * p.normal.x + frame.axis * p.normal.y,
-            );
+            b.push(centre + radial * p.rho, radial * p.normal.x + frame.axis * p.normal.y);
         }
     }
     let bands = if closed { profile.len() } else { last };
@@ -346,15 +299,13 @@ fn revolve(b: &mut Builder, frame: &Frame, profile: &[ProfilePoint], closed: boo
             (true, false) => {
                 let n = q.count;
                 for j in 0..n {
-                    b.triangles
-                        .push([first[i], first[k] + j, first[k] + (j + 1) % n]);
+                    b.triangles.push([first[i], first[k] + j, first[k] + (j + 1) % n]);
                 }
             }
             (false, true) => {
                 let n = p.count;
                 for j in 0..n {
-                    b.triangles
-                        .push([first[i] + j, first[k], first[i] + (j + 1) % n]);
+                    b.triangles.push([first[i] + j, first[k], first[i] + (j + 1) % n]);
                 }
             }
             (false, false) => zip_rings(b, (first[i], p.count), (first[k], q.count)),
@@ -382,10 +333,10 @@ fn zip_rings(b: &mut Builder, lo: (u32, u32), hi: (u32, u32)) {
     }
 }
 
-/// Number of equal bands of at most `spacing` across `length` (at least 1).
-fn bands(length: f64, spacing: f64) -> u32 {
+/// Number of equal bands of at most `spacing` across `length`, from 1 to `max`.
+fn bands(length: f64, spacing: f64, max: u32) -> u32 {
     let k = (length / spacing).ceil();
-    if k >= 1.0 { k.min(1e7) as u32 } else { 1 }
+    if k >= 1.0 { k.min(max.max(1) as f64) as u32 } else { 1 }
 }
 
 /// Pushes the rings of a flat disc of `radius` at height `h` whose rim ring has
@@ -393,23 +344,12 @@ fn bands(length: f64, spacing: f64) -> u32 {
 /// pole and ending with the rim ring) or inwards (starting after the rim ring, which the
 /// caller pushed, and ending with the centre pole). Rings are `aspect` rim segments
 /// apart at most, with vertex counts proportional to their radius.
-fn disc(
-    profile: &mut Vec<ProfilePoint>,
-    radius: f64,
-    h: f64,
-    rim_count: u32,
-    aspect: f64,
-    outward: bool,
-) {
+fn disc(profile: &mut Vec<ProfilePoint>, radius: f64, h: f64, rim_count: u32, aspect: f64, outward: bool) {
     let normal = DVec2::new(0.0, if outward { -1.0 } else { 1.0 });
-    let k = bands(radius, aspect * TAU * radius / rim_count as f64);
+    let k = bands(radius, aspect * TAU * radius / rim_count as f64, rim_count);
     let ring = |i: u32| {
         let count = (rim_count as u64 * i as u64).div_ceil(k as u64) as u32;
-        let rho = if i == k {
-            radius
-        } else {
-            radius * i as f64 / k as f64
-        };
+        let rho = if i == k { radius } else { radius * i as f64 / k as f64 };
         ProfilePoint::new(rho, h, normal, count)
     };
     if outward {
@@ -422,9 +362,10 @@ fn disc(
 }
 
 /// Pushes the rings strictly between `from` and `to` (as (rho, h)) on the straight
-/// profile segment joining them, at most `spacing` apart, all with `count` vertices.
+/// profile segment joining them, at most `spacing` apart but at most `count` bands (so a
+/// needle-thin side is not split into millions of rings), all with `count` vertices.
 fn ruled(profile: &mut Vec<ProfilePoint>, from: DVec2, to: DVec2, spacing: f64, count: u32) {
-    let k = bands((to - from).length(), spacing);
+    let k = bands((to - from).length(), spacing, count);
     let d = to - from;
     let normal = DVec2::new(d.y, -d.x).normalize();
     for i in 1..k {
@@ -446,23 +387,14 @@ fn cone(r0: f64, r1: f64, h: f64, n: u32, aspect: f64) -> TriangleMesh {
         profile.push(ProfilePoint::new(0.0, -h, DVec2::NEG_Y, 0));
     }
     let side = DVec2::new(2.0 * h, r0 - r1).normalize();
-    ruled(
-        &mut profile,
-        DVec2::new(r0, -h),
-        DVec2::new(r1, h),
-        spacing,
-        n,
-    );
+    ruled(&mut profile, DVec2::new(r0, -h), DVec2::new(r1, h), spacing, n);
     if r1 > 0.0 {
         profile.push(ProfilePoint::new(r1, h, side, n));
         disc(&mut profile, r1, h, n, aspect, false);
     } else {
         profile.push(ProfilePoint::new(0.0, h, DVec2::Y, 0));
     }
-    let rings: usize = profile
-        .iter()
-        .map(|p| if p.is_pole() { 1 } else { p.count as usize })
-        .sum();
+    let rings: usize = profile.iter().map(|p| if p.is_pole() { 1 } else { p.count as usize }).sum();
     let mut b = Builder::with_capacity(rings, 2 * rings);
     revolve(&mut b, &Frame::Y, &profile, false);
     b.finish(false)
@@ -529,15 +461,8 @@ fn hemisphere(profile: &mut Vec<ProfilePoint>, radius: f64, h: f64, n: u32, lowe
 fn capsule(a: DVec3, b: DVec3, radius: f64, n: u32, aspect: f64) -> TriangleMesh {
     let d = b - a;
     let len = d.length();
-    let frame = if len > 0.0 {
-        Frame::along(a, d / len)
-    } else {
-        Frame::Y
-    };
-    let frame = Frame {
-        origin: a,
-        ..frame
-    };
+    let frame = if len > 0.0 { Frame::along(a, d / len) } else { Frame::Y };
+    let frame = Frame { origin: a, ..frame };
     let mut profile = Vec::new();
     hemisphere(&mut profile, radius, 0.0, n, true);
     if len > 0.0 {
@@ -635,11 +560,7 @@ fn icosphere(n: u32) -> Builder {
         }
     }
     let on_edge = |u: usize, v: usize, k: usize| -> u32 {
-        if u < v {
-            edge_start[u][v] + (k - 1) as u32
-        } else {
-            edge_start[v][u] + (f - k - 1) as u32
-        }
+        if u < v { edge_start[u][v] + (k - 1) as u32 } else { edge_start[v][u] + (f - k - 1) as u32 }
     };
     for face in &faces {
         let [p, q, r] = face.map(|i| corners[i]);
@@ -669,8 +590,7 @@ fn icosphere(n: u32) -> Builder {
             for i in 0..f - j {
                 b.triangles.push([index(i, j), index(i + 1, j), index(i, j + 1)]);
                 if i + j + 1 < f {
-                    b.triangles
-                        .push([index(i + 1, j), index(i + 1, j + 1), index(i, j + 1)]);
+                    b.triangles.push([index(i + 1, j), index(i + 1, j + 1), index(i, j + 1)]);
                 }
             }
         }
@@ -712,20 +632,13 @@ fn box_mesh(half: Vec3) -> TriangleMesh {
             triangles.push([q[0], q[2], q[3]]);
         }
     }
-    TriangleMesh {
-        positions,
-        triangles,
-        normals: None,
-    }
+    TriangleMesh { positions, triangles, normals: None }
 }
 
 /// The quad of the plane `normal . p = offset` that covers `clip`'s projection onto it.
 fn plane_quad(normal: Vec3, offset: f32, clip: &Aabb) -> TriangleMesh {
     let n = normal.as_dvec3().normalize();
-    let (lo, hi) = (
-        Vec3::from(clip.min).as_dvec3(),
-        Vec3::from(clip.max).as_dvec3(),
-    );
+    let (lo, hi) = (Vec3::from(clip.min).as_dvec3(), Vec3::from(clip.max).as_dvec3());
     if !(n.is_finite() && lo.is_finite() && hi.is_finite() && lo.cmple(hi).all()) {
         return TriangleMesh::default();
     }
@@ -750,66 +663,98 @@ fn plane_quad(normal: Vec3, offset: f32, clip: &Aabb) -> TriangleMesh {
     let origin = n * offset as f64;
     let corner = |u: f64, v: f64| (origin + t1 * u + t2 * v).as_vec3();
     TriangleMesh {
-        positions: vec![
-            corner(u0, v0),
-            corner(u1, v0),
-            corner(u1, v1),
-            corner(u0, v1),
-        ],
+        positions: vec![corner(u0, v0), corner(u1, v0), corner(u1, v1), corner(u0, v1)],
         triangles: vec![[0, 1, 2], [0, 2, 3]],
         normals: None,
     }
 }
 
 #[cfg(test)]
-mod proto {
+mod tests {
     use super::*;
-    use crate::geometry::{Geometry, Ray, RayStats};
-    use crate::mesh_geometry::{MeshGeometry, Shading};
-    use crate::transform::{Transform, TransformDesc};
 
     #[test]
-    #[ignore]
-    fn aspect_bvh_cost() {
-        let prims = [
-            Primitive::Sphere { radius: 1.0 },
-            Primitive::Cylinder { radius: 1.0, half_height: 1.0 },
-            Primitive::Cone { radius_bottom: 1.0, radius_top: 0.0, half_height: 1.0 },
-            Primitive::Capsule { a: Vec3::new(0.0, -1.0, 0.0), b: Vec3::new(0.0, 1.0, 0.0), radius: 0.5 },
-            Primitive::Torus { major: 1.0, minor: 0.3 },
-        ];
-        for prim in prims {
-            for res in [256u32, 1024] {
-                for rot in [Vec3::ZERO, Vec3::new(30.0, 45.0, 0.0)] {
-                    let aspects: &[f32] = if matches!(prim, Primitive::Sphere { .. } | Primitive::Torus { .. }) { &[4.0] } else { &[1.0, 2.0, 4.0, 8.0, f32::INFINITY] };
-                    for &a in aspects {
-                        let obj = Object { kind: ObjectKind::Primitive(prim), transform: TransformDesc { rotate_deg: rot, ..Default::default() }, material: 0, label: String::new() };
-                        let t = obj.compiled_transform();
-                        let m = tessellate_object_with(&obj, res, a, None).unwrap();
-                        assert!(m.is_closed());
-                        let tris = m.triangles.len();
-                        let g = MeshGeometry::new(m, Shading::Flat, Transform::IDENTITY, 0, String::new());
-                        let mut down = RayStats::default();
-                        let mut side = RayStats::default();
-                        let k = 64;
-                        for i in 0..k {
-                            for j in 0..k {
-                                let (u, v) = ((i as f32 + 0.5) / k as f32 * 2.0 - 1.0, (j as f32 + 0.5) / k as f32 * 2.0 - 1.0);
-                                let o = t.to_world.transform_point3(Vec3::new(u, 3.0, v));
-                                let d = t.to_world.transform_vector3(Vec3::new(0.1, -1.0, 0.05)).normalize();
-                                g.closest_hit(&Ray::new(o, d), 0.0, 100.0, &mut down);
-                                let o = t.to_world.transform_point3(Vec3::new(u, v, -3.0));
-                                let d = t.to_world.transform_vector3(Vec3::new(0.05, 0.1, 1.0)).normalize();
-                                g.closest_hit(&Ray::new(o, d), 0.0, 100.0, &mut side);
-                            }
-                        }
-                        let n = (k * k) as f64;
-                        println!("{:9} res {res:5} rot {:5} A {a:4} tris {tris:8} | down: prims/ray {:6.1} nodes/ray {:6.1} | side: prims/ray {:6.1} nodes/ray {:6.1}",
-                            prim.kind_name(), rot != Vec3::ZERO,
-                            down.prim_tests as f64 / n, down.bvh_nodes as f64 / n, side.prim_tests as f64 / n, side.bvh_nodes as f64 / n);
-                    }
-                }
-            }
+    fn icosahedron_faces_point_outwards_and_close() {
+        let (corners, faces) = icosahedron();
+        for f in faces {
+            let [a, b, c] = f.map(|i| corners[i]);
+            assert!((b - a).cross(c - a).dot(a + b + c) > 0.0, "face {f:?}");
         }
+        for f in 1..6 {
+            let m = icosphere(f * 6).finish(true);
+            assert!(m.is_closed(), "frequency for resolution {}", f * 6);
+            assert_eq!(m.positions.len() as u32 * 2 - 4, m.triangles.len() as u32);
+        }
+    }
+
+    #[test]
+    fn zipped_rings_and_poles_close() {
+        // A pole, rings of 3, 7, 7, 5 and 12 vertices, a pole: every band kind.
+        let mut profile = vec![ProfilePoint::new(0.0, -1.0, DVec2::NEG_Y, 0)];
+        for (i, count) in [3, 7, 7, 5, 12].into_iter().enumerate() {
+            profile.push(ProfilePoint::new(1.0, i as f64 * 0.5 - 0.9, DVec2::X, count));
+        }
+        profile.push(ProfilePoint::new(0.0, 2.0, DVec2::Y, 0));
+        let mut b = Builder::default();
+        revolve(&mut b, &Frame::Y, &profile, false);
+        let m = b.finish(true);
+        assert_eq!(m.positions.len(), 2 + 3 + 7 + 7 + 5 + 12);
+        // Each band has as many triangles as its two rings have vertices together.
+        assert_eq!(m.triangles.len(), 3 + 10 + 14 + 12 + 17 + 12);
+        assert!(m.is_closed());
+        let volume: f32 = m
+            .triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| m.positions[i as usize]);
+                a.dot(b.cross(c))
+            })
+            .sum();
+        assert!(volume > 0.0, "outward orientation");
+    }
+
+    #[test]
+    fn band_counts() {
+        assert_eq!(bands(1.0, f64::INFINITY, 9), 1);
+        assert_eq!(bands(1.0, 0.3, 9), 4);
+        assert_eq!(bands(1.0, 0.3, 3), 3);
+        assert_eq!(bands(1.0, 1.0, 9), 1);
+        assert_eq!(bands(0.0, 1.0, 9), 1);
+        assert_eq!(bands(1.0, f64::NAN, 9), 1);
+        assert_eq!(bands(1.0, 0.0, 0), 1);
+        let mut p = Vec::new();
+        disc(&mut p, 2.0, 0.5, 40, 2.0, true);
+        assert!(p[0].is_pole());
+        assert_eq!(p.last().unwrap().rho, 2.0);
+        assert_eq!(p.last().unwrap().count, 40);
+        assert!(p.windows(2).all(|w| w[0].rho < w[1].rho && w[0].count <= w[1].count));
+        let mut q = vec![ProfilePoint::new(2.0, 0.5, DVec2::Y, 40)];
+        disc(&mut q, 2.0, 0.5, 40, 2.0, false);
+        assert_eq!(q.len(), p.len());
+        assert!(q.last().unwrap().is_pole());
+    }
+
+    #[test]
+    fn box_faces_point_outwards() {
+        let m = box_mesh(Vec3::new(1.0, 2.0, 3.0));
+        assert!(m.is_closed());
+        for t in &m.triangles {
+            let [a, b, c] = t.map(|i| m.positions[i as usize]);
+            let n = (b - a).cross(c - a);
+            // The face normal points the way its centroid lies from the centre.
+            assert!(n.dot(a + b + c) > 0.0);
+            assert_eq!(n.normalize().abs().max_element(), 1.0);
+        }
+    }
+
+    #[test]
+    fn resolution_and_aspect_are_clamped() {
+        let cyl = Primitive::Cylinder { radius: 1.0, half_height: 1.0 };
+        let m = tessellate_with(&cyl, 0, f32::INFINITY, None);
+        // 3 side segments, 2 fan caps of 3 with centre vertices.
+        assert_eq!((m.positions.len(), m.triangles.len()), (8, 12));
+        let m = tessellate_with(&cyl, 3, 0.0, None);
+        assert_eq!(m, tessellate_with(&cyl, 3, 1.0, None));
+        assert!(m.is_closed());
     }
 }
