@@ -8,6 +8,7 @@ use obvhs::bvh2::Bvh2;
 
 use crate::analytic;
 use crate::bvh;
+use crate::extract::{ExtractMethod, extract_object};
 use crate::geometry::{Aabb, Geometry, Hit, MaterialId, Ray, RayStats, max_abs};
 use crate::march::{MarchHit, MarchParams, gradient_normal, sphere_trace};
 use crate::mesh::TriangleMesh;
@@ -28,8 +29,10 @@ pub enum Representation {
     Sdf { march: MarchParams },
     /// Primitives tessellated parametrically at `resolution` (segments around the largest
     /// circle) and ray traced as triangle meshes through a BVH; infinite planes become a
-    /// disc around the camera out to the scene's `max_distance`. CSG and repetition have
-    /// no parametric tessellation and are sphere traced with `march` (the render says so).
+    /// disc around the camera out to the scene's `max_distance`; bounded CSG and repetition
+    /// are extracted from their SDF (marching tetrahedra, `resolution` cells along the
+    /// longest axis, at most 512); unbounded ones are sphere traced with `march` (the
+    /// render says so).
     Mesh { resolution: u32, shading: Shading, march: MarchParams },
 }
 
@@ -366,11 +369,24 @@ pub fn build_scene(scene: &Scene, repr: Representation) -> SceneGeometry {
     SceneGeometry::new(build_objects(scene, repr))
 }
 
+/// Largest resolution SDF-to-mesh extraction is run at in the mesh representation.
+pub const MAX_EXTRACT_RESOLUTION: u32 = 512;
+
 /// A primitive object tessellated at `resolution` and traced as a mesh under the object's
-/// transform; an infinite plane becomes a disc around the camera. `None` for objects that
-/// are not primitives.
+/// transform; an infinite plane becomes a disc around the camera; a bounded CSG or
+/// repetition node is extracted from its SDF. `None` for unbounded nodes.
 fn tessellated(scene: &Scene, o: &Object, resolution: u32, shading: Shading) -> Option<MeshGeometry> {
-    let ObjectKind::Primitive(prim) = &o.kind else { return None };
+    let ObjectKind::Primitive(prim) = &o.kind else {
+        // CSG and bounded repetition: marching tetrahedra on the SDF, at most 512 cells
+        // along the longest axis (the sample grid is held in memory while extracting).
+        let res = resolution.min(MAX_EXTRACT_RESOLUTION);
+        let mesh = extract_object(o, res, ExtractMethod::MarchingCubes)?;
+        if mesh.triangles.is_empty() {
+            return None;
+        }
+        let label = format!("{} '{}' extracted from its SDF at {res} cells", o.kind_name(), o.label);
+        return Some(MeshGeometry::new(mesh, Shading::Flat, Transform::IDENTITY, o.material, label));
+    };
     let label = format!("{} '{}' tessellated at {resolution}", prim.kind_name(), o.label);
     if let Primitive::Plane { normal, offset } = *prim {
         let t = o.compiled_transform();
