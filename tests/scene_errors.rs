@@ -247,7 +247,7 @@ fn unknown_types() {
         "[[objects]]\ntype = 'blob'\n",
         2,
         8,
-        "objects[0].type: unknown object type `blob`; valid types: sphere, plane, box, ellipsoid, cylinder, cone, torus, triangle, capsule, union, subtraction, intersection, smooth_union, smooth_subtraction, smooth_intersection, repeat",
+        "objects[0].type: unknown object type `blob`; valid types: sphere, plane, box, ellipsoid, cylinder, cone, torus, triangle, capsule, union, subtraction, intersection, smooth_union, smooth_subtraction, smooth_intersection, repeat, mesh",
     );
     fails(
         "[[objects]]\ntype = 'union'\n\n[[objects.children]]\ntype = 'Sphere'\n",

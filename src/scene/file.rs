@@ -36,7 +36,6 @@ pub const MAX_RECURSION_DEPTH: u32 = 100;
 
 /// Every value of an object's `type` key.
 pub const OBJECT_TYPES: [&str; 17] = [
-    "mesh",
     "sphere",
     "plane",
     "box",
@@ -53,6 +52,7 @@ pub const OBJECT_TYPES: [&str; 17] = [
     "smooth_subtraction",
     "smooth_intersection",
     "repeat",
+    "mesh",
 ];
 
 /// Every value of a light's `type` key.
