@@ -124,6 +124,28 @@ pub fn traverse(
     }
 }
 
+/// Whether `hit(primitive, t_max, stats)` is true for any primitive in a leaf the ray
+/// enters before `t_max`; stops at the first (shadow rays).
+pub fn traverse_any(
+    bvh: &Bvh2,
+    ray: &Ray,
+    t_min: f32,
+    t_max: f32,
+    stats: &mut RayStats,
+    mut hit: impl FnMut(u32, f32, &mut RayStats) -> bool,
+) -> bool {
+    let mut found = false;
+    traverse(bvh, ray, t_min, t_max, stats, |prim, t_max, stats| {
+        if hit(prim, t_max, stats) {
+            found = true;
+            Err(())
+        } else {
+            Ok(None)
+        }
+    });
+    found
+}
+
 /// Bytes held by a BVH2: nodes and primitive indices.
 pub fn bytes_used(bvh: &Bvh2) -> usize {
     std::mem::size_of::<Bvh2>()

@@ -175,18 +175,11 @@ impl Geometry for MeshGeometry {
     fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
         let local = self.transform.ray_to_local(ray);
         let sheared = ShearedRay::new(local.origin, local.dir);
-        let mut hit = false;
-        bvh::traverse(&self.bvh, &local, t_min, t_max, stats, |i, t_max, stats| {
+        bvh::traverse_any(&self.bvh, &local, t_min, t_max, stats, |i, t_max, stats| {
             stats.prim_tests += 1;
             let [a, b, c] = self.corners(i);
-            if sheared.intersect(a, b, c, t_min, t_max).is_some() {
-                hit = true;
-                Err(())
-            } else {
-                Ok(None)
-            }
-        });
-        hit
+            sheared.intersect(a, b, c, t_min, t_max).is_some()
+        })
     }
 
     fn bytes_used(&self) -> usize {

@@ -276,16 +276,9 @@ impl Geometry for SceneGeometry {
         if self.unbounded.iter().any(|&i| self.objects[i as usize].any_hit(ray, t_min, t_max, stats)) {
             return true;
         }
-        let mut hit = false;
-        bvh::traverse(&self.bvh, ray, t_min, t_max, stats, |prim, t_max, stats| {
-            if self.objects[self.bounded[prim as usize] as usize].any_hit(ray, t_min, t_max, stats) {
-                hit = true;
-                Err(())
-            } else {
-                Ok(None)
-            }
-        });
-        hit
+        bvh::traverse_any(&self.bvh, ray, t_min, t_max, stats, |prim, t_max, stats| {
+            self.objects[self.bounded[prim as usize] as usize].any_hit(ray, t_min, t_max, stats)
+        })
     }
 
     fn bytes_used(&self) -> usize {
