@@ -145,18 +145,7 @@ pub fn tessellate_object_with(
         return Some(tessellate_with(prim, resolution, max_aspect, clip)).filter(|m| !m.triangles.is_empty());
     }
     // The local box around the parent-frame box's corners.
-    let local_clip = clip.map(|c| {
-        let mut b = Aabb::empty();
-        for i in 0..8 {
-            let corner = Vec3::new(
-                if i & 1 == 0 { c.min.x } else { c.max.x },
-                if i & 2 == 0 { c.min.y } else { c.max.y },
-                if i & 4 == 0 { c.min.z } else { c.max.z },
-            );
-            b.extend(t.to_local.transform_point3(corner).into());
-        }
-        b
-    });
+    let local_clip = clip.map(|c| t.box_to_local(c));
     let mut mesh = tessellate_with(prim, resolution, max_aspect, local_clip.as_ref());
     if mesh.triangles.is_empty() {
         return None;

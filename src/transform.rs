@@ -133,20 +133,27 @@ impl Transform {
 
     /// The world box that encloses the local box `b` (all eight corners transformed).
     pub fn box_to_world(&self, b: &Aabb) -> Aabb {
-        if self.identity {
-            return *b;
-        }
-        let mut out = Aabb::empty();
-        for i in 0..8 {
-            let c = Vec3::new(
-                if i & 1 == 0 { b.min.x } else { b.max.x },
-                if i & 2 == 0 { b.min.y } else { b.max.y },
-                if i & 4 == 0 { b.min.z } else { b.max.z },
-            );
-            out.extend(Vec3A::from(self.to_world.transform_point3(c)));
-        }
-        out
+        if self.identity { *b } else { transform_box(&self.to_world, b) }
     }
+
+    /// The local box that encloses the world box `b` (all eight corners transformed).
+    pub fn box_to_local(&self, b: &Aabb) -> Aabb {
+        if self.identity { *b } else { transform_box(&self.to_local, b) }
+    }
+}
+
+/// The box enclosing the eight corners of `b` mapped by `m`.
+fn transform_box(m: &Affine3A, b: &Aabb) -> Aabb {
+    let mut out = Aabb::empty();
+    for i in 0..8 {
+        let c = Vec3::new(
+            if i & 1 == 0 { b.min.x } else { b.max.x },
+            if i & 2 == 0 { b.min.y } else { b.max.y },
+            if i & 4 == 0 { b.min.z } else { b.max.z },
+        );
+        out.extend(Vec3A::from(m.transform_point3(c)));
+    }
+    out
 }
 
 #[cfg(test)]
