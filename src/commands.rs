@@ -1,14 +1,21 @@
-//! The toolkit's commands as library functions: `render` (one scene, one representation)
-//! and `gallery` (every scene of a folder in every representation). `main.rs` only parses
-//! arguments into these options and maps errors to exit codes.
+//! The toolkit's commands as library functions: `render` (one scene, one representation),
+//! `gallery` (every scene of a folder in every representation) and `convert` (mesh to SDF
+//! grid, scene to mesh). `main.rs` only parses arguments into these options and maps errors
+//! to exit codes.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::time::Instant;
+
+use glam::UVec3;
 
 use crate::error::{Error, Result};
+use crate::extract::{ExtractMethod, extract_object};
 use crate::geometry::Geometry;
-use crate::mesh::{MeshFormat, load_mesh};
+use crate::grid::io::save_grid;
+use crate::grid::{DEFAULT_MAX_GRID_BYTES, check_size, sample_mesh};
+use crate::mesh::{MeshFormat, TriangleMesh, load_mesh, save_mesh};
 use crate::render::{Frame, render, write_png};
 use crate::repr::{Representation, build_scene};
 use crate::scene::{Scene, load_scene, mesh_preview_scene};
@@ -65,6 +72,18 @@ pub const MAX_RESOLUTION: u32 = 8192;
 pub fn check_repr(repr: &Representation) -> Result<()> {
     let p = match repr {
         Representation::Analytic { march } | Representation::Sdf { march } => march,
+        Representation::Grid { resolution, march } => {
+            if *resolution < 2 || *resolution > MAX_CONVERT_MESH_RESOLUTION {
+                return Err(Error::Usage(format!(
+                    "--res must be between 2 and {MAX_CONVERT_MESH_RESOLUTION} for grids, got {resolution}"
+                )));
+            }
+            check_size(
+                UVec3::splat(resolution + 1 + 2 * crate::repr::GRID_MARGIN_CELLS),
+                DEFAULT_MAX_GRID_BYTES,
+            )?;
+            march
+        }
         Representation::Mesh { resolution, march, .. } => {
             if *resolution < 3 || *resolution > MAX_RESOLUTION {
                 return Err(Error::Usage(format!(
@@ -204,4 +223,102 @@ pub fn gallery_command(
         }
     }
     Ok(text)
+}
+
+/// What `toolkit convert` produces.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ConvertTarget {
+    /// A mesh file sampled into a signed distance grid of `res` cells along the longest axis
+    /// of its bounding box, padded by `margin` cells (exact distances, winding-number signs).
+    Grid { res: u32, margin: u32 },
+    /// A scene's bounded objects extracted from their SDFs into one triangle mesh, `res`
+    /// cells along each object's longest axis.
+    Mesh { res: u32, method: ExtractMethod },
+}
+
+/// Largest resolution `toolkit convert --to mesh` accepts (its sample grid is held in memory).
+pub const MAX_CONVERT_MESH_RESOLUTION: u32 = 1024;
+
+/// `toolkit convert`: a mesh file to an SDF grid (`.sdf`, `.npy`, `.vti`), or a scene file to
+/// a triangle mesh (`.obj`, `.ply`, `.glb`). Checks the request before any work, writes the
+/// output through a temporary file, and returns a report.
+pub fn convert_command(input: &Path, output: &Path, target: ConvertTarget) -> Result<String> {
+    let start = Instant::now();
+    match target {
+        ConvertTarget::Grid { res, margin } => {
+            if res == 0 {
+                return Err(Error::Usage("--res must be at least 1".into()));
+            }
+            let (mesh, report) = load_mesh(input)?;
+            let load = start.elapsed();
+            let grid = sample_mesh(&mesh, res, margin)?;
+            let sample = start.elapsed() - load;
+            save_grid(&grid, output)?;
+            let d = grid.dims;
+            Ok(format!(
+                "{}: {} triangles ({} degenerate dropped) loaded in {:.1} ms\n\
+                 grid {}x{}x{} samples (cell corners), voxel {:.6}, origin {}, {} bytes dense; \
+                 sampled in {:.1} ms\nwrote {}\n",
+                input.display(),
+                mesh.triangles.len(),
+                report.degenerate_dropped,
+                load.as_secs_f64() * 1e3,
+                d.x,
+                d.y,
+                d.z,
+                grid.voxel,
+                grid.origin,
+                grid.bytes_used(),
+                sample.as_secs_f64() * 1e3,
+                output.display()
+            ))
+        }
+        ConvertTarget::Mesh { res, method } => {
+            if !(2..=MAX_CONVERT_MESH_RESOLUTION).contains(&res) {
+                return Err(Error::Usage(format!(
+                    "--res must be between 2 and {MAX_CONVERT_MESH_RESOLUTION}, got {res}"
+                )));
+            }
+            check_size(UVec3::splat(res + 3), DEFAULT_MAX_GRID_BYTES)?;
+            let scene = load_scene(input)?;
+            let mut out = TriangleMesh::default();
+            let mut text = String::new();
+            for o in &scene.objects {
+                match extract_object(o, res, method) {
+                    Some(m) => {
+                        let _ = writeln!(
+                            text,
+                            "  {} '{}': {} triangles",
+                            o.kind_name(),
+                            o.label,
+                            m.triangles.len()
+                        );
+                        out.merge(&m);
+                    }
+                    None => {
+                        let _ = writeln!(
+                            text,
+                            "  {} '{}': skipped (unbounded, a mesh, or a triangle: no closed SDF to extract)",
+                            o.kind_name(),
+                            o.label
+                        );
+                    }
+                }
+            }
+            if out.triangles.is_empty() {
+                return Err(Error::input(input, None, "no bounded SDF object to extract a mesh from"));
+            }
+            save_mesh(&out, output)?;
+            let _ = writeln!(
+                text,
+                "{} triangles, {} vertices, closed: {}, in {:.1} ms\nwrote {}",
+                out.triangles.len(),
+                out.positions.len(),
+                out.is_closed(),
+                start.elapsed().as_secs_f64() * 1e3,
+                output.display()
+            );
+            Ok(text)
+        }
+    }
 }

@@ -13,6 +13,7 @@ pub mod error;
 pub mod extract;
 pub mod geometry;
 pub mod grid;
+pub mod grid_geometry;
 pub mod march;
 pub mod mesh;
 pub mod mesh_geometry;

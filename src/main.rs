@@ -4,7 +4,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
-use sdfmesh::commands::{self, Overrides};
+use sdfmesh::commands::{self, ConvertTarget, Overrides};
+use sdfmesh::extract::ExtractMethod;
 use sdfmesh::march::MarchParams;
 use sdfmesh::repr::Representation;
 use sdfmesh::shape::Shading;
@@ -40,6 +41,27 @@ enum Command {
         #[command(flatten)]
         march: MarchArgs,
     },
+    /// Convert a mesh file (OBJ, glTF, GLB, PLY, STL) to a signed distance grid (.sdf, .npy,
+    /// .vti), or a scene file's SDF objects to a triangle mesh (.obj, .ply, .glb).
+    Convert {
+        /// Mesh file (--to grid) or scene file (--to mesh).
+        input: PathBuf,
+        /// Output file; its extension picks the format.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// What to produce.
+        #[arg(long, value_enum)]
+        to: Target,
+        /// Cells along the longest axis of the bounding box.
+        #[arg(long, default_value_t = 128)]
+        res: u32,
+        /// Grid padding around the mesh's bounding box, in cells (--to grid).
+        #[arg(long, default_value_t = 2)]
+        margin: u32,
+        /// Extraction method (--to mesh): marching tetrahedra (watertight) or dual contouring.
+        #[arg(long, value_enum, default_value_t = Method::Mc)]
+        method: Method,
+    },
     /// Render every scene of a folder in every representation into an output folder.
     Gallery {
         /// Folder of scene files.
@@ -65,11 +87,30 @@ enum Repr {
     Sdf,
     /// Primitives tessellated at --res and ray traced as triangle meshes.
     Mesh,
+    /// Objects sampled into signed distance grids of --res cells and ray marched.
+    Grid,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Target {
+    /// A signed distance grid sampled from a mesh (exact distances, winding-number signs).
+    Grid,
+    /// A triangle mesh extracted from a scene's signed distance functions.
+    Mesh,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Method {
+    /// Marching tetrahedra: always closed and manifold.
+    Mc,
+    /// Dual contouring with a QEF: keeps sharp edges.
+    Dc,
 }
 
 #[derive(Args)]
 struct MeshArgs {
-    /// Tessellation resolution for --repr mesh (segments around the largest circle).
+    /// Resolution for --repr mesh (segments around the largest circle) and --repr grid
+    /// (cells along each object's longest axis).
     #[arg(long, default_value_t = 64)]
     res: u32,
     /// Interpolate vertex normals of meshes (tessellated primitives and mesh files given
@@ -89,6 +130,7 @@ fn representation(repr: Repr, mesh: &MeshArgs, march: MarchParams) -> Representa
         Repr::Analytic => Representation::Analytic { march },
         Repr::Sdf => Representation::Sdf { march },
         Repr::Mesh => Representation::Mesh { resolution: mesh.res, shading: mesh.shading(), march },
+        Repr::Grid => Representation::Grid { resolution: mesh.res, march },
     }
 }
 
@@ -148,8 +190,21 @@ fn main() -> ExitCode {
             };
             commands::render_command(&opts).map(|r| print!("{}", r.text))
         }
+        Command::Convert { input, output, to, res, margin, method } => {
+            let target = match to {
+                Target::Grid => ConvertTarget::Grid { res, margin },
+                Target::Mesh => ConvertTarget::Mesh {
+                    res,
+                    method: match method {
+                        Method::Mc => ExtractMethod::MarchingCubes,
+                        Method::Dc => ExtractMethod::DualContouring,
+                    },
+                },
+            };
+            commands::convert_command(&input, &output, target).map(|t| print!("{t}"))
+        }
         Command::Gallery { scenes, output, mesh, settings, march } => {
-            let reprs: Vec<Representation> = [Repr::Analytic, Repr::Sdf, Repr::Mesh]
+            let reprs: Vec<Representation> = [Repr::Analytic, Repr::Sdf, Repr::Mesh, Repr::Grid]
                 .map(|r| representation(r, &mesh, march.params()))
                 .into();
             commands::gallery_command(&scenes, &output, &reprs, settings.overrides()).map(|t| print!("{t}"))

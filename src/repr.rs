@@ -10,6 +10,8 @@ use crate::analytic;
 use crate::bvh;
 use crate::extract::{ExtractMethod, extract_object};
 use crate::geometry::{Aabb, Geometry, Hit, MaterialId, Ray, RayStats, max_abs};
+use crate::grid::{sample_function, sample_mesh};
+use crate::grid_geometry::GridObject;
 use crate::march::{MarchHit, MarchParams, gradient_normal, sphere_trace};
 use crate::mesh::TriangleMesh;
 use crate::mesh_geometry::MeshGeometry;
@@ -34,6 +36,11 @@ pub enum Representation {
     /// longest axis, at most 512); unbounded ones are sphere traced with `march` (the
     /// render says so).
     Mesh { resolution: u32, shading: Shading, march: MarchParams },
+    /// Every bounded object (primitive, CSG, repetition, mesh) sampled into a signed
+    /// distance grid of `resolution` cells along its longest axis (exact distances at cell
+    /// corners) and ray marched through the trilinear interpolation with `march`; unbounded
+    /// objects and triangles (unsigned) are sphere traced analytically (the render says so).
+    Grid { resolution: u32, march: MarchParams },
 }
 
 impl Representation {
@@ -43,6 +50,7 @@ impl Representation {
             Representation::Analytic { .. } => "analytic",
             Representation::Sdf { .. } => "sdf",
             Representation::Mesh { .. } => "mesh",
+            Representation::Grid { .. } => "grid",
         }
     }
 }
@@ -309,6 +317,9 @@ pub fn build_objects(scene: &Scene, repr: Representation) -> Vec<Box<dyn Geometr
         Representation::Mesh { resolution, shading, march } => {
             Representation::Mesh { resolution, shading, march: with_footprint(march) }
         }
+        Representation::Grid { resolution, march } => {
+            Representation::Grid { resolution, march: with_footprint(march) }
+        }
     };
     scene
         .objects
@@ -329,18 +340,18 @@ pub fn build_objects(scene: &Scene, repr: Representation) -> Vec<Box<dyn Geometr
                     if let Some(g) = tessellated(scene, o, resolution, shading) {
                         return Box::new(g);
                     }
-                    let kind = o.kind_name();
-                    (
-                        march,
-                        format!(
-                            "{kind} '{}': sphere traced (no parametric tessellation for {kind})",
-                            o.label
-                        ),
-                    )
+                    (march, format!("{} '{}': sphere traced (unbounded: no mesh)", o.kind_name(), o.label))
+                }
+                Representation::Grid { resolution, march } => {
+                    if let Some(g) = gridded(o, resolution, march) {
+                        return Box::new(g);
+                    }
+                    let why = "unbounded or unsigned: no grid";
+                    (march, format!("{} '{}': sphere traced ({why})", o.kind_name(), o.label))
                 }
             };
             if let ObjectKind::Mesh { mesh, shading, .. } = &o.kind {
-                // A mesh is traced as triangles in every representation until grids exist.
+                // A mesh is traced as triangles in the other representations.
                 return Box::new(MeshGeometry::new(
                     TriangleMesh::clone(mesh),
                     *shading,
@@ -437,4 +448,29 @@ pub fn plane_view_mesh(normal: Vec3, offset: f32, eye: Vec3, radius: f32) -> Tri
         r *= 1.25;
     }
     TriangleMesh { positions, triangles, normals: None }
+}
+
+/// Margin of grids around an object's bounds, in cells: keeps the surface off the grid's
+/// boundary so the interpolated field is closed.
+pub const GRID_MARGIN_CELLS: u32 = 2;
+
+/// A bounded object sampled into a world-space SDF grid, or `None` when it is unbounded,
+/// unsigned (holds a triangle primitive) or its grid cannot be built.
+fn gridded(o: &Object, resolution: u32, march: MarchParams) -> Option<GridObject> {
+    let b = o.bounds()?;
+    let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
+    let kind = o.kind_name();
+    let grid = if let ObjectKind::Mesh { mesh, .. } = &o.kind {
+        let mut world = TriangleMesh::clone(mesh);
+        world.transform(&o.compiled_transform().to_world);
+        sample_mesh(&world, resolution, GRID_MARGIN_CELLS).ok()?
+    } else {
+        let tree = SdfTree::new(o)?;
+        if !tree.signed {
+            return None;
+        }
+        sample_function(&|p| tree.distance(p), lo, hi, resolution, GRID_MARGIN_CELLS).ok()?
+    };
+    let label = format!("{kind} '{}' sampled at {resolution}", o.label);
+    Some(GridObject::new(grid, o.material, march, label))
 }

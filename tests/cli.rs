@@ -146,3 +146,80 @@ fn a_mesh_file_renders_without_a_scene_and_broken_meshes_fail_cleanly() {
     assert!(err.contains("bad.obj") && err.contains("out of range"), "{err}");
     assert!(!dir.join("bad.png").exists());
 }
+
+#[test]
+fn convert_mesh_to_grid_and_scene_to_mesh() {
+    let dir = temp_dir("convert");
+    let obj = dir.join("tet.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n").unwrap();
+    let grid = dir.join("tet.sdf");
+    let o = toolkit(&[
+        "convert",
+        obj.to_str().unwrap(),
+        "--to",
+        "grid",
+        "--res",
+        "16",
+        "-o",
+        grid.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let g = sdfmesh::grid::io::load_grid(&grid).unwrap();
+    // Inside the tetrahedron the distance is negative, far outside positive.
+    let (lo, hi) = g.bounds();
+    assert!(g.trilinear(glam::Vec3::splat(0.15)) < 0.0);
+    assert!(g.trilinear(hi) > 0.0 && g.trilinear(lo) > 0.0);
+
+    let scene = scene(&dir, "s.toml", GOOD);
+    let out = dir.join("sphere.obj");
+    for method in ["mc", "dc"] {
+        let o = toolkit(&[
+            "convert",
+            scene.to_str().unwrap(),
+            "--to",
+            "mesh",
+            "--res",
+            "24",
+            "--method",
+            method,
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let (m, _) = sdfmesh::mesh::load_mesh(&out).unwrap();
+        assert!(m.is_closed(), "{method}");
+        // Vertices near the unit sphere (within a few cells of 2/24).
+        assert!(m.positions.iter().all(|p| (p.length() - 1.0).abs() < 0.2), "{method}");
+    }
+
+    // Absurd or impossible requests fail at once, with exit code 2 and no output.
+    let nothing = dir.join("nothing.obj");
+    for args in [
+        vec![
+            "convert",
+            scene.to_str().unwrap(),
+            "--to",
+            "mesh",
+            "--res",
+            "100000",
+            "-o",
+            nothing.to_str().unwrap(),
+        ],
+        vec!["convert", obj.to_str().unwrap(), "--to", "grid", "--res", "0", "-o", nothing.to_str().unwrap()],
+        vec![
+            "convert",
+            obj.to_str().unwrap(),
+            "--to",
+            "grid",
+            "--res",
+            "100000",
+            "-o",
+            nothing.to_str().unwrap(),
+        ],
+        vec!["convert", scene.to_str().unwrap(), "--to", "grid", "-o", nothing.to_str().unwrap()],
+    ] {
+        let o = toolkit(&args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        assert!(!nothing.exists());
+    }
+}

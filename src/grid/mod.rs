@@ -17,6 +17,7 @@
 //! `fill`). Z-slices are filled in parallel with rayon, each in serpentine order.
 
 pub mod closest;
+pub mod io;
 pub mod winding;
 
 use std::time::{Duration, Instant};
@@ -341,6 +342,33 @@ fn fill(grid: &mut SdfGrid, tree: &TriangleBvh, wind: &FastWinding, closed: bool
             winding_evaluations: a.winding_evaluations + b.winding_evaluations,
             ..SampleStats::default()
         })
+}
+
+/// Samples the distance function `f` (world space) on a grid of `res` cells along the
+/// longest axis of the box `lo`..`hi`, padded by `margin_cells`, in parallel over z-slices.
+///
+/// # Errors
+/// As [`SdfGrid::for_bounds`].
+pub fn sample_function(
+    f: &(impl Fn(glam::DVec3) -> f64 + Sync),
+    lo: Vec3,
+    hi: Vec3,
+    res: u32,
+    margin_cells: u32,
+) -> Result<SdfGrid> {
+    use rayon::prelude::*;
+    let mut grid = SdfGrid::for_bounds(lo, hi, res, margin_cells)?;
+    let (nx, ny) = (grid.dims.x as usize, grid.dims.y as usize);
+    let (origin, voxel) = (grid.origin.as_dvec3(), grid.voxel as f64);
+    grid.values.par_chunks_mut(nx * ny).enumerate().for_each(|(k, slice)| {
+        for j in 0..ny {
+            for i in 0..nx {
+                let p = origin + glam::DVec3::new(i as f64, j as f64, k as f64) * voxel;
+                slice[j * nx + i] = f(p) as f32;
+            }
+        }
+    });
+    Ok(grid)
 }
 
 #[cfg(test)]
