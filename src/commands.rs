@@ -32,10 +32,10 @@ pub struct Overrides {
     pub depth: Option<u32>,
 }
 
-/// Largest image edge accepted, pixels.
-pub const MAX_IMAGE_EDGE: u32 = 16384;
-/// Largest recursion depth accepted.
-pub const MAX_DEPTH: u32 = 64;
+/// Largest image edge accepted, pixels (the same limit as in scene files).
+pub const MAX_IMAGE_EDGE: u32 = crate::scene::file::MAX_IMAGE_SIZE;
+/// Largest recursion depth accepted (the same limit as in scene files).
+pub const MAX_DEPTH: u32 = crate::scene::file::MAX_RECURSION_DEPTH;
 
 impl Overrides {
     /// Applies the overrides to `scene`, rejecting absurd values.
