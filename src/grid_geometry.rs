@@ -6,7 +6,7 @@ use glam::{DVec3, Vec3};
 
 use crate::geometry::{Aabb, Geometry, Hit, MaterialId, Ray, RayStats, aabb, max_abs};
 use crate::grid::SdfGrid;
-use crate::march::{MarchHit, MarchParams, gradient_normal, sphere_trace};
+use crate::march::{MarchHit, MarchParams, gradient_normal, march_ray};
 
 /// Steps are scaled by this factor: the trilinear interpolation of exact distance samples
 /// can be slightly steeper than 1 between samples, so a full step could overshoot.
@@ -40,20 +40,8 @@ impl GridObject {
     }
 
     fn march(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<MarchHit> {
-        let (t0, t1) = ray.clip_to_box(&self.bounds, t_min, t_max)?;
         let f = |p: DVec3| self.distance(p);
-        let hit = sphere_trace(
-            &f,
-            ray.origin.as_dvec3(),
-            ray.dir.as_dvec3(),
-            t0 as f64,
-            t1 as f64,
-            self.size,
-            &self.march,
-            true,
-            stats,
-        )?;
-        (hit.t >= t_min as f64 && hit.t <= t_max as f64).then_some(hit)
+        march_ray(&f, ray, Some(&self.bounds), t_min, t_max, self.size, &self.march, true, stats)
     }
 }
 

@@ -4,7 +4,7 @@
 
 use glam::DVec3;
 
-use crate::geometry::RayStats;
+use crate::geometry::{Aabb, Ray, RayStats};
 
 /// Sphere-tracing parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -116,6 +116,30 @@ pub fn sphere_trace(
     }
     stats.step_limit_hits += 1;
     (t > 0.0 && r < params.pixel_footprint * t).then_some(MarchHit { t, residual: r })
+}
+
+/// Sphere traces the world ray `ray` (unit direction) through `f`, only inside `bounds`
+/// when given (unbounded fields march the whole interval), and keeps hits with `t` in
+/// `[t_min, t_max]`. The shared entry point of every marched representation.
+#[allow(clippy::too_many_arguments)]
+pub fn march_ray(
+    f: &impl Fn(DVec3) -> f64,
+    ray: &Ray,
+    bounds: Option<&Aabb>,
+    t_min: f32,
+    t_max: f32,
+    size: f64,
+    params: &MarchParams,
+    refine: bool,
+    stats: &mut RayStats,
+) -> Option<MarchHit> {
+    let (t0, t1) = match bounds {
+        Some(b) => ray.clip_to_box(b, t_min, t_max)?,
+        None => (t_min, t_max),
+    };
+    let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
+    let hit = sphere_trace(f, o, d, t0 as f64, t1 as f64, size, params, refine, stats)?;
+    (hit.t >= t_min as f64 && hit.t <= t_max as f64).then_some(hit)
 }
 
 /// Where a march stopped.

@@ -12,7 +12,7 @@ use crate::extract::{ExtractMethod, extract_object};
 use crate::geometry::{Aabb, Geometry, Hit, MaterialId, Ray, RayStats, max_abs};
 use crate::grid::{sample_function, sample_mesh};
 use crate::grid_geometry::GridObject;
-use crate::march::{MarchHit, MarchParams, gradient_normal, sphere_trace};
+use crate::march::{MarchHit, MarchParams, gradient_normal, march_ray};
 use crate::mesh::TriangleMesh;
 use crate::mesh_geometry::MeshGeometry;
 use crate::scene::Scene;
@@ -154,23 +154,9 @@ impl SdfObject {
     }
 
     fn march(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<MarchHit> {
-        let (t0, t1) = match &self.bounds {
-            Some(b) => ray.clip_to_box(b, t_min, t_max)?,
-            None => (t_min, t_max),
-        };
         let f = |p: DVec3| self.tree.distance(p);
-        let t = sphere_trace(
-            &f,
-            ray.origin.as_dvec3(),
-            ray.dir.as_dvec3(),
-            t0 as f64,
-            t1 as f64,
-            self.size,
-            &self.march,
-            self.tree.signed,
-            stats,
-        )?;
-        (t.t >= t_min as f64 && t.t <= t_max as f64).then_some(t)
+        let b = self.bounds.as_ref();
+        march_ray(&f, ray, b, t_min, t_max, self.size, &self.march, self.tree.signed, stats)
     }
 }
 
