@@ -163,3 +163,11 @@ pub fn aabb(min: Vec3, max: Vec3) -> Aabb {
 pub fn max_abs(p: Vec3) -> f32 {
     p.abs().max_element()
 }
+
+/// A bound on the rounding error of an f32 point of magnitude `m` after the few operations
+/// that compute a hit point (floored at magnitude 1e-3, so points at the origin still get
+/// a usable offset).
+#[inline]
+pub fn f32_error(m: f32) -> f32 {
+    32.0 * f32::EPSILON * m.max(1e-3)
+}

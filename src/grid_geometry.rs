@@ -4,7 +4,7 @@
 
 use glam::{DVec3, Vec3};
 
-use crate::geometry::{Aabb, Geometry, Hit, MaterialId, Ray, RayStats, aabb, max_abs};
+use crate::geometry::{Aabb, Geometry, Hit, MaterialId, Ray, RayStats, aabb, f32_error, max_abs};
 use crate::grid::SdfGrid;
 use crate::march::{MarchHit, MarchParams, gradient_normal, march_ray};
 
@@ -64,7 +64,7 @@ impl Geometry for GridObject {
             normal,
             shading_normal: normal,
             material: self.material,
-            error: 4.0 * eps as f32 + 32.0 * f32::EPSILON * max_abs(point).max(1e-3),
+            error: 4.0 * eps as f32 + f32_error(max_abs(point)),
         })
     }
 

@@ -9,7 +9,7 @@ use obvhs::BvhBuildParams;
 use obvhs::bvh2::Bvh2;
 
 use crate::bvh;
-use crate::geometry::{Aabb, Geometry, Hit, MaterialId, Ray, RayStats, aabb, max_abs};
+use crate::geometry::{Aabb, Geometry, Hit, MaterialId, Ray, RayStats, aabb, f32_error, max_abs};
 use crate::mesh::TriangleMesh;
 pub use crate::shape::Shading;
 use crate::transform::Transform;
@@ -168,7 +168,7 @@ impl Geometry for MeshGeometry {
             normal: self.transform.normal_to_world(geometric),
             shading_normal: self.transform.normal_to_world(shading),
             material: self.material,
-            error: 32.0 * f32::EPSILON * m.max(1e-3),
+            error: f32_error(m),
         })
     }
 

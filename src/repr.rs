@@ -9,7 +9,7 @@ use obvhs::bvh2::Bvh2;
 use crate::analytic;
 use crate::bvh;
 use crate::extract::{ExtractMethod, extract_object};
-use crate::geometry::{Aabb, Geometry, Hit, MaterialId, Ray, RayStats, max_abs};
+use crate::geometry::{Aabb, Geometry, Hit, MaterialId, Ray, RayStats, f32_error, max_abs};
 use crate::grid::{sample_function, sample_mesh};
 use crate::grid_geometry::GridObject;
 use crate::march::{MarchHit, MarchParams, gradient_normal, march_ray};
@@ -53,12 +53,6 @@ impl Representation {
             Representation::Grid { .. } => "grid",
         }
     }
-}
-
-/// Floor on the absolute error of an f32 point of magnitude `m` after a few operations.
-#[inline]
-fn f32_error(m: f32) -> f32 {
-    32.0 * f32::EPSILON * m.max(1e-3)
 }
 
 /// A closed-form primitive under a transform.
