@@ -146,6 +146,38 @@ pub fn traverse_any(
     found
 }
 
+/// The smallest `dist(primitive)` over the BVH's primitives for a query at `p`, visiting
+/// nodes nearest first and skipping those whose boxes are farther than the best so far
+/// (`f64::INFINITY` for an empty BVH). For measurement, not for tracing: it allocates.
+pub fn nearest(bvh: &Bvh2, p: glam::DVec3, mut dist: impl FnMut(u32) -> f64) -> f64 {
+    use crate::geometry::box_distance;
+    let mut best = f64::INFINITY;
+    if bvh.nodes.is_empty() {
+        return best;
+    }
+    let mut stack = vec![(0u32, box_distance(&bvh.nodes[0].aabb(), p))];
+    while let Some((node, d)) = stack.pop() {
+        if d >= best {
+            continue;
+        }
+        let n = &bvh.nodes[node as usize];
+        if n.is_leaf() {
+            for i in n.first_index..n.first_index + n.prim_count {
+                best = best.min(dist(bvh.primitive_indices[i as usize]));
+            }
+            continue;
+        }
+        let (l, r) = (n.first_index, n.first_index + 1);
+        let dl = box_distance(&bvh.nodes[l as usize].aabb(), p);
+        let dr = box_distance(&bvh.nodes[r as usize].aabb(), p);
+        // Push the farther first so the nearer is popped first.
+        let (near, dn, far, df) = if dl <= dr { (l, dl, r, dr) } else { (r, dr, l, dl) };
+        stack.push((far, df));
+        stack.push((near, dn));
+    }
+    best
+}
+
 /// Bytes held by a BVH2: nodes and primitive indices.
 pub fn bytes_used(bvh: &Bvh2) -> usize {
     std::mem::size_of::<Bvh2>()

@@ -72,7 +72,7 @@ pub const MAX_RESOLUTION: u32 = 8192;
 pub fn check_repr(repr: &Representation) -> Result<()> {
     let p = match repr {
         Representation::Analytic { march } | Representation::Sdf { march } => march,
-        Representation::Grid { resolution, march } => {
+        Representation::Grid { resolution, march, .. } => {
             if *resolution < 2 || *resolution > MAX_CONVERT_MESH_RESOLUTION {
                 return Err(Error::Usage(format!(
                     "--res must be between 2 and {MAX_CONVERT_MESH_RESOLUTION} for grids, got {resolution}"

@@ -2,7 +2,7 @@
 //! [`Geometry`] trait that every representation (closed form, analytic SDF, SDF grid,
 //! triangle mesh) implements. The tracer never learns which representation it traces.
 
-use glam::{Vec3, Vec3A};
+use glam::{DVec3, Vec3, Vec3A};
 pub use obvhs::aabb::Aabb;
 
 /// Index of a material in [`crate::scene::Scene::materials`].
@@ -144,6 +144,70 @@ pub trait Geometry: Send + Sync {
     /// A short human-readable description of how this geometry is traced, e.g.
     /// `"closed form"` or `"sphere traced (no closed form for union)"`.
     fn describe(&self) -> String;
+
+    /// What the geometry stores, for measurement tables.
+    fn census(&self) -> Census;
+
+    /// Unsigned distance from `p` to this geometry's surface, scene units: exact or an
+    /// upper bound (the distance to a point on the surface). For measuring geometric error,
+    /// not for tracing: it may be slow and is not counted in any work counter.
+    fn surface_distance(&self, p: DVec3) -> f64;
+}
+
+/// What a geometry stores. `bytes_used() - accel_bytes` is the geometry itself.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Census {
+    /// Triangles stored.
+    pub triangles: u64,
+    /// Distance samples stored in grids.
+    pub grid_samples: u64,
+    /// Bytes of acceleration structures (BVH nodes and index arrays), part of `bytes_used`.
+    pub accel_bytes: u64,
+}
+
+impl Census {
+    /// The sum of two censuses.
+    pub fn add(self, o: Census) -> Census {
+        Census {
+            triangles: self.triangles + o.triangles,
+            grid_samples: self.grid_samples + o.grid_samples,
+            accel_bytes: self.accel_bytes + o.accel_bytes,
+        }
+    }
+}
+
+/// Distance from `p` to the zero set of the field `f` by projection: Newton steps
+/// `q -= f(q) grad f(q) / |grad f(q)|^2` (central differences of step `h`) until `|f(q)|`
+/// is below `tol`; returns `|p - q|`, an upper bound on the true distance when `q`
+/// converged onto the surface (exact in one step for exact distance fields), or `|f(p)|`
+/// when it did not converge or the gradient vanished.
+pub fn distance_by_projection(f: &dyn Fn(DVec3) -> f64, p: DVec3, h: f64, tol: f64) -> f64 {
+    let mut q = p;
+    for _ in 0..16 {
+        let d = f(q);
+        if d.abs() <= tol {
+            return (p - q).length();
+        }
+        let g = DVec3::new(
+            f(q + DVec3::X * h) - f(q - DVec3::X * h),
+            f(q + DVec3::Y * h) - f(q - DVec3::Y * h),
+            f(q + DVec3::Z * h) - f(q - DVec3::Z * h),
+        ) / (2.0 * h);
+        let g2 = g.length_squared();
+        if !(g2 > 1e-12) || !g2.is_finite() {
+            break;
+        }
+        q -= g * (d / g2);
+    }
+    f(p).abs()
+}
+
+/// Distance from `p` to the box `b` (0 inside).
+#[inline]
+pub fn box_distance(b: &Aabb, p: DVec3) -> f64 {
+    let lo = DVec3::new(b.min.x as f64, b.min.y as f64, b.min.z as f64);
+    let hi = DVec3::new(b.max.x as f64, b.max.y as f64, b.max.z as f64);
+    (lo - p).max(p - hi).max(DVec3::ZERO).length()
 }
 
 /// Converts a glam `Vec3` into obvhs's `Vec3A`.

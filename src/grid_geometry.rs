@@ -4,7 +4,10 @@
 
 use glam::{DVec3, Vec3};
 
-use crate::geometry::{Aabb, Geometry, Hit, MaterialId, Ray, RayStats, aabb, f32_error, max_abs};
+use crate::geometry::{
+    Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, aabb, box_distance, distance_by_projection,
+    f32_error, max_abs,
+};
 use crate::grid::SdfGrid;
 use crate::march::{MarchHit, MarchParams, gradient_normal, march_ray};
 
@@ -75,6 +78,20 @@ impl Geometry for GridObject {
     fn bytes_used(&self) -> usize {
         std::mem::size_of::<Self>() + self.grid.bytes_used() - std::mem::size_of::<SdfGrid>()
             + self.label.capacity()
+    }
+
+    fn census(&self) -> Census {
+        Census { triangles: 0, grid_samples: self.grid.values.len() as u64, accel_bytes: 0 }
+    }
+
+    fn surface_distance(&self, p: DVec3) -> f64 {
+        // Outside the box the field is undefined: measure from the nearest box point.
+        let outside = box_distance(&self.bounds, p);
+        let (lo, hi) = (self.bounds.min.as_dvec3(), self.bounds.max.as_dvec3());
+        let q = p.clamp(lo, hi);
+        let f = |x: DVec3| self.grid.trilinear(x.as_vec3()) as f64;
+        let h = 0.25 * self.grid.voxel as f64;
+        outside + distance_by_projection(&f, q, h, 1e-6 * self.size)
     }
 
     fn describe(&self) -> String {

@@ -7,7 +7,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use sdfmesh::commands::{self, ConvertTarget, Overrides};
 use sdfmesh::extract::ExtractMethod;
 use sdfmesh::march::MarchParams;
-use sdfmesh::repr::Representation;
+use sdfmesh::repr::{GridFill, GridStorage, MeshMethod, Representation};
 use sdfmesh::shape::Shading;
 
 #[derive(Parser)]
@@ -129,8 +129,18 @@ fn representation(repr: Repr, mesh: &MeshArgs, march: MarchParams) -> Representa
     match repr {
         Repr::Analytic => Representation::Analytic { march },
         Repr::Sdf => Representation::Sdf { march },
-        Repr::Mesh => Representation::Mesh { resolution: mesh.res, shading: mesh.shading(), march },
-        Repr::Grid => Representation::Grid { resolution: mesh.res, march },
+        Repr::Mesh => Representation::Mesh {
+            resolution: mesh.res,
+            shading: mesh.shading(),
+            method: MeshMethod::Parametric,
+            march,
+        },
+        Repr::Grid => Representation::Grid {
+            resolution: mesh.res,
+            fill: GridFill::Sample,
+            storage: GridStorage::Dense,
+            march,
+        },
     }
 }
 

@@ -4,12 +4,13 @@
 
 use std::time::{Duration, Instant};
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use obvhs::BvhBuildParams;
 use obvhs::bvh2::Bvh2;
 
 use crate::bvh;
-use crate::geometry::{Aabb, Geometry, Hit, MaterialId, Ray, RayStats, aabb, f32_error, max_abs};
+use crate::geometry::{Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, aabb, f32_error, max_abs};
+use crate::grid::closest::closest_point_on_triangle;
 use crate::mesh::TriangleMesh;
 pub use crate::shape::Shading;
 use crate::transform::Transform;
@@ -190,6 +191,31 @@ impl Geometry for MeshGeometry {
             + bvh::bytes_used(&self.bvh)
             - std::mem::size_of::<Bvh2>()
             + self.label.capacity()
+    }
+
+    fn census(&self) -> Census {
+        Census {
+            triangles: self.triangles.len() as u64,
+            grid_samples: 0,
+            accel_bytes: (bvh::bytes_used(&self.bvh) - std::mem::size_of::<Bvh2>()) as u64,
+        }
+    }
+
+    fn surface_distance(&self, p: DVec3) -> f64 {
+        // Nearest point in the local frame, measured in the world (exact for rigid and
+        // uniformly scaled transforms, an upper bound otherwise).
+        let local = self.transform.point_to_local_f64(p);
+        let to_world = |x: DVec3| self.transform.to_world.transform_point3(x.as_vec3()).as_dvec3();
+        let mut best = f64::INFINITY;
+        crate::bvh::nearest(&self.bvh, local, |i| {
+            let [a, b, c] = self.corners(i);
+            let x = closest_point_on_triangle(local.as_vec3().into(), a.into(), b.into(), c.into());
+            let d = (to_world(Vec3::from(x).as_dvec3()) - p).length();
+            best = best.min(d);
+            // The BVH prunes by local distance: convert the world distance back.
+            d / self.transform.max_scale.max(f32::MIN_POSITIVE) as f64
+        });
+        best
     }
 
     fn describe(&self) -> String {

@@ -9,7 +9,10 @@ use obvhs::bvh2::Bvh2;
 use crate::analytic;
 use crate::bvh;
 use crate::extract::{ExtractMethod, extract_object};
-use crate::geometry::{Aabb, Geometry, Hit, MaterialId, Ray, RayStats, f32_error, max_abs};
+use crate::geometry::{
+    Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, box_distance, distance_by_projection, f32_error,
+    max_abs,
+};
 use crate::grid::{sample_function, sample_mesh};
 use crate::grid_geometry::GridObject;
 use crate::march::{MarchHit, MarchParams, gradient_normal, march_ray};
@@ -35,12 +38,43 @@ pub enum Representation {
     /// are extracted from their SDF (marching tetrahedra, `resolution` cells along the
     /// longest axis, at most 512); unbounded ones are sphere traced with `march` (the
     /// render says so).
-    Mesh { resolution: u32, shading: Shading, march: MarchParams },
+    Mesh { resolution: u32, shading: Shading, method: MeshMethod, march: MarchParams },
     /// Every bounded object (primitive, CSG, repetition, mesh) sampled into a signed
     /// distance grid of `resolution` cells along its longest axis (exact distances at cell
     /// corners) and ray marched through the trilinear interpolation with `march`; unbounded
     /// objects and triangles (unsigned) are sphere traced analytically (the render says so).
-    Grid { resolution: u32, march: MarchParams },
+    Grid { resolution: u32, fill: GridFill, storage: GridStorage, march: MarchParams },
+}
+
+/// How the mesh representation turns primitives into triangles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum MeshMethod {
+    /// Parametric tessellation of each primitive (CSG and repetition are extracted).
+    Parametric,
+    /// Every bounded object extracted from its SDF with the given method.
+    Extracted(ExtractMethod),
+}
+
+/// How a mesh object's grid is filled (analytic objects are always sampled exactly).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum GridFill {
+    /// Exact distance to the nearest triangle at every sample, sign from the winding number.
+    Sample,
+    /// Surface voxels rasterised, inside found by flood fill, distances from a Euclidean
+    /// distance transform (voxel-accurate).
+    Voxelize,
+}
+
+/// How a grid's samples are stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum GridStorage {
+    /// Every sample of the box.
+    Dense,
+    /// Only bricks within `cells` cells of the surface; elsewhere a conservative bound.
+    Band {
+        /// Half-width of the stored band, in cells, `>= 1`.
+        cells: u32,
+    },
 }
 
 impl Representation {
@@ -111,6 +145,17 @@ impl Geometry for AnalyticObject {
 
     fn describe(&self) -> String {
         format!("{} '{}': closed form", self.prim.kind_name(), self.label)
+    }
+
+    fn census(&self) -> Census {
+        Census::default()
+    }
+
+    fn surface_distance(&self, p: DVec3) -> f64 {
+        let f =
+            |q: DVec3| crate::sdf::primitive_distance_f64(&self.prim, self.transform.point_to_local_f64(q));
+        let scale = self.bounds.map_or(1.0, |b| b.diagonal().length() as f64).max(1e-30);
+        distance_by_projection(&f, p, 1e-7 * scale.max(p.abs().max_element()), 1e-9 * scale)
     }
 }
 
@@ -193,6 +238,15 @@ impl Geometry for SdfObject {
     fn describe(&self) -> String {
         let bound = if self.tree.exact { "exact distance" } else { "Lipschitz bound" };
         format!("{} ({bound})", self.why)
+    }
+
+    fn census(&self) -> Census {
+        Census::default()
+    }
+
+    fn surface_distance(&self, p: DVec3) -> f64 {
+        let f = |q: DVec3| self.tree.distance(q);
+        distance_by_projection(&f, p, 1e-7 * self.size.max(p.abs().max_element()), 1e-9 * self.size)
     }
 }
 
@@ -283,6 +337,36 @@ impl Geometry for SceneGeometry {
     fn describe(&self) -> String {
         format!("{} objects, top-level BVH of {} nodes", self.objects.len(), self.bvh.nodes.len())
     }
+
+    fn census(&self) -> Census {
+        let own = Census {
+            accel_bytes: (bvh::bytes_used(&self.bvh) + 4 * (self.unbounded.len() + self.bounded.len()))
+                as u64,
+            ..Census::default()
+        };
+        self.objects.iter().fold(own, |c, o| c.add(o.census()))
+    }
+
+    fn surface_distance(&self, p: DVec3) -> f64 {
+        let mut best = f64::INFINITY;
+        for &i in &self.unbounded {
+            best = best.min(self.objects[i as usize].surface_distance(p));
+        }
+        // Objects nearest first by their boxes; a box farther than the best is skipped.
+        let mut order: Vec<(f64, u32)> = self
+            .bounded
+            .iter()
+            .map(|&i| (self.objects[i as usize].bounds().map_or(0.0, |b| box_distance(&b, p)), i))
+            .collect();
+        order.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for (d, i) in order {
+            if d >= best {
+                break;
+            }
+            best = best.min(self.objects[i as usize].surface_distance(p));
+        }
+        best
+    }
 }
 
 /// Builds the geometry of every top-level object of `scene` in representation `repr`.
@@ -294,11 +378,11 @@ pub fn build_objects(scene: &Scene, repr: Representation) -> Vec<Box<dyn Geometr
     let repr = match repr {
         Representation::Analytic { march } => Representation::Analytic { march: with_footprint(march) },
         Representation::Sdf { march } => Representation::Sdf { march: with_footprint(march) },
-        Representation::Mesh { resolution, shading, march } => {
-            Representation::Mesh { resolution, shading, march: with_footprint(march) }
+        Representation::Mesh { resolution, shading, method, march } => {
+            Representation::Mesh { resolution, shading, method, march: with_footprint(march) }
         }
-        Representation::Grid { resolution, march } => {
-            Representation::Grid { resolution, march: with_footprint(march) }
+        Representation::Grid { resolution, fill, storage, march } => {
+            Representation::Grid { resolution, fill, storage, march: with_footprint(march) }
         }
     };
     scene
@@ -316,14 +400,14 @@ pub fn build_objects(scene: &Scene, repr: Representation) -> Vec<Box<dyn Geometr
                 Representation::Sdf { march } => {
                     (march, format!("{} '{}': sphere traced", o.kind_name(), o.label))
                 }
-                Representation::Mesh { resolution, shading, march } => {
-                    if let Some(g) = tessellated(scene, o, resolution, shading) {
+                Representation::Mesh { resolution, shading, method, march } => {
+                    if let Some(g) = tessellated(scene, o, resolution, shading, method) {
                         return Box::new(g);
                     }
                     (march, format!("{} '{}': sphere traced (unbounded: no mesh)", o.kind_name(), o.label))
                 }
-                Representation::Grid { resolution, march } => {
-                    if let Some(g) = gridded(o, resolution, march) {
+                Representation::Grid { resolution, fill, storage, march } => {
+                    if let Some(g) = gridded(o, resolution, fill, storage, march) {
                         return Box::new(g);
                     }
                     let why = "unbounded or unsigned: no grid";
@@ -359,18 +443,35 @@ pub const MAX_EXTRACT_RESOLUTION: u32 = 512;
 /// A primitive object tessellated at `resolution` and traced as a mesh under the object's
 /// transform; an infinite plane becomes a disc around the camera; a bounded CSG or
 /// repetition node is extracted from its SDF. `None` for unbounded nodes.
-fn tessellated(scene: &Scene, o: &Object, resolution: u32, shading: Shading) -> Option<MeshGeometry> {
-    let ObjectKind::Primitive(prim) = &o.kind else {
-        // CSG and bounded repetition: marching tetrahedra on the SDF, at most 512 cells
-        // along the longest axis (the sample grid is held in memory while extracting).
+fn tessellated(
+    scene: &Scene,
+    o: &Object,
+    resolution: u32,
+    shading: Shading,
+    method: MeshMethod,
+) -> Option<MeshGeometry> {
+    let parametric = match (&o.kind, method) {
+        (ObjectKind::Primitive(Primitive::Plane { .. }), _) => true,
+        (ObjectKind::Primitive(_), MeshMethod::Parametric) => true,
+        _ => false,
+    };
+    if !parametric {
+        // CSG and bounded repetition (and every bounded object when extraction is asked
+        // for): extracted from the SDF at most 512 cells along the longest axis (the
+        // sample grid is held in memory while extracting).
+        let how = match method {
+            MeshMethod::Extracted(m) => m,
+            MeshMethod::Parametric => ExtractMethod::MarchingCubes,
+        };
         let res = resolution.min(MAX_EXTRACT_RESOLUTION);
-        let mesh = extract_object(o, res, ExtractMethod::MarchingCubes)?;
+        let mesh = extract_object(o, res, how)?;
         if mesh.triangles.is_empty() {
             return None;
         }
         let label = format!("{} '{}' extracted from its SDF at {res} cells", o.kind_name(), o.label);
         return Some(MeshGeometry::new(mesh, Shading::Flat, Transform::IDENTITY, o.material, label));
-    };
+    }
+    let ObjectKind::Primitive(prim) = &o.kind else { return None };
     let label = format!("{} '{}' tessellated at {resolution}", prim.kind_name(), o.label);
     if let Primitive::Plane { normal, offset } = *prim {
         let t = o.compiled_transform();
@@ -436,7 +537,15 @@ pub const GRID_MARGIN_CELLS: u32 = 2;
 
 /// A bounded object sampled into a world-space SDF grid, or `None` when it is unbounded,
 /// unsigned (holds a triangle primitive) or its grid cannot be built.
-fn gridded(o: &Object, resolution: u32, march: MarchParams) -> Option<GridObject> {
+fn gridded(
+    o: &Object,
+    resolution: u32,
+    fill: GridFill,
+    storage: GridStorage,
+    march: MarchParams,
+) -> Option<GridObject> {
+    // Voxelization and narrow-band storage are wired in by the grid module.
+    let _ = (fill, storage);
     let b = o.bounds()?;
     let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
     let kind = o.kind_name();

@@ -21,7 +21,12 @@ fn reprs() -> [Representation; 4] {
         Representation::Analytic { march: m },
         Representation::Sdf { march: m },
         Representation::Sdf { march: MarchParams { relaxation: 1.6, ..m } },
-        Representation::Mesh { resolution: 512, shading: sdfmesh::shape::Shading::Smooth, march: m },
+        Representation::Mesh {
+            resolution: 512,
+            shading: sdfmesh::shape::Shading::Smooth,
+            method: sdfmesh::repr::MeshMethod::Parametric,
+            march: m,
+        },
     ]
 }
 
@@ -230,6 +235,7 @@ fn mirror_and_glass_spheres_have_no_speckles_in_any_representation() {
     let coarse = Representation::Mesh {
         resolution: 24,
         shading: sdfmesh::shape::Shading::Smooth,
+        method: sdfmesh::repr::MeshMethod::Parametric,
         march: MarchParams::default(),
     };
     for repr in reprs().into_iter().chain([coarse]) {

@@ -59,7 +59,12 @@ fn closed_form_and_sphere_traced_renders_agree_for_every_primitive() {
         common::dump(&format!("{}-{}", prim.kind_name(), rot.x), &[&a.frame.image, &s.frame.image]);
         assert!(agree >= 0.995, "{}: only {:.3}% of pixels agree", prim.kind_name(), agree * 100.0);
         // Finely tessellated, the polygon representation agrees too (a little less: facets).
-        let mesh = Representation::Mesh { resolution: 512, shading: sdfmesh::shape::Shading::Smooth, march };
+        let mesh = Representation::Mesh {
+            resolution: 512,
+            shading: sdfmesh::shape::Shading::Smooth,
+            method: sdfmesh::repr::MeshMethod::Parametric,
+            march,
+        };
         let m = render_scene(&scene, mesh);
         let agree = fraction_within(&a.frame.image, &m.frame.image, 2);
         common::dump(&format!("{}-{}-mesh", prim.kind_name(), rot.x), &[&a.frame.image, &m.frame.image]);
@@ -68,7 +73,15 @@ fn closed_form_and_sphere_traced_renders_agree_for_every_primitive() {
         // Sampled into a grid and ray marched: silhouettes and shading follow the trilinear
         // field, so agreement is lower; the object must still be there and mostly alike.
         if !matches!(prim, Primitive::Triangle { .. }) {
-            let g = render_scene(&scene, Representation::Grid { resolution: 128, march });
+            let g = render_scene(
+                &scene,
+                Representation::Grid {
+                    resolution: 128,
+                    fill: sdfmesh::repr::GridFill::Sample,
+                    storage: sdfmesh::repr::GridStorage::Dense,
+                    march,
+                },
+            );
             let agree = fraction_within(&a.frame.image, &g.frame.image, 8);
             common::dump(&format!("{}-{}-grid", prim.kind_name(), rot.x), &[&a.frame.image, &g.frame.image]);
             eprintln!(
@@ -133,7 +146,12 @@ fn finely_tessellated_sphere_renders_like_the_closed_form_sphere() {
     let reference = render_scene(&scene, Representation::Analytic { march });
     let mut previous = 0.0;
     for resolution in [32, 128, 512] {
-        let mesh = Representation::Mesh { resolution, shading: sdfmesh::shape::Shading::Smooth, march };
+        let mesh = Representation::Mesh {
+            resolution,
+            shading: sdfmesh::shape::Shading::Smooth,
+            method: sdfmesh::repr::MeshMethod::Parametric,
+            march,
+        };
         let m = render_scene(&scene, mesh);
         let agree = fraction_within(&reference.frame.image, &m.frame.image, 2);
         common::dump(&format!("tessellated-sphere-{resolution}"), &[&reference.frame.image, &m.frame.image]);
