@@ -155,7 +155,7 @@ pub fn nearest(bvh: &Bvh2, p: glam::DVec3, mut dist: impl FnMut(u32) -> f64) -> 
     if bvh.nodes.is_empty() {
         return best;
     }
-    let mut stack = vec![(0u32, box_distance(&bvh.nodes[0].aabb(), p))];
+    let mut stack = vec![(0u32, box_distance(bvh.nodes[0].aabb(), p))];
     while let Some((node, d)) = stack.pop() {
         if d >= best {
             continue;
@@ -168,8 +168,8 @@ pub fn nearest(bvh: &Bvh2, p: glam::DVec3, mut dist: impl FnMut(u32) -> f64) -> 
             continue;
         }
         let (l, r) = (n.first_index, n.first_index + 1);
-        let dl = box_distance(&bvh.nodes[l as usize].aabb(), p);
-        let dr = box_distance(&bvh.nodes[r as usize].aabb(), p);
+        let dl = box_distance(bvh.nodes[l as usize].aabb(), p);
+        let dr = box_distance(bvh.nodes[r as usize].aabb(), p);
         // Push the farther first so the nearer is popped first.
         let (near, dn, far, df) = if dl <= dr { (l, dl, r, dr) } else { (r, dr, l, dl) };
         stack.push((far, df));

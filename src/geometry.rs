@@ -165,9 +165,10 @@ pub struct Census {
     pub accel_bytes: u64,
 }
 
-impl Census {
-    /// The sum of two censuses.
-    pub fn add(self, o: Census) -> Census {
+impl std::ops::Add for Census {
+    type Output = Census;
+
+    fn add(self, o: Census) -> Census {
         Census {
             triangles: self.triangles + o.triangles,
             grid_samples: self.grid_samples + o.grid_samples,

@@ -344,7 +344,7 @@ impl Geometry for SceneGeometry {
                 as u64,
             ..Census::default()
         };
-        self.objects.iter().fold(own, |c, o| c.add(o.census()))
+        self.objects.iter().fold(own, |c, o| c + o.census())
     }
 
     fn surface_distance(&self, p: DVec3) -> f64 {
@@ -450,11 +450,11 @@ fn tessellated(
     shading: Shading,
     method: MeshMethod,
 ) -> Option<MeshGeometry> {
-    let parametric = match (&o.kind, method) {
-        (ObjectKind::Primitive(Primitive::Plane { .. }), _) => true,
-        (ObjectKind::Primitive(_), MeshMethod::Parametric) => true,
-        _ => false,
-    };
+    let parametric = matches!(
+        (&o.kind, method),
+        (ObjectKind::Primitive(Primitive::Plane { .. }), _)
+            | (ObjectKind::Primitive(_), MeshMethod::Parametric)
+    );
     if !parametric {
         // CSG and bounded repetition (and every bounded object when extraction is asked
         // for): extracted from the SDF at most 512 cells along the longest axis (the
