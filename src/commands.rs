@@ -13,10 +13,13 @@ use glam::UVec3;
 use crate::error::{Error, Result};
 use crate::extract::{ExtractMethod, extract_object};
 use crate::geometry::Geometry;
+use crate::grid::band::{BRICK, BandGrid};
 use crate::grid::io::save_grid;
+use crate::grid::voxelize::voxelize_mesh;
 use crate::grid::{DEFAULT_MAX_GRID_BYTES, check_size, sample_mesh};
 use crate::mesh::{MeshFormat, TriangleMesh, load_mesh, save_mesh};
 use crate::render::{Frame, render, write_png};
+use crate::repr::GridFill;
 use crate::repr::{Representation, build_scene};
 use crate::scene::{Scene, load_scene, mesh_preview_scene};
 use crate::shape::Shading;
@@ -229,8 +232,11 @@ pub fn gallery_command(
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum ConvertTarget {
     /// A mesh file sampled into a signed distance grid of `res` cells along the longest axis
-    /// of its bounding box, padded by `margin` cells (exact distances, winding-number signs).
-    Grid { res: u32, margin: u32 },
+    /// of its bounding box, padded by `margin` cells: exact distances and winding-number
+    /// signs ([`GridFill::Sample`]) or voxelized ([`GridFill::Voxelize`], about one voxel of
+    /// error, closed meshes only). With `band > 0` the report also gives the memory a
+    /// narrow band of `band` cells would take against the dense grid (the file is dense).
+    Grid { res: u32, margin: u32, fill: GridFill, band: u32 },
     /// A scene's bounded objects extracted from their SDFs into one triangle mesh, `res`
     /// cells along each object's longest axis.
     Mesh { res: u32, method: ExtractMethod },
@@ -245,20 +251,42 @@ pub const MAX_CONVERT_MESH_RESOLUTION: u32 = 1024;
 pub fn convert_command(input: &Path, output: &Path, target: ConvertTarget) -> Result<String> {
     let start = Instant::now();
     match target {
-        ConvertTarget::Grid { res, margin } => {
+        ConvertTarget::Grid { res, margin, fill, band } => {
             if res == 0 {
                 return Err(Error::Usage("--res must be at least 1".into()));
             }
             let (mesh, report) = load_mesh(input)?;
             let load = start.elapsed();
-            let grid = sample_mesh(&mesh, res, margin)?;
+            let grid = match fill {
+                GridFill::Sample => sample_mesh(&mesh, res, margin)?,
+                GridFill::Voxelize => voxelize_mesh(&mesh, res, margin)?,
+            };
             let sample = start.elapsed() - load;
+            let how = match fill {
+                GridFill::Sample => "sampled",
+                GridFill::Voxelize => "voxelized",
+            };
+            let band_text = if band > 0 {
+                let b = BandGrid::from_dense(&grid, band)?;
+                format!(
+                    "narrow band of {band} cells: {} of {} bricks of {}^3 cells stored, {} bytes \
+                     ({:.1}% of the dense grid's {} bytes)\n",
+                    b.stored_bricks(),
+                    b.brick_count(),
+                    BRICK,
+                    b.bytes_used(),
+                    100.0 * b.bytes_used() as f64 / grid.bytes_used() as f64,
+                    grid.bytes_used()
+                )
+            } else {
+                String::new()
+            };
             save_grid(&grid, output)?;
             let d = grid.dims;
             Ok(format!(
                 "{}: {} triangles ({} degenerate dropped) loaded in {:.1} ms\n\
                  grid {}x{}x{} samples (cell corners), voxel {:.6}, origin {}, {} bytes dense; \
-                 sampled in {:.1} ms\nwrote {}\n",
+                 {how} in {:.1} ms\n{band_text}wrote {}\n",
                 input.display(),
                 mesh.triangles.len(),
                 report.degenerate_dropped,

@@ -1,6 +1,10 @@
 //! Discrete SDF grids in the tracer: sphere tracing of the trilinear interpolation of a
 //! [`SdfGrid`] inside its box, with the same tolerance, step limit, refinement and
 //! over-relaxation as analytic SDFs, and normals from the interpolated field's gradient.
+//! The samples are stored densely ([`SdfGrid`]) or as a narrow band ([`BandGrid`]: bricks
+//! near the surface, a conservative distance bound elsewhere). [`ClippedGrid`] grids only
+//! the part of a huge object that the camera sees ([`view_region`]) and sphere traces the
+//! rest analytically.
 
 use glam::{DVec3, Vec3};
 
@@ -9,15 +13,91 @@ use crate::geometry::{
     f32_error, max_abs,
 };
 use crate::grid::SdfGrid;
+use crate::grid::band::BandGrid;
 use crate::march::{MarchHit, MarchParams, gradient_normal, march_ray};
+use crate::scene::Scene;
+use crate::shape::Object;
 
 /// Steps are scaled by this factor: the trilinear interpolation of exact distance samples
 /// can be slightly steeper than 1 between samples, so a full step could overshoot.
 pub const GRID_STEP_SCALE: f64 = 0.9;
 
+/// How a [`GridObject`] stores its samples.
+#[derive(Clone, Debug, PartialEq)]
+pub enum GridStore {
+    /// Every sample of the box.
+    Dense(SdfGrid),
+    /// Bricks near the surface only.
+    Band(BandGrid),
+}
+
+impl GridStore {
+    /// The interpolated field at `p` (see [`SdfGrid::trilinear`], [`BandGrid::trilinear`]).
+    #[inline]
+    pub fn trilinear(&self, p: Vec3) -> f32 {
+        match self {
+            GridStore::Dense(g) => g.trilinear(p),
+            GridStore::Band(b) => b.trilinear(p),
+        }
+    }
+
+    /// The sample spacing.
+    pub fn voxel(&self) -> f32 {
+        match self {
+            GridStore::Dense(g) => g.voxel,
+            GridStore::Band(b) => b.voxel,
+        }
+    }
+
+    /// Samples per axis (of the dense lattice).
+    pub fn dims(&self) -> glam::UVec3 {
+        match self {
+            GridStore::Dense(g) => g.dims,
+            GridStore::Band(b) => b.dims,
+        }
+    }
+
+    /// The box, `(min, max)`.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        match self {
+            GridStore::Dense(g) => g.bounds(),
+            GridStore::Band(b) => b.bounds(),
+        }
+    }
+
+    /// Values actually stored (samples, plus one bound per empty brick of a band).
+    pub fn stored_values(&self) -> u64 {
+        match self {
+            GridStore::Dense(g) => g.values.len() as u64,
+            GridStore::Band(b) => b.stored_values(),
+        }
+    }
+
+    /// Bytes held (struct included).
+    pub fn bytes_used(&self) -> usize {
+        std::mem::size_of::<Self>()
+            + match self {
+                GridStore::Dense(g) => g.bytes_used() - std::mem::size_of::<SdfGrid>(),
+                GridStore::Band(b) => b.bytes_used() - std::mem::size_of::<BandGrid>(),
+            }
+    }
+}
+
+impl From<SdfGrid> for GridStore {
+    fn from(g: SdfGrid) -> Self {
+        GridStore::Dense(g)
+    }
+}
+
+impl From<BandGrid> for GridStore {
+    fn from(b: BandGrid) -> Self {
+        GridStore::Band(b)
+    }
+}
+
 /// A signed distance grid ready for tracing (world space).
 pub struct GridObject {
-    grid: SdfGrid,
+    grid: GridStore,
     bounds: Aabb,
     size: f64,
     material: MaterialId,
@@ -26,15 +106,16 @@ pub struct GridObject {
 }
 
 impl GridObject {
-    /// Wraps `grid` (world-space samples) with a material.
-    pub fn new(grid: SdfGrid, material: MaterialId, march: MarchParams, label: String) -> Self {
+    /// Wraps `grid` (world-space samples, a [`SdfGrid`] or a [`BandGrid`]) with a material.
+    pub fn new(grid: impl Into<GridStore>, material: MaterialId, march: MarchParams, label: String) -> Self {
+        let grid = grid.into();
         let (lo, hi) = grid.bounds();
         let size = (hi - lo).length() as f64;
         GridObject { bounds: aabb(lo, hi), grid, size, material, march, label }
     }
 
     /// The grid.
-    pub fn grid(&self) -> &SdfGrid {
+    pub fn grid(&self) -> &GridStore {
         &self.grid
     }
 
@@ -59,7 +140,7 @@ impl Geometry for GridObject {
         let eps = self.march.tolerance(t, self.size).max(residual);
         // Half a voxel: the interpolant is piecewise, so smaller steps see cell seams.
         let f = |q: DVec3| self.distance(q);
-        let normal = gradient_normal(&f, p, 0.5 * self.grid.voxel as f64, stats).as_vec3();
+        let normal = gradient_normal(&f, p, 0.5 * self.grid.voxel() as f64, stats).as_vec3();
         let point: Vec3 = p.as_vec3();
         Some(Hit {
             t: t as f32,
@@ -76,29 +157,172 @@ impl Geometry for GridObject {
     }
 
     fn bytes_used(&self) -> usize {
-        std::mem::size_of::<Self>() + self.grid.bytes_used() - std::mem::size_of::<SdfGrid>()
+        std::mem::size_of::<Self>() + self.grid.bytes_used() - std::mem::size_of::<GridStore>()
             + self.label.capacity()
     }
 
     fn census(&self) -> Census {
-        Census { triangles: 0, grid_samples: self.grid.values.len() as u64, accel_bytes: 0 }
+        Census { triangles: 0, grid_samples: self.grid.stored_values(), accel_bytes: 0 }
     }
 
     fn surface_distance(&self, p: DVec3) -> f64 {
-        // Outside the box the field is undefined: measure from the nearest box point.
+        // Outside the box the field is undefined: measure from the nearest box point. In a
+        // narrow band's empty bricks the field is a constant bound (no gradient): there the
+        // projection gives up and this returns that bound, a lower bound, not an upper
+        // one; hit points (where errors are measured) always lie in stored bricks.
         let outside = box_distance(&self.bounds, p);
         let (lo, hi) = (self.bounds.min.as_dvec3(), self.bounds.max.as_dvec3());
         let q = p.clamp(lo, hi);
         let f = |x: DVec3| self.grid.trilinear(x.as_vec3()) as f64;
-        let h = 0.25 * self.grid.voxel as f64;
+        let h = 0.25 * self.grid.voxel() as f64;
         outside + distance_by_projection(&f, q, h, 1e-6 * self.size)
     }
 
     fn describe(&self) -> String {
-        let d = self.grid.dims;
+        let d = self.grid.dims();
+        let storage = match &self.grid {
+            GridStore::Dense(_) => String::new(),
+            GridStore::Band(b) => format!(
+                ", narrow band of {} cells ({} of {} bricks stored)",
+                b.band_cells,
+                b.stored_bricks(),
+                b.brick_count()
+            ),
+        };
         format!(
-            "{}: grid {}x{}x{} samples, voxel {:.5}, ray marched",
-            self.label, d.x, d.y, d.z, self.grid.voxel
+            "{}: grid {}x{}x{} samples{storage}, voxel {:.5}, ray marched",
+            self.label,
+            d.x,
+            d.y,
+            d.z,
+            self.grid.voxel()
         )
+    }
+}
+
+/// A grid clipping box is used only when its longest extent is below this fraction of
+/// the object's (otherwise the object is gridded whole).
+pub const VIEW_CLIP_FRACTION: f32 = 0.5;
+
+/// The region of the scene the camera can see well enough to need a fine grid: the
+/// bounding box of the camera's view frustum out to a far distance of twice the distance
+/// from the eye to the farthest bounding-box corner of the other bounded objects (all
+/// objects but `exclude`), never beyond the scene's `max_distance` (which is also used
+/// when there is no other bounded object). `None` when that distance is not positive and
+/// finite.
+pub fn view_region(scene: &Scene, exclude: &Object) -> Option<Aabb> {
+    let cam = &scene.camera;
+    let mut far = 0.0f32;
+    let mut any = false;
+    for o in scene.objects.iter().filter(|o| !std::ptr::eq(*o, exclude)) {
+        if let Some(b) = o.bounds() {
+            let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
+            for c in 0..8 {
+                let corner = Vec3::new(
+                    if c & 1 == 0 { lo.x } else { hi.x },
+                    if c & 2 == 0 { lo.y } else { hi.y },
+                    if c & 4 == 0 { lo.z } else { hi.z },
+                );
+                far = far.max((corner - cam.position).length());
+            }
+            any = true;
+        }
+    }
+    let max = scene.settings.max_distance;
+    let far = if any { (2.0 * far).min(max) } else { max };
+    if !(far > 0.0) || !far.is_finite() {
+        return None;
+    }
+    let f = cam.forward.normalize();
+    let r = f.cross(cam.up).try_normalize()?;
+    let u = r.cross(f);
+    let half_h = (0.5 * cam.fov_y_deg.to_radians()).tan();
+    let half_w = half_h * cam.width as f32 / cam.height.max(1) as f32;
+    let (mut lo, mut hi) = (cam.position, cam.position);
+    for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
+        // Depth `far` along the axis; the corner rays reach a little farther.
+        let p = cam.position + (f + r * (sx * half_w) + u * (sy * half_h)) * far;
+        lo = lo.min(p);
+        hi = hi.max(p);
+    }
+    Some(aabb(lo, hi))
+}
+
+/// An object gridded only inside a clipping box (the part of it the camera sees, see
+/// [`view_region`]) and sphere traced through its analytic SDF everywhere else, so that a
+/// huge object (a ground sphere, a large box) does not spend its samples where the
+/// camera never looks, and the image stays right where it does (reflections, shadows).
+pub struct ClippedGrid {
+    grid: GridObject,
+    inner: Aabb,
+    outside: Box<dyn Geometry>,
+}
+
+impl ClippedGrid {
+    /// `grid` covers part of the object whose whole analytic geometry is `outside` (its
+    /// `bounds()` are the object's).
+    pub fn new(grid: GridObject, outside: Box<dyn Geometry>) -> Self {
+        let inner = grid.bounds;
+        ClippedGrid { grid, inner, outside }
+    }
+
+    /// The gridded part.
+    pub fn grid(&self) -> &GridObject {
+        &self.grid
+    }
+}
+
+impl Geometry for ClippedGrid {
+    fn bounds(&self) -> Option<Aabb> {
+        self.outside.bounds()
+    }
+
+    fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
+        let Some((t0, t1)) = ray.clip_to_box(&self.inner, t_min, t_max) else {
+            return self.outside.closest_hit(ray, t_min, t_max, stats);
+        };
+        if t0 > t_min
+            && let Some(h) = self.outside.closest_hit(ray, t_min, t0, stats)
+        {
+            return Some(h);
+        }
+        if let Some(h) = self.grid.closest_hit(ray, t0, t1, stats) {
+            return Some(h);
+        }
+        if t1 < t_max { self.outside.closest_hit(ray, t1, t_max, stats) } else { None }
+    }
+
+    fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
+        let Some((t0, t1)) = ray.clip_to_box(&self.inner, t_min, t_max) else {
+            return self.outside.any_hit(ray, t_min, t_max, stats);
+        };
+        (t0 > t_min && self.outside.any_hit(ray, t_min, t0, stats))
+            || self.grid.any_hit(ray, t0, t1, stats)
+            || (t1 < t_max && self.outside.any_hit(ray, t1, t_max, stats))
+    }
+
+    fn bytes_used(&self) -> usize {
+        std::mem::size_of::<Self>() + self.grid.bytes_used() + self.outside.bytes_used()
+    }
+
+    fn describe(&self) -> String {
+        let (lo, hi) = (Vec3::from(self.inner.min), Vec3::from(self.inner.max));
+        format!(
+            "{}, clipped to the view region {lo:.3} .. {hi:.3}; sphere traced on its analytic SDF \
+             outside it",
+            self.grid.describe()
+        )
+    }
+
+    fn census(&self) -> Census {
+        self.grid.census() + self.outside.census()
+    }
+
+    fn surface_distance(&self, p: DVec3) -> f64 {
+        if box_distance(&self.inner, p) == 0.0 {
+            self.grid.surface_distance(p)
+        } else {
+            self.outside.surface_distance(p)
+        }
     }
 }

@@ -61,6 +61,65 @@ enum Command {
         /// Extraction method (--to mesh): marching tetrahedra (watertight) or dual contouring.
         #[arg(long, value_enum, default_value_t = Method::Mc)]
         method: Method,
+        /// How the grid is filled (--to grid).
+        #[arg(long, value_enum, default_value_t = Fill::Sample)]
+        fill: Fill,
+        /// Also report the memory a narrow band of K cells would take against the dense
+        /// grid (--to grid; 0 = no report). The written file is always dense.
+        #[arg(long, default_value_t = 0)]
+        band: u32,
+    },
+    /// Render scenes and meshes in every representation across a resolution sweep and write
+    /// one CSV row per run (error, frame time, build time, bytes; schema in the README), then
+    /// print which representation is fastest and smallest at each error threshold.
+    Compare {
+        /// Scene files and mesh files (default: every scene in data/scenes and
+        /// ../shared/meshes/stanford-bunny.obj where it exists).
+        inputs: Vec<PathBuf>,
+        /// Output CSV (rows are appended and flushed as each run finishes).
+        #[arg(long)]
+        csv: PathBuf,
+        /// Resolution sweep, comma-separated.
+        #[arg(long, value_delimiter = ',', default_values_t = sdfmesh::compare::DEFAULT_RESOLUTIONS)]
+        res: Vec<u32>,
+        /// Timed frames per run, after one warm-up frame.
+        #[arg(long, default_value_t = 5)]
+        frames: u32,
+        /// Skip the runs already in the CSV and append the rest.
+        #[arg(long)]
+        resume: bool,
+        /// Replace an existing CSV.
+        #[arg(long, conflicts_with = "resume")]
+        overwrite: bool,
+        /// Half-width of narrow-band grids, in cells.
+        #[arg(long, default_value_t = 3)]
+        band: u32,
+        /// Also write the summary as JSON.
+        #[arg(long)]
+        summary_json: Option<PathBuf>,
+        /// Save each run's render (and meshes and grids up to resolution 64) in this folder.
+        #[arg(long)]
+        artifacts: Option<PathBuf>,
+        /// Surface points sampled per side for the Chamfer and Hausdorff distances.
+        #[arg(long, default_value_t = 20_000)]
+        surface_samples: usize,
+        /// Run the coursework's scaling experiment instead: frame time against the number of
+        /// spheres, cubes, cylinders and cones (image 320x240 unless --width/--height).
+        #[arg(long)]
+        scaling: bool,
+        /// Primitive counts of the scaling experiment, comma-separated.
+        #[arg(long, value_delimiter = ',', default_values_t = [10, 20, 30, 40, 50, 60, 70, 80, 90, 100])]
+        counts: Vec<u32>,
+        /// Resolution of the mesh and grid representations in the scaling experiment.
+        #[arg(long, default_value_t = 32)]
+        scaling_res: u32,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
+        #[command(flatten)]
+        settings: SettingArgs,
+        #[command(flatten)]
+        march: MarchArgs,
     },
     /// Render every scene of a folder in every representation into an output folder.
     Gallery {
@@ -107,6 +166,29 @@ enum Method {
     Dc,
 }
 
+#[derive(Clone, Copy, ValueEnum)]
+enum Fill {
+    /// Exact distance to the nearest triangle at every sample, sign from the winding number.
+    Sample,
+    /// Rasterize the surface, flood fill the outside, Euclidean distance transform
+    /// (fast, about one voxel of error; closed meshes only).
+    Voxelize,
+}
+
+impl Fill {
+    fn grid_fill(self) -> GridFill {
+        match self {
+            Fill::Sample => GridFill::Sample,
+            Fill::Voxelize => GridFill::Voxelize,
+        }
+    }
+}
+
+/// `--band K`: 0 is dense storage, else a narrow band of K cells.
+fn grid_storage(band: u32) -> GridStorage {
+    if band == 0 { GridStorage::Dense } else { GridStorage::Band { cells: band } }
+}
+
 #[derive(Args)]
 struct MeshArgs {
     /// Resolution for --repr mesh (segments around the largest circle) and --repr grid
@@ -117,6 +199,13 @@ struct MeshArgs {
     /// instead of a scene); default flat.
     #[arg(long)]
     smooth: bool,
+    /// How --repr grid fills mesh objects' grids (analytic objects are always sampled).
+    #[arg(long, value_enum, default_value_t = Fill::Sample)]
+    fill: Fill,
+    /// --repr grid storage: 0 stores every sample (dense); K > 0 stores only 8x8x8-cell
+    /// bricks within K cells of the surface (a distance bound elsewhere).
+    #[arg(long, default_value_t = 0)]
+    band: u32,
 }
 
 impl MeshArgs {
@@ -137,8 +226,8 @@ fn representation(repr: Repr, mesh: &MeshArgs, march: MarchParams) -> Representa
         },
         Repr::Grid => Representation::Grid {
             resolution: mesh.res,
-            fill: GridFill::Sample,
-            storage: GridStorage::Dense,
+            fill: mesh.fill.grid_fill(),
+            storage: grid_storage(mesh.band),
             march,
         },
     }
@@ -200,9 +289,9 @@ fn main() -> ExitCode {
             };
             commands::render_command(&opts).map(|r| print!("{}", r.text))
         }
-        Command::Convert { input, output, to, res, margin, method } => {
+        Command::Convert { input, output, to, res, margin, method, fill, band } => {
             let target = match to {
-                Target::Grid => ConvertTarget::Grid { res, margin },
+                Target::Grid => ConvertTarget::Grid { res, margin, fill: fill.grid_fill(), band },
                 Target::Mesh => ConvertTarget::Mesh {
                     res,
                     method: match method {
@@ -212,6 +301,56 @@ fn main() -> ExitCode {
                 },
             };
             commands::convert_command(&input, &output, target).map(|t| print!("{t}"))
+        }
+        Command::Compare {
+            inputs,
+            csv,
+            res,
+            frames,
+            resume,
+            overwrite,
+            band,
+            summary_json,
+            artifacts,
+            surface_samples,
+            scaling,
+            counts,
+            scaling_res,
+            quiet,
+            settings,
+            march,
+        } => {
+            if scaling {
+                let opts = sdfmesh::compare::scaling::ScalingOptions {
+                    counts,
+                    frames,
+                    resolution: scaling_res,
+                    overrides: settings.overrides(),
+                    march: march.params(),
+                };
+                sdfmesh::compare::scaling::scaling_command(&opts, &csv).map(|t| print!("{t}"))
+            } else {
+                let inputs = if inputs.is_empty() { sdfmesh::compare::default_inputs() } else { Ok(inputs) };
+                inputs
+                    .and_then(|inputs| {
+                        sdfmesh::compare::compare_command(&sdfmesh::compare::CompareOptions {
+                            inputs,
+                            csv,
+                            resolutions: res,
+                            frames,
+                            resume,
+                            overwrite,
+                            overrides: settings.overrides(),
+                            march: march.params(),
+                            band_cells: band,
+                            summary_json,
+                            artifacts,
+                            surface_samples,
+                            progress: !quiet,
+                        })
+                    })
+                    .map(|t| print!("{t}"))
+            }
         }
         Command::Gallery { scenes, output, mesh, settings, march } => {
             let reprs: Vec<Representation> = [Repr::Analytic, Repr::Sdf, Repr::Mesh, Repr::Grid]

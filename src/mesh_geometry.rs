@@ -112,6 +112,15 @@ impl MeshGeometry {
         }
     }
 
+    /// The triangles in world space (positions transformed; no normals).
+    pub fn world_mesh(&self) -> TriangleMesh {
+        TriangleMesh {
+            positions: self.positions.iter().map(|&p| self.transform.to_world.transform_point3(p)).collect(),
+            triangles: self.triangles.clone(),
+            normals: None,
+        }
+    }
+
     /// Number of triangles.
     pub fn triangle_count(&self) -> usize {
         self.triangles.len()

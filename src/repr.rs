@@ -13,8 +13,10 @@ use crate::geometry::{
     Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, box_distance, distance_by_projection, f32_error,
     max_abs,
 };
-use crate::grid::{sample_function, sample_mesh};
-use crate::grid_geometry::GridObject;
+use crate::grid::band::{BandGrid, band_from_function, band_from_mesh};
+use crate::grid::voxelize::voxelize_mesh;
+use crate::grid::{SdfGrid, sample_function, sample_mesh};
+use crate::grid_geometry::{ClippedGrid, GridObject, GridStore, VIEW_CLIP_FRACTION, view_region};
 use crate::march::{MarchHit, MarchParams, gradient_normal, march_ray};
 use crate::mesh::TriangleMesh;
 use crate::mesh_geometry::MeshGeometry;
@@ -407,8 +409,8 @@ pub fn build_objects(scene: &Scene, repr: Representation) -> Vec<Box<dyn Geometr
                     (march, format!("{} '{}': sphere traced (unbounded: no mesh)", o.kind_name(), o.label))
                 }
                 Representation::Grid { resolution, fill, storage, march } => {
-                    if let Some(g) = gridded(o, resolution, fill, storage, march) {
-                        return Box::new(g);
+                    if let Some(g) = gridded(scene, o, resolution, fill, storage, march) {
+                        return g;
                     }
                     let why = "unbounded or unsigned: no grid";
                     (march, format!("{} '{}': sphere traced ({why})", o.kind_name(), o.label))
@@ -531,35 +533,126 @@ pub fn plane_view_mesh(normal: Vec3, offset: f32, eye: Vec3, radius: f32) -> Tri
     TriangleMesh { positions, triangles, normals: None }
 }
 
+/// Every object of `scene` that the mesh representation `repr` turns into triangles, in
+/// world space, as one mesh (for artifacts and external checks); `None` when `repr` is not
+/// a mesh representation or nothing becomes triangles.
+pub fn scene_mesh(scene: &Scene, repr: Representation) -> Option<TriangleMesh> {
+    let Representation::Mesh { resolution, shading, method, .. } = repr else { return None };
+    let mut all = TriangleMesh::default();
+    for o in &scene.objects {
+        let mesh = match &o.kind {
+            ObjectKind::Mesh { mesh, .. } => {
+                let mut m = TriangleMesh::clone(mesh);
+                m.transform(&o.compiled_transform().to_world);
+                m
+            }
+            _ => match tessellated(scene, o, resolution, shading, method) {
+                Some(g) => g.world_mesh(),
+                None => continue,
+            },
+        };
+        let base = all.positions.len() as u32;
+        all.positions.extend(&mesh.positions);
+        all.triangles.extend(mesh.triangles.iter().map(|t| t.map(|i| i + base)));
+    }
+    (!all.triangles.is_empty()).then_some(all)
+}
+
 /// Margin of grids around an object's bounds, in cells: keeps the surface off the grid's
 /// boundary so the interpolated field is closed.
 pub const GRID_MARGIN_CELLS: u32 = 2;
 
 /// A bounded object sampled into a world-space SDF grid, or `None` when it is unbounded,
 /// unsigned (holds a triangle primitive) or its grid cannot be built.
+///
+/// `fill` applies to mesh objects only: [`GridFill::Voxelize`] voxelizes them
+/// ([`crate::grid::voxelize`], about one voxel of error; a mesh that voxelizing finds open
+/// falls back to exact sampling and its label says so). Analytic objects (primitives, CSG,
+/// repetition) are always sampled exactly from their SDF. `storage`
+/// [`GridStorage::Band`] keeps only the bricks near the surface
+/// ([`crate::grid::band`]); it is built without a dense grid except for voxelized meshes
+/// (the distance transform needs the whole grid).
+///
+/// View clipping: an analytic object whose box is much larger than the region the camera
+/// sees ([`view_region`]: the view frustum out to twice the other objects' farthest
+/// corner; used when it cuts the object's longest extent by more than
+/// [`VIEW_CLIP_FRACTION`]) is gridded only inside that region, `resolution` cells along
+/// the clipped box's longest axis, and sphere traced on its analytic SDF outside it
+/// ([`ClippedGrid`]); entirely outside the region it is only sphere traced. Mesh objects
+/// are never clipped.
 fn gridded(
+    scene: &Scene,
     o: &Object,
     resolution: u32,
     fill: GridFill,
     storage: GridStorage,
     march: MarchParams,
-) -> Option<GridObject> {
-    // Voxelization and narrow-band storage are wired in by the grid module.
-    let _ = (fill, storage);
+) -> Option<Box<dyn Geometry>> {
     let b = o.bounds()?;
-    let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
+    let (mut lo, mut hi) = (Vec3::from(b.min), Vec3::from(b.max));
     let kind = o.kind_name();
-    let grid = if let ObjectKind::Mesh { mesh, .. } = &o.kind {
+    let is_mesh = matches!(o.kind, ObjectKind::Mesh { .. });
+    let clip = if is_mesh { None } else { view_region(scene, o) };
+    let mut clipped = false;
+    if let Some(region) = clip {
+        let c = region.intersection(&b);
+        let (clo, chi) = (Vec3::from(c.min), Vec3::from(c.max));
+        if !(chi - clo).cmpge(Vec3::ZERO).all() {
+            let why = format!("{kind} '{}': sphere traced (outside the view region: no grid)", o.label);
+            return Some(Box::new(SdfObject::new(o, march, why)?));
+        }
+        if (chi - clo).max_element() < VIEW_CLIP_FRACTION * (hi - lo).max_element() {
+            (lo, hi, clipped) = (clo, chi, true);
+        }
+    }
+    let band = |g: SdfGrid| -> Option<GridStore> {
+        Some(match storage {
+            GridStorage::Dense => g.into(),
+            GridStorage::Band { cells } => BandGrid::from_dense(&g, cells).ok()?.into(),
+        })
+    };
+    let mut how = "sampled";
+    let grid: GridStore = if let ObjectKind::Mesh { mesh, .. } = &o.kind {
         let mut world = TriangleMesh::clone(mesh);
         world.transform(&o.compiled_transform().to_world);
-        sample_mesh(&world, resolution, GRID_MARGIN_CELLS).ok()?
+        let voxelized = match fill {
+            GridFill::Voxelize => match voxelize_mesh(&world, resolution, GRID_MARGIN_CELLS) {
+                Ok(g) => {
+                    how = "voxelized";
+                    Some(g)
+                }
+                Err(_) => {
+                    how = "sampled (voxelizing found it open)";
+                    None
+                }
+            },
+            GridFill::Sample => None,
+        };
+        match (voxelized, storage) {
+            (Some(g), _) => band(g)?,
+            (None, GridStorage::Dense) => sample_mesh(&world, resolution, GRID_MARGIN_CELLS).ok()?.into(),
+            (None, GridStorage::Band { cells }) => {
+                band_from_mesh(&world, resolution, GRID_MARGIN_CELLS, cells).ok()?.into()
+            }
+        }
     } else {
         let tree = SdfTree::new(o)?;
         if !tree.signed {
             return None;
         }
-        sample_function(&|p| tree.distance(p), lo, hi, resolution, GRID_MARGIN_CELLS).ok()?
+        let f = |p| tree.distance(p);
+        match storage {
+            GridStorage::Dense => sample_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS).ok()?.into(),
+            GridStorage::Band { cells } => {
+                band_from_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS, cells).ok()?.into()
+            }
+        }
     };
-    let label = format!("{kind} '{}' sampled at {resolution}", o.label);
-    Some(GridObject::new(grid, o.material, march, label))
+    let label = format!("{kind} '{}' {how} at {resolution}", o.label);
+    let grid = GridObject::new(grid, o.material, march, label);
+    if clipped {
+        let why = format!("{kind} '{}' outside the view region", o.label);
+        return Some(Box::new(ClippedGrid::new(grid, Box::new(SdfObject::new(o, march, why)?))));
+    }
+    Some(Box::new(grid))
 }

@@ -16,8 +16,10 @@
 //! its sign instead of evaluating the winding number again (exact for closed meshes; see
 //! `fill`). Z-slices are filled in parallel with rayon, each in serpentine order.
 
+pub mod band;
 pub mod closest;
 pub mod io;
+pub mod voxelize;
 pub mod winding;
 
 use std::time::{Duration, Instant};
@@ -84,6 +86,43 @@ fn human_bytes(b: u128) -> String {
     if f >= GIB { format!("{:.1} GiB", f / GIB) } else { format!("{:.1} MiB", f / MIB) }
 }
 
+/// The placement [`SdfGrid::for_bounds`] gives a grid around `[lo, hi]` with `res` cells
+/// along the longest axis and `margin_cells` more on every side: `(origin, voxel, dims)`,
+/// without checking the memory it would need or allocating anything.
+///
+/// # Errors
+/// [`Error::Usage`] for `res == 0`, a box that is empty, flat in every direction or not
+/// finite, or more than `u32::MAX` samples along an axis.
+pub fn grid_layout(lo: Vec3, hi: Vec3, res: u32, margin_cells: u32) -> Result<(Vec3, f32, UVec3)> {
+    if res == 0 {
+        return Err(Error::Usage("the SDF grid resolution must be at least 1 cell".into()));
+    }
+    let ext = hi - lo;
+    let longest = ext.max_element();
+    if !lo.is_finite() || !hi.is_finite() || !(ext.min_element() >= 0.0) || !(longest > 0.0) {
+        return Err(Error::Usage(format!("cannot build an SDF grid around the box {lo} .. {hi}")));
+    }
+    let voxel = longest as f64 / res as f64;
+    let mut cells = [0u64; 3];
+    let mut dims = [0u32; 3];
+    for a in 0..3 {
+        // The tolerance keeps the longest axis at exactly `res` cells.
+        let c = ((ext[a] as f64 / voxel) - 1e-6).ceil().max(1.0) as u64 + 2 * margin_cells as u64;
+        cells[a] = c;
+        dims[a] = u32::try_from(c + 1).map_err(|_| {
+            Error::Usage(format!("an SDF grid of {} samples along one axis is too large", c + 1))
+        })?;
+    }
+    let dims = UVec3::from_array(dims);
+    if dims.min_element() < 2 {
+        return Err(Error::Usage("an SDF grid needs at least 2 samples per axis".into()));
+    }
+    let centre = (lo.as_dvec3() + hi.as_dvec3()) * 0.5;
+    let half = glam::DVec3::new(cells[0] as f64, cells[1] as f64, cells[2] as f64) * (voxel * 0.5);
+    let origin = (centre - half).as_vec3();
+    Ok((origin, voxel as f32, dims))
+}
+
 impl SdfGrid {
     /// A zero-filled grid around the box `[lo, hi]` with `res` cells along the box's
     /// longest axis (so `voxel = longest extent / res`), as many cells as cover each other
@@ -109,32 +148,10 @@ impl SdfGrid {
         margin_cells: u32,
         max_bytes: u64,
     ) -> Result<Self> {
-        if res == 0 {
-            return Err(Error::Usage("the SDF grid resolution must be at least 1 cell".into()));
-        }
-        let ext = hi - lo;
-        let longest = ext.max_element();
-        if !lo.is_finite() || !hi.is_finite() || !(ext.min_element() >= 0.0) || !(longest > 0.0) {
-            return Err(Error::Usage(format!("cannot build an SDF grid around the box {lo} .. {hi}")));
-        }
-        let voxel = longest as f64 / res as f64;
-        let mut cells = [0u64; 3];
-        let mut dims = [0u32; 3];
-        for a in 0..3 {
-            // The tolerance keeps the longest axis at exactly `res` cells.
-            let c = ((ext[a] as f64 / voxel) - 1e-6).ceil().max(1.0) as u64 + 2 * margin_cells as u64;
-            cells[a] = c;
-            dims[a] = u32::try_from(c + 1).map_err(|_| {
-                Error::Usage(format!("an SDF grid of {} samples along one axis is too large", c + 1))
-            })?;
-        }
-        let dims = UVec3::from_array(dims);
+        let (origin, voxel, dims) = grid_layout(lo, hi, res, margin_cells)?;
         check_size(dims, max_bytes)?;
-        let centre = (lo.as_dvec3() + hi.as_dvec3()) * 0.5;
-        let half = glam::DVec3::new(cells[0] as f64, cells[1] as f64, cells[2] as f64) * (voxel * 0.5);
-        let origin = (centre - half).as_vec3();
         let n = dims.x as usize * dims.y as usize * dims.z as usize;
-        Ok(SdfGrid { origin, voxel: voxel as f32, dims, values: vec![0.0; n] })
+        Ok(SdfGrid { origin, voxel, dims, values: vec![0.0; n] })
     }
 
     /// Index into `values` of sample `(i, j, k)`.
@@ -280,7 +297,6 @@ const REUSE_MARGIN: f32 = 0.4;
 /// stays within `[-0.25, 1.25]` near the sample, which holds for surfaces that do not
 /// overlap themselves.
 fn fill(grid: &mut SdfGrid, tree: &TriangleBvh, wind: &FastWinding, closed: bool) -> SampleStats {
-    let reuse = if closed { 0.99 } else { 0.125 };
     let (nx, ny) = (grid.dims.x, grid.dims.y);
     let slice = nx as usize * ny as usize;
     let (origin, voxel) = (grid.origin, grid.voxel);
@@ -288,52 +304,16 @@ fn fill(grid: &mut SdfGrid, tree: &TriangleBvh, wind: &FastWinding, closed: bool
         .par_chunks_mut(slice)
         .enumerate()
         .map(|(k, out)| {
-            let mut stats = SampleStats::default();
-            let mut stack = NodeStack::with_capacity(128);
-            let mut wstack: Vec<u32> = Vec::with_capacity(256);
-            // (position, unsigned distance, nearest triangle's slot) of the previous sample:
-            // a bound and a starting triangle for the next.
-            let mut prev: Option<(Vec3, f32, u32)> = None;
-            // (position, unsigned distance, winding number) of the last sample whose
-            // winding number was evaluated.
-            let mut anchor: Option<(Vec3, f32, f32)> = None;
+            let mut sampler = MeshSampler::new(tree, wind, closed);
             for j in 0..ny {
                 // Serpentine order keeps consecutive samples adjacent.
                 for step in 0..nx {
                     let i = if j % 2 == 0 { step } else { nx - 1 - step };
                     let p = origin + voxel * Vec3::new(i as f32, j as f32, k as f32);
-                    let (hint, bound) = match prev {
-                        // Distance is 1-Lipschitz; pad for rounding.
-                        Some((q, d, slot)) => (Some(slot), (d + (p - q).length()) * (1.0 + 1e-5) + 1e-30),
-                        None => (None, f32::INFINITY),
-                    };
-                    let near = tree
-                        .nearest_with_hint(p, hint, bound, &mut stack, &mut stats.closest_nodes)
-                        .or_else(|| tree.nearest(p, f32::INFINITY, &mut stack, &mut stats.closest_nodes))
-                        .expect("the mesh has triangles");
-                    let d = near.dist2.sqrt();
-                    prev = Some((p, d, near.slot));
-                    // The sign of the last directly evaluated sample holds within `reuse`
-                    // times its distance (see `fill`'s documentation).
-                    let inside = match anchor {
-                        Some((a, da, wa))
-                            if (wa - winding::INSIDE).abs() >= REUSE_MARGIN
-                                && (p - a).length() < da * reuse =>
-                        {
-                            wa >= winding::INSIDE
-                        }
-                        _ => {
-                            let w = wind.winding_for_sign(tree, p, &mut wstack, &mut stats.winding_nodes);
-                            stats.winding_evaluations += 1;
-                            anchor = Some((p, d, w));
-                            w >= winding::INSIDE
-                        }
-                    };
-                    out[i as usize + nx as usize * j as usize] = if inside { -d } else { d };
-                    stats.samples += 1;
+                    out[i as usize + nx as usize * j as usize] = sampler.sample(p);
                 }
             }
-            stats
+            sampler.stats
         })
         .reduce(SampleStats::default, |a, b| SampleStats {
             samples: a.samples + b.samples,
@@ -342,6 +322,82 @@ fn fill(grid: &mut SdfGrid, tree: &TriangleBvh, wind: &FastWinding, closed: bool
             winding_evaluations: a.winding_evaluations + b.winding_evaluations,
             ..SampleStats::default()
         })
+}
+
+/// Signed distance queries against a mesh for a sequence of nearby points (one per
+/// thread): each query is bounded by and started from the previous one's nearest
+/// triangle, and reuses the sign of the last evaluated winding number where that is safe
+/// (see `fill`). Consecutive points should be close (e.g. a serpentine scan).
+pub struct MeshSampler<'a> {
+    tree: &'a TriangleBvh,
+    wind: &'a FastWinding,
+    reuse: f32,
+    stack: NodeStack,
+    wstack: Vec<u32>,
+    // (position, unsigned distance, nearest triangle's slot) of the previous sample.
+    prev: Option<(Vec3, f32, u32)>,
+    // (position, unsigned distance, winding number) of the last evaluated sample.
+    anchor: Option<(Vec3, f32, f32)>,
+    /// Work done so far.
+    pub stats: SampleStats,
+}
+
+impl<'a> MeshSampler<'a> {
+    /// A sampler over `tree` (which must have triangles) and its winding data; `closed`
+    /// is [`winding::is_closed`] of the mesh (it decides how far signs may be reused).
+    pub fn new(tree: &'a TriangleBvh, wind: &'a FastWinding, closed: bool) -> Self {
+        MeshSampler {
+            tree,
+            wind,
+            reuse: if closed { 0.99 } else { 0.125 },
+            stack: NodeStack::with_capacity(128),
+            wstack: Vec::with_capacity(256),
+            prev: None,
+            anchor: None,
+            stats: SampleStats::default(),
+        }
+    }
+
+    /// The unsigned distance from `p` to the mesh (no sign), using the previous query as a
+    /// bound and hint; `f32::INFINITY` for a mesh without triangles.
+    pub fn unsigned(&mut self, p: Vec3) -> f32 {
+        let (hint, bound) = match self.prev {
+            // Distance is 1-Lipschitz; pad for rounding.
+            Some((q, d, slot)) => (Some(slot), (d + (p - q).length()) * (1.0 + 1e-5) + 1e-30),
+            None => (None, f32::INFINITY),
+        };
+        let tree = self.tree;
+        let near = tree
+            .nearest_with_hint(p, hint, bound, &mut self.stack, &mut self.stats.closest_nodes)
+            .or_else(|| tree.nearest(p, f32::INFINITY, &mut self.stack, &mut self.stats.closest_nodes));
+        let Some(near) = near else { return f32::INFINITY };
+        let d = near.dist2.sqrt();
+        self.prev = Some((p, d, near.slot));
+        d
+    }
+
+    /// The signed distance at `p` (negative inside).
+    pub fn sample(&mut self, p: Vec3) -> f32 {
+        let d = self.unsigned(p);
+        self.stats.samples += 1;
+        // The sign of the last directly evaluated sample holds within `reuse` times its
+        // distance (see `fill`'s documentation).
+        let inside = match self.anchor {
+            Some((a, da, wa))
+                if (wa - winding::INSIDE).abs() >= REUSE_MARGIN && (p - a).length() < da * self.reuse =>
+            {
+                wa >= winding::INSIDE
+            }
+            _ => {
+                let w =
+                    self.wind.winding_for_sign(self.tree, p, &mut self.wstack, &mut self.stats.winding_nodes);
+                self.stats.winding_evaluations += 1;
+                self.anchor = Some((p, d, w));
+                w >= winding::INSIDE
+            }
+        };
+        if inside { -d } else { d }
+    }
 }
 
 /// Samples the distance function `f` (world space) on a grid of `res` cells along the

@@ -31,7 +31,7 @@ mod obj;
 mod ply;
 mod stl;
 mod text;
-mod write;
+pub(crate) mod write;
 
 /// An indexed triangle mesh.
 ///

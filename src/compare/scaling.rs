@@ -1,0 +1,270 @@
+//! The coursework's scaling experiment: frame time against the number of primitives
+//! (spheres, cubes, cylinders or cones of unit size on a square grid with spacing 2 along x
+//! and z, seen from above at a fixed camera) for each representation.
+
+use std::path::Path;
+use std::time::Instant;
+
+use glam::Vec3;
+use serde::Serialize;
+
+use crate::commands::Overrides;
+use crate::error::{Error, Result};
+use crate::geometry::Geometry;
+use crate::march::MarchParams;
+use crate::metrics::median;
+use crate::repr::{GridFill, GridStorage, MeshMethod, Representation, build_scene};
+use crate::scene::{Camera, Light, Material, Scene, Settings};
+use crate::shape::{Object, ObjectKind, Primitive, Shading};
+use crate::transform::TransformDesc;
+
+use super::{SCHEMA_VERSION, commit_id};
+
+/// Columns of the scaling CSV, in order.
+pub const SCALING_COLUMNS: [&str; 23] = [
+    "primitive",
+    "repr",
+    "method",
+    "count",
+    "triangles",
+    "total_bytes",
+    "build_ms",
+    "frame_ms_median",
+    "frame_ms_min",
+    "frame_ms_max",
+    "frames",
+    "fps_median",
+    "mrays_per_s",
+    "steps_per_ray",
+    "nodes_per_ray",
+    "threads",
+    "width",
+    "height",
+    "depth",
+    "commit",
+    "timestamp",
+    "frame_ms_samples",
+    "schema_version",
+];
+
+/// One row of the scaling CSV (field order is [`SCALING_COLUMNS`]).
+#[derive(Clone, Debug, Serialize)]
+pub struct ScalingRow {
+    /// `sphere`, `cube`, `cylinder` or `cone`.
+    pub primitive: &'static str,
+    /// Representation name.
+    pub repr: &'static str,
+    /// Method within the representation (with its resolution, e.g. `parametric-32`).
+    pub method: String,
+    /// Number of primitives.
+    pub count: u32,
+    /// Triangles stored.
+    pub triangles: u64,
+    /// Bytes of the geometry and its acceleration structures.
+    pub total_bytes: u64,
+    /// Build time, ms.
+    pub build_ms: f64,
+    /// Median frame time, ms.
+    pub frame_ms_median: f64,
+    /// Fastest frame, ms.
+    pub frame_ms_min: f64,
+    /// Slowest frame, ms.
+    pub frame_ms_max: f64,
+    /// Timed frames.
+    pub frames: u32,
+    /// Frames per second at the median frame time.
+    pub fps_median: f64,
+    /// Rays per second at the median, millions.
+    pub mrays_per_s: f64,
+    /// Distance evaluations per ray.
+    pub steps_per_ray: f64,
+    /// BVH nodes per ray.
+    pub nodes_per_ray: f64,
+    /// Rendering threads.
+    pub threads: usize,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Recursion depth.
+    pub depth: u32,
+    /// Toolkit commit.
+    pub commit: String,
+    /// RFC 3339 UTC.
+    pub timestamp: String,
+    /// Every timed frame, ms, space-separated.
+    pub frame_ms_samples: String,
+    /// Schema version of the compare CSVs.
+    pub schema_version: u32,
+}
+
+/// The primitive types of the experiment.
+pub const PRIMITIVES: [&str; 4] = ["sphere", "cube", "cylinder", "cone"];
+
+fn primitive(name: &str) -> Primitive {
+    match name {
+        "sphere" => Primitive::Sphere { radius: 0.5 },
+        "cube" => Primitive::Box { half: Vec3::splat(0.5) },
+        "cylinder" => Primitive::Cylinder { radius: 0.5, half_height: 0.5 },
+        _ => Primitive::Cone { radius_bottom: 0.5, radius_top: 0.0, half_height: 0.5 },
+    }
+}
+
+/// `count` primitives of one kind on a square grid with spacing 2 along x and z (row-major,
+/// as square as possible), centred on the origin, seen from above and in front by a camera
+/// that frames 100 of them.
+pub fn scaling_scene(kind: &str, count: u32, width: u32, height: u32) -> Scene {
+    let cols = (count as f32).sqrt().ceil().max(1.0) as u32;
+    let rows = count.div_ceil(cols);
+    let objects = (0..count)
+        .map(|i| {
+            let (c, r) = (i % cols, i / cols);
+            let x = 2.0 * c as f32 - (cols - 1) as f32;
+            let z = 2.0 * r as f32 - (rows - 1) as f32;
+            Object {
+                kind: ObjectKind::Primitive(primitive(kind)),
+                transform: TransformDesc { translate: Vec3::new(x, 0.0, z), ..TransformDesc::default() },
+                material: i % 3,
+                label: format!("{kind} {i}"),
+            }
+        })
+        .collect();
+    let position = Vec3::new(0.0, 14.0, -16.0);
+    let material = |color: Vec3| Material { color, ks: 0.5, shininess: Some(50.0), ..Material::default() };
+    Scene {
+        camera: Camera {
+            position,
+            forward: (-position).normalize(),
+            up: Vec3::Y,
+            fov_y_deg: 50.0,
+            width,
+            height,
+        },
+        settings: Settings { max_depth: 1, ..Settings::default() },
+        lights: vec![
+            Light::Ambient { intensity: 0.2 },
+            Light::Point { position: Vec3::new(-6.0, 10.0, -8.0), intensity: 0.7, color: Vec3::ONE },
+            Light::Directional {
+                direction: Vec3::new(0.3, -1.0, 0.4).normalize(),
+                intensity: 0.2,
+                color: Vec3::ONE,
+            },
+        ],
+        materials: vec![
+            material(Vec3::new(0.9, 0.3, 0.2)),
+            material(Vec3::new(0.3, 0.8, 0.3)),
+            material(Vec3::new(0.3, 0.4, 0.9)),
+        ],
+        objects,
+    }
+}
+
+/// Options of `toolkit compare --scaling`.
+#[derive(Clone, Debug)]
+pub struct ScalingOptions {
+    /// Primitive counts.
+    pub counts: Vec<u32>,
+    /// Timed frames per run.
+    pub frames: u32,
+    /// Resolution of the mesh and grid representations.
+    pub resolution: u32,
+    /// Image size and depth overrides (default 320 x 240, depth 1).
+    pub overrides: Overrides,
+    /// Sphere tracing parameters.
+    pub march: MarchParams,
+}
+
+/// Runs the experiment and writes the CSV (through a temporary file: all rows or none).
+///
+/// # Errors
+/// Bad options, an unwritable CSV.
+pub fn scaling_command(opts: &ScalingOptions, csv_path: &Path) -> Result<String> {
+    if opts.counts.is_empty() || opts.counts.iter().any(|&c| c == 0 || c > 10_000) {
+        return Err(Error::Usage("--counts must be between 1 and 10000".into()));
+    }
+    if opts.frames == 0 || opts.frames > 1000 {
+        return Err(Error::Usage(format!("--frames must be between 1 and 1000, got {}", opts.frames)));
+    }
+    let march = opts.march;
+    let res = opts.resolution;
+    let reprs: [(&str, String, Representation); 4] = [
+        ("analytic", "closed-form".into(), Representation::Analytic { march }),
+        ("sdf", "sphere-trace".into(), Representation::Sdf { march }),
+        (
+            "mesh",
+            format!("parametric-{res}"),
+            Representation::Mesh {
+                resolution: res,
+                shading: Shading::Smooth,
+                method: MeshMethod::Parametric,
+                march,
+            },
+        ),
+        (
+            "grid",
+            format!("dense-{res}"),
+            Representation::Grid {
+                resolution: res,
+                fill: GridFill::Sample,
+                storage: GridStorage::Dense,
+                march,
+            },
+        ),
+    ];
+    for (_, _, r) in &reprs {
+        crate::commands::check_repr(r)?;
+    }
+    let commit = commit_id();
+    let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(Vec::new());
+    w.write_record(SCALING_COLUMNS).map_err(|e| Error::io(csv_path, e))?;
+    let mut text = String::new();
+    for kind in PRIMITIVES {
+        for &count in &opts.counts {
+            let mut scene = scaling_scene(kind, count, 320, 240);
+            opts.overrides.apply(&mut scene)?;
+            for (repr, method, r) in &reprs {
+                let start = Instant::now();
+                let geometry = build_scene(&scene, *r);
+                let build_ms = start.elapsed().as_secs_f64() * 1e3;
+                let (times, frame) = super::time_frames(&scene, &geometry, opts.frames);
+                let m = median(&times);
+                let s = frame.stats;
+                let row = ScalingRow {
+                    primitive: kind,
+                    repr,
+                    method: method.clone(),
+                    count,
+                    triangles: geometry.census().triangles,
+                    total_bytes: geometry.bytes_used() as u64,
+                    build_ms,
+                    frame_ms_median: m,
+                    frame_ms_min: times.iter().copied().fold(f64::INFINITY, f64::min),
+                    frame_ms_max: times.iter().copied().fold(0.0, f64::max),
+                    frames: opts.frames,
+                    fps_median: 1e3 / m,
+                    mrays_per_s: s.rays as f64 / (m * 1e-3) / 1e6,
+                    steps_per_ray: s.march_steps as f64 / s.rays.max(1) as f64,
+                    nodes_per_ray: s.bvh_nodes as f64 / s.rays.max(1) as f64,
+                    threads: rayon::current_num_threads(),
+                    width: scene.camera.width,
+                    height: scene.camera.height,
+                    depth: scene.settings.max_depth,
+                    commit: commit.clone(),
+                    timestamp: humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string(),
+                    frame_ms_samples: times.iter().map(|t| format!("{t:.3}")).collect::<Vec<_>>().join(" "),
+                    schema_version: SCHEMA_VERSION,
+                };
+                use std::fmt::Write as _;
+                let _ = writeln!(
+                    text,
+                    "{kind:>8} x{count:<4} {repr:>8}/{method:<14} {m:8.1} ms  {:6.1} fps",
+                    row.fps_median
+                );
+                w.serialize(&row).map_err(|e| Error::io(csv_path, e))?;
+            }
+        }
+    }
+    let bytes = w.into_inner().map_err(|e| Error::io(csv_path, e))?;
+    crate::mesh::write::atomic_write(csv_path, &bytes)?;
+    Ok(text)
+}
