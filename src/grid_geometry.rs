@@ -207,15 +207,18 @@ pub const VIEW_CLIP_FRACTION: f32 = 0.5;
 /// The region of the scene the camera can see well enough to need a fine grid: the
 /// bounding box of the camera's view frustum out to a far distance of twice the distance
 /// from the eye to the farthest bounding-box corner of the other bounded objects (all
-/// objects but `exclude`), never beyond the scene's `max_distance` (which is also used
-/// when there is no other bounded object). `None` when that distance is not positive and
-/// finite.
+/// objects but `exclude` whose longest extent is below [`VIEW_CLIP_FRACTION`] times
+/// `exclude`'s, so that two huge objects do not stretch each other's region), never
+/// beyond the scene's `max_distance` (which is also used when there is no such object).
+/// `None` when that distance is not positive and finite.
 pub fn view_region(scene: &Scene, exclude: &Object) -> Option<Aabb> {
     let cam = &scene.camera;
+    let extent = |b: &Aabb| (Vec3::from(b.max) - Vec3::from(b.min)).max_element();
+    let own = exclude.bounds().map_or(f32::INFINITY, |b| extent(&b));
     let mut far = 0.0f32;
     let mut any = false;
     for o in scene.objects.iter().filter(|o| !std::ptr::eq(*o, exclude)) {
-        if let Some(b) = o.bounds() {
+        if let Some(b) = o.bounds().filter(|b| extent(b) < VIEW_CLIP_FRACTION * own) {
             let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
             for c in 0..8 {
                 let corner = Vec3::new(

@@ -217,12 +217,9 @@ fn huge_boxes_are_clipped_to_the_view_or_left_analytic() {
     );
     floor.material = 0;
     floor.label = "floor".into();
-    let mut behind = object(
-        Primitive::Box { half: Vec3::splat(100.0) },
-        Vec3::new(0.0, 0.0, -400.0),
-        Vec3::ZERO,
-        Vec3::ONE,
-    );
+    // Small and behind the camera: outside the view region.
+    let mut behind =
+        object(Primitive::Box { half: Vec3::splat(5.0) }, Vec3::new(0.0, 0.0, -40.0), Vec3::ZERO, Vec3::ONE);
     behind.label = "behind".into();
     let scene = lit_scene(vec![s, floor, behind], 100);
     let march = MarchParams::default();

@@ -536,13 +536,17 @@ fn note(geometry: &SceneGeometry, repr: &str) -> String {
     if repr != "mesh" && repr != "grid" {
         return String::new();
     }
-    let fallbacks: Vec<String> =
-        geometry.objects().iter().map(|o| o.describe()).filter(|d| d.contains("sphere traced")).collect();
+    let fallbacks: Vec<String> = geometry
+        .objects()
+        .iter()
+        .map(|o| o.describe())
+        .filter(|d| d.contains("sphere traced") || d.contains("found it open"))
+        .collect();
     if fallbacks.is_empty() {
         String::new()
     } else {
         format!(
-            "{} of {} objects sphere traced: {}",
+            "{} of {} objects not as asked: {}",
             fallbacks.len(),
             geometry.objects().len(),
             fallbacks.join("; ")

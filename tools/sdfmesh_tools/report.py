@@ -52,7 +52,7 @@ KIND_MAP = (
     ("*repeat*", REP),
     ("*repetition*", REP),
     ("scaling*", MANY),
-    ("bunny*", ORGANIC),
+    ("*bunny*", ORGANIC),
     ("armadillo*", ORGANIC),
     ("spot*", ORGANIC),
     ("fertility*", ORGANIC),
@@ -60,7 +60,7 @@ KIND_MAP = (
     ("lucy*", ORGANIC),
     ("happy*", ORGANIC),
     ("thesis_sdf_boxes", CAD),
-    ("thesis_sdf_plane_cylinders", THIN),
+    ("thesis_sdf_plane_cylinders", FEW),  # capped cylinders on an infinite plane
     ("showcase", MIXED),
 )
 KIND_ORDER = (FEW, CSG, REP, MANY, ORGANIC, CAD, THIN, MIXED, OTHER)
@@ -400,7 +400,8 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
     L.append(md_table(["what", "value"], [
         ("CPU", m["cpu"]), ("logical cores", m["cores"]), ("RAM", fmt_bytes(m["ram"])), ("OS", m["os"]),
         ("commit", ", ".join(f"`{c}`" for c in uniq("commit")) or "–"),
-        ("timestamp (UTC)", ", ".join(uniq("timestamp")) or "–"),
+        ("timestamps (UTC)", (lambda ts: f"{ts[0]} to {ts[-1]}" if len(ts) > 1 else (ts[0] if ts else "–"))(
+            sorted(uniq("timestamp")))),
         ("render threads", ", ".join(uniq("threads")) or "–"),
         ("image size", ", ".join(f"{w}×{h}" for w, h in sorted({(r.get('width'), r.get('height')) for r in rows if r.get('width')})) or "–"),
         ("frames per row", ", ".join(uniq("frames")) or "–"),
@@ -412,8 +413,9 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
     L.append("```sh\n" + cmd.strip() + "\n" + (invocation + "\n" if invocation else "") + "```\n")
     if summary:
         try:
-            s = json.loads(Path(summary).read_text())
-            L.append("\n### Summary file\n\n```json\n" + json.dumps(s, indent=2)[:4000] + "\n```\n")
+            json.loads(Path(summary).read_text())
+            L.append(f"\nThe toolkit's own summary (per input and error threshold: fastest, smallest, and the "
+                     f"marched/mesh ratios) is `{Path(summary).name}`.\n")
         except (OSError, ValueError) as e:
             L.append(f"\n(summary {summary} could not be read: {e})\n")
 
