@@ -397,16 +397,47 @@ fn ms(start: Instant) -> f64 {
     start.elapsed().as_secs_f64() * 1e3
 }
 
-/// Renders one warm-up frame and `frames` timed ones; returns the timed frames' times in
-/// ms and the last frame.
-pub(crate) fn time_frames(scene: &Scene, geometry: &dyn Geometry, frames: u32) -> (Vec<f64>, Frame) {
+/// The timing columns shared by the compare and scaling CSVs.
+pub(crate) struct Timing {
+    /// Median frame time, ms.
+    pub median: f64,
+    /// Fastest frame, ms.
+    pub min: f64,
+    /// Slowest frame, ms.
+    pub max: f64,
+    /// Rays per second at the median, millions.
+    pub mrays_per_s: f64,
+    /// Distance evaluations per ray.
+    pub steps_per_ray: f64,
+    /// BVH nodes per ray.
+    pub nodes_per_ray: f64,
+    /// Every timed frame, ms, space-separated.
+    pub samples: String,
+    /// When the frames finished, RFC 3339 UTC.
+    pub timestamp: String,
+}
+
+/// Renders one warm-up frame and `frames` timed ones; returns their timing and the last
+/// frame (work counts are the same in every frame).
+pub(crate) fn time_frames(scene: &Scene, geometry: &dyn Geometry, frames: u32) -> (Timing, Frame) {
     let mut last = render(scene, geometry);
     let mut times = Vec::with_capacity(frames as usize);
     for _ in 0..frames {
         last = render(scene, geometry);
         times.push(last.time.as_secs_f64() * 1e3);
     }
-    (times, last)
+    let median = metrics::median(&times);
+    let timing = Timing {
+        median,
+        min: times.iter().copied().fold(f64::INFINITY, f64::min),
+        max: times.iter().copied().fold(0.0, f64::max),
+        mrays_per_s: last.stats.rays as f64 / (median * 1e-3) / 1e6,
+        steps_per_ray: last.steps_per_ray(),
+        nodes_per_ray: last.nodes_per_ray(),
+        samples: times.iter().map(|t| format!("{t:.3}")).collect::<Vec<_>>().join(" "),
+        timestamp: humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string(),
+    };
+    (timing, last)
 }
 
 /// What the reference run leaves for the others to be measured against.
@@ -483,15 +514,15 @@ pub fn read_rows(path: &Path) -> Result<Vec<Row>> {
 }
 
 /// Opens the CSV for appending rows: new (header written) or, with `resume`, existing
-/// (header checked). Returns the keys of the rows already there.
-fn open_csv(opts: &CompareOptions) -> Result<(File, HashSet<RowKey>)> {
+/// (header checked). Returns the rows already there.
+fn open_csv(opts: &CompareOptions) -> Result<(File, Vec<Row>)> {
     let path = &opts.csv;
     let exists = path.exists() && std::fs::metadata(path).map(|m| m.len() > 0).unwrap_or(false);
     if exists && opts.resume {
         drop_partial_row(path)?;
-        let done = read_rows(path)?.iter().map(Row::key).collect();
+        let rows = read_rows(path)?;
         let file = OpenOptions::new().append(true).open(path).map_err(|e| Error::io(path, e))?;
-        return Ok((file, done));
+        return Ok((file, rows));
     }
     if exists && !opts.overwrite {
         return Err(Error::io(
@@ -502,7 +533,7 @@ fn open_csv(opts: &CompareOptions) -> Result<(File, HashSet<RowKey>)> {
     let mut file = File::create(path).map_err(|e| Error::io(path, format!("cannot write: {e}")))?;
     writeln!(file, "{}", COLUMNS.join(",")).map_err(|e| Error::io(path, e))?;
     file.flush().map_err(|e| Error::io(path, e))?;
-    Ok((file, HashSet::new()))
+    Ok((file, Vec::new()))
 }
 
 /// Cuts a last line left incomplete by a crash (no final newline) off the file.
@@ -592,12 +623,12 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
     if let Some(dir) = &opts.artifacts {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     }
-    let (mut file, done) = open_csv(opts)?;
+    let (mut file, mut rows) = open_csv(opts)?;
+    let done: HashSet<RowKey> = rows.iter().map(Row::key).collect();
     let plans: Vec<Vec<Run>> = inputs.iter().map(|(_, s)| plan(s, opts)).collect();
     let total: usize = plans.iter().map(Vec::len).sum();
     let bar = progress_bar(total as u64, opts.progress);
     let commit = commit_id();
-    let mut rows = if opts.resume && opts.csv.exists() { read_rows(&opts.csv)? } else { Vec::new() };
     for ((name, scene), runs) in inputs.iter().zip(&plans) {
         let mut reference: Option<Reference> = None;
         for run in runs {
@@ -665,7 +696,7 @@ fn measure(
 ) -> Result<Row> {
     reset_peak_rss();
     let built = build(scene, run.build)?;
-    let (times, frame) = time_frames(scene, &built.geometry, opts.frames);
+    let (timing, frame) = time_frames(scene, &built.geometry, opts.frames);
     let peak = peak_rss_bytes();
     let probe = metrics::probe(&scene.camera, &built.geometry, scene.settings.max_distance);
     let points = metrics::subsample(&probe.points, opts.surface_samples);
@@ -688,8 +719,6 @@ fn measure(
     };
     let census = built.geometry.census();
     let total = built.geometry.bytes_used() as u64;
-    let median = metrics::median(&times);
-    let s = &frame.stats;
     let row = Row {
         input: name.to_string(),
         repr: run.repr.to_string(),
@@ -702,13 +731,13 @@ fn measure(
         accel_bytes: census.accel_bytes,
         total_bytes: total,
         build_ms: built.build_ms,
-        frame_ms_median: median,
-        frame_ms_min: times.iter().copied().fold(f64::INFINITY, f64::min),
-        frame_ms_max: times.iter().copied().fold(0.0, f64::max),
+        frame_ms_median: timing.median,
+        frame_ms_min: timing.min,
+        frame_ms_max: timing.max,
         frames: opts.frames,
-        mrays_per_s: s.rays as f64 / (median * 1e-3) / 1e6,
-        steps_per_ray: s.march_steps as f64 / s.rays.max(1) as f64,
-        nodes_per_ray: s.bvh_nodes as f64 / s.rays.max(1) as f64,
+        mrays_per_s: timing.mrays_per_s,
+        steps_per_ray: timing.steps_per_ray,
+        nodes_per_ray: timing.nodes_per_ray,
         image_rmse: metrics::rmse(&frame.image, &r.image),
         image_psnr_db: metrics::psnr_db(&frame.image, &r.image),
         image_ssim: metrics::ssim(&frame.image, &r.image),
@@ -721,8 +750,8 @@ fn measure(
         height: scene.camera.height,
         depth: scene.settings.max_depth,
         commit: commit.to_string(),
-        timestamp: humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string(),
-        frame_ms_samples: times.iter().map(|t| format!("{t:.3}")).collect::<Vec<_>>().join(" "),
+        timestamp: timing.timestamp,
+        frame_ms_samples: timing.samples,
         schema_version: SCHEMA_VERSION,
         note: note(&built.geometry, run.repr),
     };

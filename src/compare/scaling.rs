@@ -12,7 +12,6 @@ use crate::commands::Overrides;
 use crate::error::{Error, Result};
 use crate::geometry::Geometry;
 use crate::march::MarchParams;
-use crate::metrics::median;
 use crate::repr::{GridFill, GridStorage, MeshMethod, Representation, build_scene};
 use crate::scene::{Camera, Light, Material, Scene, Settings};
 use crate::shape::{Object, ObjectKind, Primitive, Shading};
@@ -226,9 +225,7 @@ pub fn scaling_command(opts: &ScalingOptions, csv_path: &Path) -> Result<String>
                 let start = Instant::now();
                 let geometry = build_scene(&scene, *r);
                 let build_ms = start.elapsed().as_secs_f64() * 1e3;
-                let (times, frame) = super::time_frames(&scene, &geometry, opts.frames);
-                let m = median(&times);
-                let s = frame.stats;
+                let (timing, _) = super::time_frames(&scene, &geometry, opts.frames);
                 let row = ScalingRow {
                     primitive: kind,
                     repr,
@@ -237,28 +234,28 @@ pub fn scaling_command(opts: &ScalingOptions, csv_path: &Path) -> Result<String>
                     triangles: geometry.census().triangles,
                     total_bytes: geometry.bytes_used() as u64,
                     build_ms,
-                    frame_ms_median: m,
-                    frame_ms_min: times.iter().copied().fold(f64::INFINITY, f64::min),
-                    frame_ms_max: times.iter().copied().fold(0.0, f64::max),
+                    frame_ms_median: timing.median,
+                    frame_ms_min: timing.min,
+                    frame_ms_max: timing.max,
                     frames: opts.frames,
-                    fps_median: 1e3 / m,
-                    mrays_per_s: s.rays as f64 / (m * 1e-3) / 1e6,
-                    steps_per_ray: s.march_steps as f64 / s.rays.max(1) as f64,
-                    nodes_per_ray: s.bvh_nodes as f64 / s.rays.max(1) as f64,
+                    fps_median: 1e3 / timing.median,
+                    mrays_per_s: timing.mrays_per_s,
+                    steps_per_ray: timing.steps_per_ray,
+                    nodes_per_ray: timing.nodes_per_ray,
                     threads: rayon::current_num_threads(),
                     width: scene.camera.width,
                     height: scene.camera.height,
                     depth: scene.settings.max_depth,
                     commit: commit.clone(),
-                    timestamp: humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string(),
-                    frame_ms_samples: times.iter().map(|t| format!("{t:.3}")).collect::<Vec<_>>().join(" "),
+                    timestamp: timing.timestamp,
+                    frame_ms_samples: timing.samples,
                     schema_version: SCHEMA_VERSION,
                 };
                 use std::fmt::Write as _;
                 let _ = writeln!(
                     text,
-                    "{kind:>8} x{count:<4} {repr:>8}/{method:<14} {m:8.1} ms  {:6.1} fps",
-                    row.fps_median
+                    "{kind:>8} x{count:<4} {repr:>8}/{method:<14} {:8.1} ms  {:6.1} fps",
+                    row.frame_ms_median, row.fps_median
                 );
                 w.serialize(&row).map_err(|e| Error::io(csv_path, e))?;
             }
