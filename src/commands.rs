@@ -14,14 +14,14 @@ use crate::error::{Error, Result};
 use crate::extract::{ExtractMethod, extract_object};
 use crate::geometry::Geometry;
 use crate::grid::band::{BRICK, BandGrid};
-use crate::grid::io::save_grid;
+use crate::grid::io::{load_grid, save_grid};
 use crate::grid::voxelize::voxelize_mesh;
 use crate::grid::{DEFAULT_MAX_GRID_BYTES, check_size, sample_mesh};
 use crate::mesh::{MeshFormat, TriangleMesh, load_mesh, save_mesh};
 use crate::render::{Frame, render, write_png};
 use crate::repr::GridFill;
-use crate::repr::{Representation, build_scene};
-use crate::scene::{Scene, load_scene, mesh_preview_scene};
+use crate::repr::{MeshMethod, Representation, build_scene, grid_file_mesh};
+use crate::scene::{Scene, grid_preview_scene, load_scene, mesh_preview_scene};
 use crate::shape::Shading;
 
 /// Overrides of a scene's settings from the command line.
@@ -165,8 +165,14 @@ pub fn render_scene(scene: &Scene, repr: Representation) -> RenderReport {
     RenderReport { geometry_bytes: geometry.bytes_used(), frame, text }
 }
 
-/// Loads a scene file, or a mesh file (by its extension) into a preview scene.
+/// Loads a scene file, or a mesh file or a signed distance grid file (`.sdf`, `.npy`) into
+/// a preview scene, by the file's extension.
 pub fn load_scene_or_mesh(path: &Path, shading: Shading) -> Result<Scene> {
+    let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if matches!(ext.as_deref(), Some("sdf" | "npy")) {
+        let grid = load_grid(path)?;
+        return Ok(grid_preview_scene(Arc::new(grid), path.to_path_buf()));
+    }
     if MeshFormat::from_path(path).is_some() {
         let (mesh, report) = load_mesh(path)?;
         if report.degenerate_dropped > 0 {
@@ -312,7 +318,9 @@ pub fn convert_command(input: &Path, output: &Path, target: ConvertTarget) -> Re
             let mut out = TriangleMesh::default();
             let mut text = String::new();
             for o in &scene.objects {
-                match extract_object(o, res, method) {
+                let extracted = extract_object(o, res, method)
+                    .or_else(|| grid_file_mesh(o, res, MeshMethod::Extracted(method)));
+                match extracted {
                     Some(m) => {
                         let _ = writeln!(
                             text,

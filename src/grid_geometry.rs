@@ -4,7 +4,8 @@
 //! The samples are stored densely ([`SdfGrid`]) or as a narrow band ([`BandGrid`]: bricks
 //! near the surface, a conservative distance bound elsewhere). [`ClippedGrid`] grids only
 //! the part of a huge object that the camera sees ([`view_region`]) and sphere traces the
-//! rest analytically.
+//! rest analytically. A grid read from a file is placed in the scene by a rigid transform
+//! with uniform scale ([`GridObject::placed`]), which keeps its distances exact.
 
 use glam::{DVec3, Vec3};
 
@@ -17,6 +18,7 @@ use crate::grid::band::BandGrid;
 use crate::march::{MarchHit, MarchParams, gradient_normal, march_ray};
 use crate::scene::Scene;
 use crate::shape::Object;
+use crate::transform::Transform;
 
 /// Steps are scaled by this factor: the trilinear interpolation of exact distance samples
 /// can be slightly steeper than 1 between samples, so a full step could overshoot.
@@ -95,14 +97,28 @@ impl From<BandGrid> for GridStore {
     }
 }
 
-/// A signed distance grid ready for tracing (world space).
+/// A signed distance grid ready for tracing.
 pub struct GridObject {
     grid: GridStore,
+    /// World-space bounds.
     bounds: Aabb,
+    /// Diagonal of `bounds`, scene units.
     size: f64,
+    /// Where the grid's local frame sits in the world; `None` when the samples are in
+    /// world space.
+    placement: Option<Placement>,
     material: MaterialId,
     march: MarchParams,
     label: String,
+}
+
+/// A rigid transform with uniform scale from a grid's frame to the world.
+#[derive(Clone, Copy, Debug)]
+struct Placement {
+    /// World to grid frame.
+    to_local: glam::DAffine3,
+    /// Grid-frame distances times this are world distances (> 0).
+    scale: f64,
 }
 
 impl GridObject {
@@ -111,7 +127,27 @@ impl GridObject {
         let grid = grid.into();
         let (lo, hi) = grid.bounds();
         let size = (hi - lo).length() as f64;
-        GridObject { bounds: aabb(lo, hi), grid, size, material, march, label }
+        GridObject { bounds: aabb(lo, hi), grid, size, placement: None, material, march, label }
+    }
+
+    /// Wraps `grid` whose samples are in a local frame placed in the world by `transform`,
+    /// which must have a uniform scale ([`Transform::is_uniform`]; otherwise its smallest
+    /// factor is used, which keeps the marched distance a lower bound).
+    pub fn placed(
+        grid: impl Into<GridStore>,
+        transform: &Transform,
+        material: MaterialId,
+        march: MarchParams,
+        label: String,
+    ) -> Self {
+        let mut g = Self::new(grid, material, march, label);
+        if !transform.identity {
+            g.bounds = transform.box_to_world(&g.bounds);
+            g.size = (g.bounds.max - g.bounds.min).length() as f64;
+            g.placement =
+                Some(Placement { to_local: transform.to_local_f64, scale: transform.min_scale as f64 });
+        }
+        g
     }
 
     /// The grid.
@@ -119,8 +155,22 @@ impl GridObject {
         &self.grid
     }
 
+    /// The interpolated field at world point `p`, world units.
+    fn field(&self, p: DVec3) -> f64 {
+        match &self.placement {
+            None => self.grid.trilinear(p.as_vec3()) as f64,
+            Some(m) => self.grid.trilinear(m.to_local.transform_point3(p).as_vec3()) as f64 * m.scale,
+        }
+    }
+
+    /// The interpolated field at world point `p`, world units (outside the grid's box it is
+    /// continued as a distance bound, see [`SdfGrid::trilinear`]).
+    pub fn field_at(&self, p: DVec3) -> f64 {
+        self.field(p)
+    }
+
     fn distance(&self, p: DVec3) -> f64 {
-        self.grid.trilinear(p.as_vec3()) as f64 * GRID_STEP_SCALE
+        self.field(p) * GRID_STEP_SCALE
     }
 
     fn march(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<MarchHit> {
@@ -140,7 +190,8 @@ impl Geometry for GridObject {
         let eps = self.march.tolerance(t, self.size).max(residual);
         // Half a voxel: the interpolant is piecewise, so smaller steps see cell seams.
         let f = |q: DVec3| self.distance(q);
-        let normal = gradient_normal(&f, p, 0.5 * self.grid.voxel() as f64, stats).as_vec3();
+        let voxel = self.grid.voxel() as f64 * self.placement.map_or(1.0, |m| m.scale);
+        let normal = gradient_normal(&f, p, 0.5 * voxel, stats).as_vec3();
         let point: Vec3 = p.as_vec3();
         Some(Hit {
             t: t as f32,
@@ -170,12 +221,19 @@ impl Geometry for GridObject {
         // narrow band's empty bricks the field is a constant bound (no gradient): there the
         // projection gives up and this returns that bound, a lower bound, not an upper
         // one; hit points (where errors are measured) always lie in stored bricks.
-        let outside = box_distance(&self.bounds, p);
-        let (lo, hi) = (self.bounds.min.as_dvec3(), self.bounds.max.as_dvec3());
-        let q = p.clamp(lo, hi);
+        // A placed grid is measured in its own frame and scaled.
+        let (p, scale) = match &self.placement {
+            None => (p, 1.0),
+            Some(m) => (m.to_local.transform_point3(p), m.scale),
+        };
+        let (lo, hi) = self.grid.bounds();
+        let local_box = aabb(lo, hi);
+        let outside = box_distance(&local_box, p);
+        let q = p.clamp(lo.as_dvec3(), hi.as_dvec3());
         let f = |x: DVec3| self.grid.trilinear(x.as_vec3()) as f64;
         let h = 0.25 * self.grid.voxel() as f64;
-        outside + distance_by_projection(&f, q, h, 1e-6 * self.size)
+        let size = (hi - lo).length() as f64;
+        scale * (outside + distance_by_projection(&f, q, h, 1e-6 * size))
     }
 
     fn describe(&self) -> String {

@@ -391,6 +391,9 @@ pub fn build_objects(scene: &Scene, repr: Representation) -> Vec<Box<dyn Geometr
         .objects
         .iter()
         .map(|o| -> Box<dyn Geometry> {
+            if let ObjectKind::Grid { .. } = &o.kind {
+                return grid_file_geometry(o, repr);
+            }
             let (march, why) = match repr {
                 Representation::Analytic { march } => {
                     if let ObjectKind::Primitive(p) = &o.kind {
@@ -432,6 +435,68 @@ pub fn build_objects(scene: &Scene, repr: Representation) -> Vec<Box<dyn Geometr
             }
         })
         .collect()
+}
+
+/// A grid-file object ([`ObjectKind::Grid`]) in representation `repr`: its surface
+/// extracted at `resolution` cells ([`grid_file_mesh`]) in the mesh representation, the
+/// grid itself ray marched in every other one (stored as a narrow band under
+/// [`GridStorage::Band`]).
+fn grid_file_geometry(o: &Object, repr: Representation) -> Box<dyn Geometry> {
+    let ObjectKind::Grid { grid, source } = &o.kind else { unreachable!("called for grid objects only") };
+    let file =
+        source.file_name().map_or_else(|| source.display().to_string(), |f| f.to_string_lossy().into());
+    let transform = o.compiled_transform();
+    let (march, storage) = match repr {
+        Representation::Mesh { resolution, method, .. } => {
+            if let Some(mesh) = grid_file_mesh(o, resolution, method) {
+                let res = resolution.min(MAX_EXTRACT_RESOLUTION);
+                let label = format!("grid '{}' ({file}) extracted at {res} cells", o.label);
+                return Box::new(MeshGeometry::new(
+                    mesh,
+                    Shading::Flat,
+                    Transform::IDENTITY,
+                    o.material,
+                    label,
+                ));
+            }
+            // No surface in the grid: march it (it will show nothing, honestly).
+            (MarchParams::default(), GridStorage::Dense)
+        }
+        Representation::Grid { storage, march, .. } => (march, storage),
+        Representation::Analytic { march } | Representation::Sdf { march } => (march, GridStorage::Dense),
+    };
+    let label = format!("grid '{}' ({file})", o.label);
+    let store: GridStore = match storage {
+        GridStorage::Band { cells } => match BandGrid::from_dense(grid, cells) {
+            Ok(b) => b.into(),
+            Err(_) => SdfGrid::clone(grid).into(),
+        },
+        GridStorage::Dense => SdfGrid::clone(grid).into(),
+    };
+    Box::new(GridObject::placed(store, &transform, o.material, march, label))
+}
+
+/// The zero level set of a grid-file object's trilinear field, in world space, extracted at
+/// `resolution` cells (at most [`MAX_EXTRACT_RESOLUTION`]) along the longest axis of its
+/// box with marching cubes, or with `method`'s extraction method; `None` for other objects
+/// or when the grid holds no surface.
+pub fn grid_file_mesh(o: &Object, resolution: u32, method: MeshMethod) -> Option<TriangleMesh> {
+    let ObjectKind::Grid { grid, .. } = &o.kind else { return None };
+    let how = match method {
+        MeshMethod::Extracted(m) => m,
+        MeshMethod::Parametric => ExtractMethod::MarchingCubes,
+    };
+    let g = GridObject::placed(
+        SdfGrid::clone(grid),
+        &o.compiled_transform(),
+        o.material,
+        MarchParams::default(),
+        String::new(),
+    );
+    let bounds = g.bounds()?;
+    let mesh =
+        crate::extract::extract(&|p| g.field_at(p), &bounds, resolution.min(MAX_EXTRACT_RESOLUTION), how);
+    (!mesh.triangles.is_empty()).then_some(mesh)
 }
 
 /// Builds the scene geometry in representation `repr`.
@@ -546,6 +611,10 @@ pub fn scene_mesh(scene: &Scene, repr: Representation) -> Option<TriangleMesh> {
                 m.transform(&o.compiled_transform().to_world);
                 m
             }
+            ObjectKind::Grid { .. } => match grid_file_mesh(o, resolution, method) {
+                Some(m) => m,
+                None => continue,
+            },
             _ => match tessellated(scene, o, resolution, shading, method) {
                 Some(g) => g.world_mesh(),
                 None => continue,

@@ -161,10 +161,11 @@ fn contains_triangle(object: &Object) -> bool {
         ObjectKind::Csg { children, .. } => children.iter().any(contains_triangle),
         ObjectKind::Repeat { child, .. } => contains_triangle(child),
         ObjectKind::Mesh { .. } => true,
+        ObjectKind::Grid { .. } => false,
     }
 }
 
-/// Compiles `object`, or `None` when it holds a mesh (meshes have no analytic SDF).
+/// Compiles `object`, or `None` when it holds a mesh or a grid file (no analytic SDF).
 fn compile(object: &Object, exact: &mut bool, count: &mut usize) -> Option<SdfNode> {
     *count += 1;
     let transform = object.compiled_transform();
@@ -172,7 +173,7 @@ fn compile(object: &Object, exact: &mut bool, count: &mut usize) -> Option<SdfNo
         *exact = false;
     }
     Some(match &object.kind {
-        ObjectKind::Mesh { .. } => return None,
+        ObjectKind::Mesh { .. } | ObjectKind::Grid { .. } => return None,
         ObjectKind::Primitive(prim) => {
             if !primitive_is_exact(prim) {
                 *exact = false;

@@ -8,6 +8,7 @@ use std::sync::Arc;
 use glam::{UVec3, Vec3};
 
 use crate::geometry::{Aabb, MaterialId, aabb};
+use crate::grid::SdfGrid;
 use crate::mesh::TriangleMesh;
 use crate::transform::{Transform, TransformDesc};
 
@@ -131,6 +132,15 @@ pub enum ObjectKind {
         /// Flat or smooth shading.
         shading: Shading,
     },
+    /// A signed distance grid loaded from a file (`.sdf` or `.npy`; top level only). Its
+    /// samples are in the object's local frame; the object's scale is uniform (checked when
+    /// the scene is read), so distances scale exactly.
+    Grid {
+        /// The loaded grid (shared, never copied per representation).
+        grid: Arc<SdfGrid>,
+        /// The file it came from.
+        source: PathBuf,
+    },
 }
 
 /// How mesh normals are shaded.
@@ -169,6 +179,7 @@ impl Object {
             ObjectKind::Csg { op, .. } => op.name(),
             ObjectKind::Repeat { .. } => "repeat",
             ObjectKind::Mesh { .. } => "mesh",
+            ObjectKind::Grid { .. } => "grid",
         }
     }
 
@@ -178,6 +189,10 @@ impl Object {
             ObjectKind::Primitive(p) => p.local_bounds()?,
             ObjectKind::Mesh { mesh, .. } => {
                 let (lo, hi) = mesh.bounds()?;
+                aabb(lo, hi)
+            }
+            ObjectKind::Grid { grid, .. } => {
+                let (lo, hi) = grid.bounds();
                 aabb(lo, hi)
             }
             ObjectKind::Csg { op: CsgOp::Intersection | CsgOp::SmoothIntersection { .. }, children } => {

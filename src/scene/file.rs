@@ -26,7 +26,7 @@ use super::{Camera, Light, Material, Scene, Settings};
 use crate::error::{Error, Location, Result};
 use crate::geometry::MaterialId;
 use crate::shape::{CsgOp, Object, ObjectKind, Primitive, Shading};
-use crate::transform::TransformDesc;
+use crate::transform::{Transform, TransformDesc};
 
 /// Largest accepted image width or height, pixels.
 pub const MAX_IMAGE_SIZE: u32 = 16384;
@@ -35,7 +35,7 @@ pub const MAX_IMAGE_SIZE: u32 = 16384;
 pub const MAX_RECURSION_DEPTH: u32 = 100;
 
 /// Every value of an object's `type` key.
-pub const OBJECT_TYPES: [&str; 17] = [
+pub const OBJECT_TYPES: [&str; 18] = [
     "sphere",
     "plane",
     "box",
@@ -53,6 +53,7 @@ pub const OBJECT_TYPES: [&str; 17] = [
     "smooth_intersection",
     "repeat",
     "mesh",
+    "grid",
 ];
 
 /// Every value of a light's `type` key.
@@ -77,6 +78,7 @@ fn object_type_keys(ty: &str) -> Option<&'static [&'static str]> {
         "smooth_union" | "smooth_subtraction" | "smooth_intersection" => &["children", "blend"],
         "repeat" => &["period", "count", "child"],
         "mesh" => &["path", "shading"],
+        "grid" => &["path"],
         _ => return None,
     })
 }
@@ -919,6 +921,39 @@ impl Cx<'_> {
             });
         }
 
+        if ty == "grid" {
+            let file = req_str(&o.path, "path")?;
+            if at.contains(".child") {
+                return Err(self.err(
+                    o.kind.span(),
+                    format!(
+                        "{at}: a grid can only be a top-level object (grid files do not take part in CSG)"
+                    ),
+                ));
+            }
+            if let Some(sc) = &o.scale
+                && !Transform::new(&transform).is_uniform()
+            {
+                return Err(self.err(
+                    sc.span(),
+                    format!(
+                        "{}: a grid's scale must be the same on every axis (its samples are distances)",
+                        w("scale")
+                    ),
+                ));
+            }
+            // Relative to the scene file's folder.
+            let source = self.path.parent().unwrap_or(Path::new("")).join(file.get_ref());
+            let grid = crate::grid::io::load_grid(&source)?;
+            let material = material.unwrap_or_else(|| materials.default_id());
+            return Ok(Object {
+                kind: ObjectKind::Grid { grid: Arc::new(grid), source },
+                transform,
+                material,
+                label,
+            });
+        }
+
         let kind = if ty == "repeat" {
             let period = req_v3(&o.period, "period")?;
             let pv = period.get_ref().0;
@@ -997,8 +1032,8 @@ impl Cx<'_> {
         let material = material.unwrap_or(match &kind {
             ObjectKind::Csg { children, .. } => children[0].material,
             ObjectKind::Repeat { child, .. } => child.material,
-            ObjectKind::Primitive(_) | ObjectKind::Mesh { .. } => {
-                unreachable!("primitives and meshes returned above")
+            ObjectKind::Primitive(_) | ObjectKind::Mesh { .. } | ObjectKind::Grid { .. } => {
+                unreachable!("primitives, meshes and grids returned above")
             }
         });
         Ok(Object { kind, transform, material, label })

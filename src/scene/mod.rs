@@ -132,13 +132,33 @@ pub fn mesh_preview_scene(
     shading: crate::shape::Shading,
 ) -> Scene {
     let (lo, hi) = mesh.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::ONE));
+    preview_scene(crate::shape::ObjectKind::Mesh { mesh, source, shading }, lo, hi)
+}
+
+/// The preview scene of [`mesh_preview_scene`] for a signed distance grid file (`toolkit
+/// render GRID_FILE`), framing the grid's box.
+pub fn grid_preview_scene(grid: std::sync::Arc<crate::grid::SdfGrid>, source: std::path::PathBuf) -> Scene {
+    let (lo, hi) = grid.bounds();
+    preview_scene(crate::shape::ObjectKind::Grid { grid, source }, lo, hi)
+}
+
+/// One object of `kind` within `lo..hi`, seen by the preview camera and lights.
+fn preview_scene(kind: crate::shape::ObjectKind, lo: Vec3, hi: Vec3) -> Scene {
     let centre = 0.5 * (lo + hi);
     let radius = (0.5 * (hi - lo).length()).max(1e-6);
     let fov_y_deg: f32 = 40.0;
     let distance = radius / (0.5 * fov_y_deg).to_radians().sin() * 1.05;
     let view = Vec3::new(0.35, 0.3, 1.0).normalize();
     let position = centre + view * distance;
-    let label = source.file_name().map_or_else(|| "mesh".into(), |n| n.to_string_lossy().into_owned());
+    let source = match &kind {
+        crate::shape::ObjectKind::Mesh { source, .. } | crate::shape::ObjectKind::Grid { source, .. } => {
+            Some(source)
+        }
+        _ => None,
+    };
+    let label = source
+        .and_then(|s| s.file_name())
+        .map_or_else(|| "preview".into(), |n| n.to_string_lossy().into_owned());
     Scene {
         camera: Camera { position, forward: -view, up: Vec3::Y, fov_y_deg, width: 500, height: 500 },
         settings: Settings { max_distance: 4.0 * distance + 4.0 * radius, ..Settings::default() },
@@ -163,7 +183,7 @@ pub fn mesh_preview_scene(
             ..Material::default()
         }],
         objects: vec![Object {
-            kind: crate::shape::ObjectKind::Mesh { mesh, source, shading },
+            kind,
             transform: crate::transform::TransformDesc::default(),
             material: 0,
             label,
