@@ -10,13 +10,14 @@ use std::time::Instant;
 
 use glam::UVec3;
 
+use crate::budget::{MemoryBudget, extraction_bytes, mesh_to_grid_bytes, scene_bytes};
 use crate::error::{Error, Result};
 use crate::extract::{ExtractMethod, extract_object};
 use crate::geometry::Geometry;
 use crate::grid::band::{BRICK, BandGrid};
 use crate::grid::io::{load_grid, save_grid};
 use crate::grid::voxelize::voxelize_mesh;
-use crate::grid::{DEFAULT_MAX_GRID_BYTES, check_size, sample_mesh};
+use crate::grid::{DEFAULT_MAX_GRID_BYTES, check_size, grid_layout, sample_mesh};
 use crate::mesh::{MeshFormat, TriangleMesh, load_mesh, save_mesh};
 use crate::render::{Frame, render, write_png};
 use crate::repr::GridFill;
@@ -121,6 +122,8 @@ pub struct RenderOptions {
     pub overrides: Overrides,
     /// Shading of a mesh given instead of a scene file.
     pub shading: Shading,
+    /// Memory the geometry may need (checked before it is built).
+    pub budget: MemoryBudget,
 }
 
 /// A rendered scene with a printable summary.
@@ -188,9 +191,16 @@ pub fn render_command(opts: &RenderOptions) -> Result<RenderReport> {
     check_repr(&opts.repr)?;
     let mut scene = load_scene_or_mesh(&opts.scene, opts.shading)?;
     opts.overrides.apply(&mut scene)?;
+    check_budget(&opts.budget, &scene, opts.repr, &opts.scene)?;
     let report = render_scene(&scene, opts.repr);
     write_png(&report.frame.image, &opts.output)?;
     Ok(report)
+}
+
+/// Fails when `scene` in `repr` would need more memory than `budget` allows.
+fn check_budget(budget: &MemoryBudget, scene: &Scene, repr: Representation, path: &Path) -> Result<()> {
+    let what = format!("the {} representation of {}", repr.name(), path.display());
+    budget.check(&what, scene_bytes(scene, repr))
 }
 
 /// `toolkit gallery`: renders every `*.toml` scene in `scenes` in each of `reprs` into `out`
@@ -200,6 +210,7 @@ pub fn gallery_command(
     out: &Path,
     reprs: &[Representation],
     overrides: Overrides,
+    budget: MemoryBudget,
 ) -> Result<String> {
     for r in reprs {
         check_repr(r)?;
@@ -218,6 +229,9 @@ pub fn gallery_command(
     for f in &files {
         let mut scene = load_scene(f)?;
         overrides.apply(&mut scene)?;
+        for &repr in reprs {
+            check_budget(&budget, &scene, repr, f)?;
+        }
         loaded.push((f, scene));
     }
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
@@ -254,7 +268,12 @@ pub const MAX_CONVERT_MESH_RESOLUTION: u32 = 1024;
 /// `toolkit convert`: a mesh file to an SDF grid (`.sdf`, `.npy`, `.vti`), or a scene file to
 /// a triangle mesh (`.obj`, `.ply`, `.glb`). Checks the request before any work, writes the
 /// output through a temporary file, and returns a report.
-pub fn convert_command(input: &Path, output: &Path, target: ConvertTarget) -> Result<String> {
+pub fn convert_command(
+    input: &Path,
+    output: &Path,
+    target: ConvertTarget,
+    budget: MemoryBudget,
+) -> Result<String> {
     let start = Instant::now();
     match target {
         ConvertTarget::Grid { res, margin, fill, band } => {
@@ -262,6 +281,12 @@ pub fn convert_command(input: &Path, output: &Path, target: ConvertTarget) -> Re
                 return Err(Error::Usage("--res must be at least 1".into()));
             }
             let (mesh, report) = load_mesh(input)?;
+            if let Some((lo, hi)) = mesh.bounds() {
+                let (_, _, dims) = grid_layout(lo, hi, res, margin)?;
+                let what =
+                    format!("a grid of {}x{}x{} samples for {}", dims.x, dims.y, dims.z, input.display());
+                budget.check(&what, mesh_to_grid_bytes(mesh.triangles.len(), dims, fill))?;
+            }
             let load = start.elapsed();
             let grid = match fill {
                 GridFill::Sample => sample_mesh(&mesh, res, margin)?,
@@ -314,6 +339,7 @@ pub fn convert_command(input: &Path, output: &Path, target: ConvertTarget) -> Re
                 )));
             }
             check_size(UVec3::splat(res + 3), DEFAULT_MAX_GRID_BYTES)?;
+            budget.check(&format!("extracting at {res} cells"), extraction_bytes(res, method))?;
             let scene = load_scene(input)?;
             let mut out = TriangleMesh::default();
             let mut text = String::new();

@@ -6,6 +6,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod analytic;
+pub mod budget;
 pub mod bvh;
 pub mod camera;
 pub mod commands;

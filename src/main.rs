@@ -4,6 +4,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use sdfmesh::budget::MemoryBudget;
 use sdfmesh::commands::{self, ConvertTarget, Overrides};
 use sdfmesh::extract::ExtractMethod;
 use sdfmesh::march::MarchParams;
@@ -19,12 +20,18 @@ use sdfmesh::shape::Shading;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Memory a request may use, e.g. 4GiB or 512MB (default: half of physical memory).
+    /// Grids, extractions and meshes that would need more fail at once, before any work.
+    #[arg(long, global = true, value_name = "SIZE")]
+    max_memory: Option<MemoryBudget>,
 }
 
 #[derive(Subcommand)]
 enum Command {
-    /// Render a scene file, or a mesh file (OBJ, glTF, GLB, PLY, STL) framed by a default
-    /// camera and lights, to a PNG with one representation.
+    /// Render a scene file, or a mesh file (OBJ, glTF, GLB, PLY, STL) or a signed distance
+    /// grid file (.sdf, .npy) framed by a default camera and lights, to a PNG with one
+    /// representation.
+    #[command(allow_negative_numbers = true)]
     Render {
         /// Scene file (TOML, see docs/scene-format.md) or mesh file.
         scene: PathBuf,
@@ -43,6 +50,7 @@ enum Command {
     },
     /// Convert a mesh file (OBJ, glTF, GLB, PLY, STL) to a signed distance grid (.sdf, .npy,
     /// .vti), or a scene file's SDF objects to a triangle mesh (.obj, .ply, .glb).
+    #[command(allow_negative_numbers = true)]
     Convert {
         /// Mesh file (--to grid) or scene file (--to mesh).
         input: PathBuf,
@@ -72,6 +80,7 @@ enum Command {
     /// Render scenes and meshes in every representation across a resolution sweep and write
     /// one CSV row per run (error, frame time, build time, bytes; schema in the README), then
     /// print which representation is fastest and smallest at each error threshold.
+    #[command(allow_negative_numbers = true)]
     Compare {
         /// Scene files and mesh files (default: every scene in data/scenes and
         /// ../shared/meshes/stanford-bunny.obj where it exists).
@@ -122,6 +131,7 @@ enum Command {
         march: MarchArgs,
     },
     /// Render every scene of a folder in every representation into an output folder.
+    #[command(allow_negative_numbers = true)]
     Gallery {
         /// Folder of scene files.
         #[arg(default_value = "data/scenes")]
@@ -278,6 +288,7 @@ impl MarchArgs {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    let budget = cli.max_memory.unwrap_or_else(MemoryBudget::machine_default);
     let result = match cli.command {
         Command::Render { scene, output, repr, mesh, settings, march } => {
             let opts = commands::RenderOptions {
@@ -286,6 +297,7 @@ fn main() -> ExitCode {
                 repr: representation(repr, &mesh, march.params()),
                 overrides: settings.overrides(),
                 shading: mesh.shading(),
+                budget,
             };
             commands::render_command(&opts).map(|r| print!("{}", r.text))
         }
@@ -300,7 +312,7 @@ fn main() -> ExitCode {
                     },
                 },
             };
-            commands::convert_command(&input, &output, target).map(|t| print!("{t}"))
+            commands::convert_command(&input, &output, target, budget).map(|t| print!("{t}"))
         }
         Command::Compare {
             inputs,
@@ -347,6 +359,7 @@ fn main() -> ExitCode {
                             artifacts,
                             surface_samples,
                             progress: !quiet,
+                            budget,
                         })
                     })
                     .map(|t| print!("{t}"))
@@ -356,7 +369,8 @@ fn main() -> ExitCode {
             let reprs: Vec<Representation> = [Repr::Analytic, Repr::Sdf, Repr::Mesh, Repr::Grid]
                 .map(|r| representation(r, &mesh, march.params()))
                 .into();
-            commands::gallery_command(&scenes, &output, &reprs, settings.overrides()).map(|t| print!("{t}"))
+            commands::gallery_command(&scenes, &output, &reprs, settings.overrides(), budget)
+                .map(|t| print!("{t}"))
         }
     };
     match result {

@@ -23,6 +23,7 @@ use glam::DVec3;
 use image::RgbImage;
 use serde::{Deserialize, Serialize};
 
+use crate::budget::{MemoryBudget, extraction_bytes, mesh_to_grid_bytes, scene_bytes};
 use crate::commands::{Overrides, check_repr, load_scene_or_mesh};
 use crate::error::{Error, Result};
 use crate::extract::{ExtractMethod, extract};
@@ -191,6 +192,8 @@ pub struct CompareOptions {
     pub surface_samples: usize,
     /// Show a progress bar on stderr.
     pub progress: bool,
+    /// Runs whose estimated memory exceeds this are skipped with a message.
+    pub budget: MemoryBudget,
 }
 
 /// The default inputs: every scene in `data/scenes` (sorted) and the Stanford bunny from
@@ -356,7 +359,17 @@ struct Built {
     grid: Option<SdfGrid>,
 }
 
-fn build(scene: &Scene, b: Build) -> Result<Built> {
+fn build(scene: &Scene, b: Build, budget: &MemoryBudget) -> Result<Built> {
+    let need = match b {
+        Build::Scene(repr) => scene_bytes(scene, repr),
+        Build::Reextract { fill, resolution } => {
+            let dims = glam::UVec3::splat(resolution + 1 + 2 * crate::repr::GRID_MARGIN_CELLS);
+            let triangles = mesh_input(scene).map_or(0, |m| m.triangles.len());
+            mesh_to_grid_bytes(triangles, dims, fill)
+                .saturating_add(extraction_bytes(resolution, ExtractMethod::MarchingCubes))
+        }
+    };
+    budget.check("this run", need)?;
     let start = Instant::now();
     match b {
         Build::Scene(repr) => {
@@ -695,7 +708,7 @@ fn measure(
     reference: &mut Option<Reference>,
 ) -> Result<Row> {
     reset_peak_rss();
-    let built = build(scene, run.build)?;
+    let built = build(scene, run.build, &opts.budget)?;
     let (timing, frame) = time_frames(scene, &built.geometry, opts.frames);
     let peak = peak_rss_bytes();
     let probe = metrics::probe(&scene.camera, &built.geometry, scene.settings.max_distance);
