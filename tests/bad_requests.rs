@@ -62,7 +62,7 @@ fn sdf_file(magic: &[u8; 8], version: u32, dims: [u32; 3], voxel: f32, samples: 
 /// A `.npy` file with the given header dictionary and payload.
 fn npy_file(dict: &str, payload: &[u8]) -> Vec<u8> {
     let mut header = dict.to_owned();
-    while (10 + header.len() + 1) % 64 != 0 {
+    while !(10 + header.len() + 1).is_multiple_of(64) {
         header.push(' ');
     }
     header.push('\n');
