@@ -2,13 +2,10 @@
 with the right volume and surface area: every example scene, CSG of a sphere, a box and a
 cylinder against manifold3d's own CSG, and single primitives against closed-form formulas.
 
-The toolkit binary is $SDFMESH_TOOLKIT, else <repo>/target/debug/toolkit, built with
-`cargo build --bin toolkit` first (cargo does nothing when it is up to date).
+The toolkit binary comes from the `toolkit` fixture in conftest.py.
 """
 
 import math
-import os
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -29,23 +26,6 @@ SEGMENTS = 512  # manifold3d's polygonal spheres and cylinders: volume error ~ 1
 VOLUME_TOLERANCE = {16: 0.04, 32: 0.01, 64: 0.003}
 AREA_TOLERANCE = {16: 0.12, 32: 0.05, 64: 0.03}
 TOLERANCE = AREA_TOLERANCE  # the resolutions tested
-
-
-@pytest.fixture(scope="session")
-def toolkit():
-    env = os.environ.get("SDFMESH_TOOLKIT")
-    if env:
-        path = Path(env)
-        assert path.is_file(), f"SDFMESH_TOOLKIT={env} does not exist"
-        return path
-    path = REPO / "target" / "debug" / "toolkit"
-    if shutil.which("cargo"):
-        r = subprocess.run(["cargo", "build", "--quiet", "--bin", "toolkit"], cwd=REPO,
-                           capture_output=True, text=True)
-        if r.returncode != 0 and not path.is_file():
-            pytest.fail(f"cargo build failed and there is no {path}:\n{r.stderr[-3000:]}")
-    assert path.is_file(), f"no toolkit binary at {path}; run cargo build"
-    return path
 
 
 def read_ply(path: Path):
