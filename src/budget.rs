@@ -215,7 +215,8 @@ mod tests {
     fn estimates_grow_with_resolution() {
         let a = extraction_bytes(64, ExtractMethod::MarchingCubes);
         let b = extraction_bytes(128, ExtractMethod::MarchingCubes);
-        assert!(b > 7 * a && b < 9 * a, "{a} {b}");
+        // The grid grows as res^3, the mesh bound as res^2.
+        assert!(b > 4 * a && b < 8 * a, "{a} {b}");
         assert!(extraction_bytes(64, ExtractMethod::DualContouring) > a);
         assert_eq!(mesh_to_grid_bytes(0, UVec3::splat(10), GridFill::Sample), 4000);
         assert_eq!(mesh_to_grid_bytes(0, UVec3::splat(10), GridFill::Voxelize), 13000);

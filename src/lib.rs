@@ -16,6 +16,7 @@ pub mod extract;
 pub mod geometry;
 pub mod grid;
 pub mod grid_geometry;
+pub mod hard;
 pub mod march;
 pub mod mesh;
 pub mod mesh_geometry;

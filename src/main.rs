@@ -130,6 +130,17 @@ enum Command {
         #[command(flatten)]
         march: MarchArgs,
     },
+    /// Run the hard-case suite: every case of a manifest (default data/hard/cases.toml) in
+    /// every representation against the reference; prints a Markdown table and exits 1
+    /// when an outcome is not the one the manifest expects.
+    Hard {
+        /// The manifest.
+        #[arg(default_value = "data/hard/cases.toml")]
+        manifest: PathBuf,
+        /// Also write the table here.
+        #[arg(long)]
+        table: Option<PathBuf>,
+    },
     /// Render every scene of a folder in every representation into an output folder.
     #[command(allow_negative_numbers = true)]
     Gallery {
@@ -365,6 +376,16 @@ fn main() -> ExitCode {
                     .map(|t| print!("{t}"))
             }
         }
+        Command::Hard { manifest, table } => match sdfmesh::hard::hard_command(&manifest, table.as_deref()) {
+            Ok((text, as_expected)) => {
+                print!("{text}");
+                if !as_expected {
+                    return ExitCode::from(1);
+                }
+                Ok(())
+            }
+            Err(e) => Err(e),
+        },
         Command::Gallery { scenes, output, mesh, settings, march } => {
             let reprs: Vec<Representation> = [Repr::Analytic, Repr::Sdf, Repr::Mesh, Repr::Grid]
                 .map(|r| representation(r, &mesh, march.params()))

@@ -381,7 +381,7 @@ def _blank_lines_around_headings(text: str) -> str:
 
 
 def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, commands=None,
-                 invocation=None) -> Path:
+                 invocation=None, hard=None) -> Path:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rows = data.read_csv(csv_path)
@@ -522,6 +522,13 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
     L.append("Generated from the numbers above, one paragraph per kind of scene.\n\n")
     L.append(answer_section(rows, scaling_rows, tests))
 
+    if hard and Path(hard).is_file():
+        L.append("\n## Hard cases\n\n")
+        L.append("Which numerically hard cases each representation passes (`toolkit hard`, "
+                 "data/hard/README.md explains each case and each known limit), measured in this "
+                 "run at 96x96 against the analytic reference:\n\n")
+        L.append(Path(hard).read_text().rstrip() + "\n")
+
     L.append("\n## Plots\n\n")
     if images:
         for p in images:
@@ -543,10 +550,11 @@ def main(argv=None) -> int:
     ap.add_argument("--artifacts", help="artifacts folder (toolkit compare --artifacts)")
     ap.add_argument("--out", required=True, help="output folder, e.g. reports/2026-11-22/")
     ap.add_argument("--commands", help="the exact commands that produced the CSVs, quoted into the report")
+    ap.add_argument("--hard", help="hard-case table (toolkit hard --table) to include")
     a = ap.parse_args(argv)
     argv = sys.argv[1:] if argv is None else list(argv)
     write_report(a.csv, a.out, a.scaling, a.summary, a.artifacts, a.commands,
-                 invocation="python -m sdfmesh_tools.report " + shlex.join(argv))
+                 invocation="python -m sdfmesh_tools.report " + shlex.join(argv), hard=a.hard)
     return 0
 
 

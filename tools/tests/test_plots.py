@@ -203,6 +203,13 @@ def test_missing_columns_and_rows_do_not_crash(tmp_path):
     write_csv(empty, [], data.COMPARE_COLUMNS)
     report.write_report(empty, tmp_path / "out2")
     assert (tmp_path / "out2" / "REPORT.md").is_file()
+    assert "## Hard cases" not in (tmp_path / "out2" / "REPORT.md").read_text()
+    # the hard-case table (toolkit hard --table) goes in verbatim
+    hard = tmp_path / "hard.md"
+    hard.write_text("| case | representation |\n|---|---|\n| thin_features | grid |\n")
+    report.write_report(empty, tmp_path / "out3", hard=hard)
+    text = (tmp_path / "out3" / "REPORT.md").read_text()
+    assert "## Hard cases" in text and "| thin_features | grid |" in text
 
 
 def test_ratio_ci_covers_the_true_ratio():
