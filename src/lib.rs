@@ -21,6 +21,7 @@ pub mod march;
 pub mod mesh;
 pub mod mesh_geometry;
 pub mod metrics;
+pub mod progress;
 pub mod render;
 pub mod repr;
 pub mod scene;

@@ -1,0 +1,87 @@
+//! Progress of long conversions on the terminal: a bar on stderr (indicatif) for the stage
+//! a command is in, shown only when the command asked for it ([`Stage::start`] with
+//! `show`) and stderr is a terminal; nothing otherwise.
+//!
+//! Work loops deep in the library report with [`advance`] (a few calls per z-slice or
+//! chunk, never per sample), so they need no progress parameter: while no stage is shown,
+//! [`advance`] is a relaxed atomic load and a return.
+
+use std::io::IsTerminal;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// Whether a bar is shown (checked before taking the lock).
+static ACTIVE: AtomicBool = AtomicBool::new(false);
+/// The bar of the current stage.
+static BAR: Mutex<Option<ProgressBar>> = Mutex::new(None);
+
+/// A stage of a command whose progress is shown while it lives; the bar is cleared when it
+/// is dropped.
+pub struct Stage {
+    shown: bool,
+}
+
+impl Stage {
+    /// Starts a stage of `total` units of work called `label`; a bar is drawn when `show`
+    /// is true and stderr is a terminal.
+    pub fn start(label: &str, total: u64, show: bool) -> Stage {
+        if !show || !std::io::stderr().is_terminal() {
+            return Stage { shown: false };
+        }
+        let bar = ProgressBar::new(total);
+        if let Ok(style) = ProgressStyle::with_template("{msg} [{bar:30}] {percent:>3}% {elapsed} ETA {eta}") {
+            bar.set_style(style.progress_chars("=> "));
+        }
+        bar.set_message(label.to_owned());
+        if let Ok(mut b) = BAR.lock() {
+            *b = Some(bar);
+            ACTIVE.store(true, Ordering::Release);
+        }
+        Stage { shown: true }
+    }
+}
+
+impl Drop for Stage {
+    fn drop(&mut self) {
+        if !self.shown {
+            return;
+        }
+        ACTIVE.store(false, Ordering::Release);
+        if let Ok(mut b) = BAR.lock()
+            && let Some(bar) = b.take()
+        {
+            bar.finish_and_clear();
+        }
+    }
+}
+
+/// Records `n` more units of the current stage's work (no-op when no bar is shown).
+#[inline]
+pub fn advance(n: u64) {
+    if !ACTIVE.load(Ordering::Relaxed) {
+        return;
+    }
+    if let Ok(b) = BAR.lock()
+        && let Some(bar) = b.as_ref()
+    {
+        bar.inc(n);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hidden_stages_cost_nothing_and_never_draw() {
+        // Under the test harness stderr is not a terminal: nothing is shown.
+        let stage = Stage::start("sampling", 10, true);
+        assert!(!stage.shown);
+        assert!(!ACTIVE.load(Ordering::Relaxed));
+        advance(5);
+        drop(stage);
+        assert!(BAR.lock().unwrap().is_none());
+    }
+}
