@@ -407,14 +407,14 @@ impl TriangleBvh {
             // The children within the bound, nearest first.
             let mut order = [(0.0f32, 0u32); 4];
             let mut count = 0;
-            for c in 0..4 {
-                if d2[c] <= best2 {
+            for (&dc, &child) in d2.iter().zip(&n.child) {
+                if dc <= best2 {
                     let mut at = count;
-                    while at > 0 && order[at - 1].0 > d2[c] {
+                    while at > 0 && order[at - 1].0 > dc {
                         order[at] = order[at - 1];
                         at -= 1;
                     }
-                    order[at] = (d2[c], n.child[c]);
+                    order[at] = (dc, child);
                     count += 1;
                 }
             }

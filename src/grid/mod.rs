@@ -458,17 +458,17 @@ fn fill_by_regions(grid: &mut SdfGrid, tree: &TriangleBvh, wind: &FastWinding, c
     let mut parent: Vec<u32> = (0..n as u32).collect();
     parent.par_chunks_mut(slice).zip(links.par_chunks(slice)).enumerate().for_each(|(k, (par, l))| {
         let base = k * slice;
-        for s in 0..slice {
-            if l[s] & 1 != 0 {
+        for (s, &bits) in l.iter().enumerate() {
+            if bits & 1 != 0 {
                 union(par, base, base + s, base + s + 1);
             }
-            if l[s] & 2 != 0 {
+            if bits & 2 != 0 {
                 union(par, base, base + s, base + s + nx);
             }
         }
     });
-    for s in 0..n.saturating_sub(slice) {
-        if links[s] & 4 != 0 {
+    for (s, &bits) in links[..n.saturating_sub(slice)].iter().enumerate() {
+        if bits & 4 != 0 {
             union(&mut parent, 0, s, s + slice);
         }
     }
