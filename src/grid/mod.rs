@@ -9,12 +9,17 @@
 //! [`sample_mesh`] fills a grid from a [`TriangleMesh`]: the exact unsigned distance to
 //! the nearest triangle ([`closest`], a BVH closest-point query started from the previous
 //! sample's nearest triangle and bounded by its distance plus the step) times the sign
-//! from the generalized winding number ([`winding`], Barill et al.'s fast approximation;
-//! inside where it is `>= 0.5`). The winding number only decides the sign; it never scales
-//! the distance. This works for open meshes and soups too (the sign then follows the
-//! winding number's `0.5` level set). Samples well inside a neighbour's empty ball reuse
-//! its sign instead of evaluating the winding number again (exact for closed meshes; see
-//! `fill`). Z-slices are filled in parallel with rayon, each in serpentine order.
+//! from the generalized winding number ([`winding`]; inside where it is `>= 0.5`). The
+//! winding number only decides the sign; it never scales the distance. This works for open
+//! meshes and soups too (the sign then follows the winding number's `0.5` level set).
+//!
+//! Signs are found by regions (`fill_by_regions`): the mesh's holes are closed by cap
+//! triangles ([`winding::Caps`]), neighbouring samples whose connecting segment provably
+//! misses the mesh and the caps are linked, and the (integer) winding number of the capped
+//! mesh is evaluated once per linked component; each sample's winding number is that
+//! integer minus the caps' exact winding number. Meshes with very many holes (soups) reuse
+//! winding numbers along the scan instead (`fill`). Z-slices are filled in parallel with
+//! rayon, each in serpentine order.
 
 pub mod band;
 pub mod closest;
@@ -24,14 +29,14 @@ pub mod winding;
 
 use std::time::{Duration, Instant};
 
-use glam::{UVec3, Vec3};
+use glam::{UVec3, Vec3, Vec3A};
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::mesh::TriangleMesh;
 
 use closest::{NodeStack, TriangleBvh};
-use winding::FastWinding;
+use winding::{Caps, FastWinding};
 
 /// The default limit on a grid's sample memory (8 GiB) used by [`SdfGrid::for_bounds`]
 /// and [`sample_mesh`].
@@ -276,7 +281,12 @@ pub fn sample_mesh_with_stats(
     let build_time = start.elapsed();
     let start = Instant::now();
     let closed = winding::is_closed(mesh);
-    let stats = fill(&mut grid, &tree, &wind, closed);
+    let caps = Caps::new(mesh);
+    let stats = if caps.triangles.len() <= MAX_CAP_TRIANGLES {
+        fill_by_regions(&mut grid, &tree, &wind, &caps)
+    } else {
+        fill(&mut grid, &tree, &wind, closed)
+    };
     Ok((grid, SampleStats { build_time, fill_time: start.elapsed(), closed, ..stats }))
 }
 
@@ -322,6 +332,219 @@ fn fill(grid: &mut SdfGrid, tree: &TriangleBvh, wind: &FastWinding, closed: bool
             winding_evaluations: a.winding_evaluations + b.winding_evaluations,
             ..SampleStats::default()
         })
+}
+
+/// Meshes whose holes need more cap triangles than this are signed by [`fill`]'s reuse of
+/// winding numbers instead of [`fill_by_regions`].
+const MAX_CAP_TRIANGLES: usize = 4096;
+
+/// Sums the work counters of two partial results.
+fn add_stats(a: SampleStats, b: SampleStats) -> SampleStats {
+    SampleStats {
+        samples: a.samples + b.samples,
+        closest_nodes: a.closest_nodes + b.closest_nodes,
+        winding_nodes: a.winding_nodes + b.winding_nodes,
+        winding_evaluations: a.winding_evaluations + b.winding_evaluations,
+        ..SampleStats::default()
+    }
+}
+
+/// Fills every sample of `grid` with the signed distance to `tree`'s triangles, signing
+/// by regions (exact up to the winding number of one point per region):
+///
+/// 1. Unsigned distances, z-slices in parallel, each in serpentine order.
+/// 2. Two neighbouring samples `p`, `q` are linked when the segment between them cannot
+///    meet the mesh or its `caps` ([`Caps`]): when the lower bounds of their distances to
+///    both sum to more than `|p - q|` (a point of the segment on the surface would be
+///    closer to one of them), or else when an exact, conservative segment test
+///    ([`TriangleBvh::axis_segment_may_meet`]) finds no triangle near it.
+/// 3. The winding number `W` of the mesh with its caps is an integer, constant off both
+///    in every connected region (the caps close the mesh as a chain), so it is the same
+///    at all samples of a linked component: it is evaluated once per component, at its
+///    sample farthest from the mesh, as the fast winding number of the mesh plus the caps'
+///    exact one, rounded (a component where that sum is not within `0.25` of an integer
+///    falls back to evaluating every sample's fast winding number).
+/// 4. Each sample's winding number is `W - w_caps` (exact): inside where it is `>= 0.5`.
+///    Away from the holes `|w_caps| < 0.5` is certain from a bound, and then the sample is
+///    inside iff `W >= 1`.
+///
+/// For a closed mesh there are no caps and the signs are those of `W` per component.
+fn fill_by_regions(grid: &mut SdfGrid, tree: &TriangleBvh, wind: &FastWinding, caps: &Caps) -> SampleStats {
+    let (nx, ny, nz) = (grid.dims.x as usize, grid.dims.y as usize, grid.dims.z as usize);
+    let slice = nx * ny;
+    let n = slice * nz;
+    let (origin, voxel) = (grid.origin, grid.voxel);
+    let position =
+        move |i: usize, j: usize, k: usize| origin + voxel * Vec3::new(i as f32, j as f32, k as f32);
+
+    // 1. Unsigned distances.
+    let mut stats = grid
+        .values
+        .par_chunks_mut(slice)
+        .enumerate()
+        .map(|(k, out)| {
+            let mut sampler = MeshSampler::new(tree, wind, false);
+            for j in 0..ny {
+                for step in 0..nx {
+                    let i = if j % 2 == 0 { step } else { nx - 1 - step };
+                    out[i + nx * j] = sampler.unsigned(position(i, j, k));
+                }
+            }
+            sampler.stats.samples = slice as u64;
+            sampler.stats
+        })
+        .reduce(SampleStats::default, add_stats);
+
+    // 2. Links: bit `a` of `links[s]` links sample `s` to its neighbour along axis `a`.
+    let dist = &grid.values;
+    // The largest distance between neighbouring samples (rounding of the positions).
+    let extent = origin.abs().max(origin.abs() + voxel * grid.dims.as_vec3()).max_element();
+    let step = voxel * (1.0 + 1e-3) + 8.0 * f32::EPSILON * extent;
+    let eps = 1e-4 * voxel + 8.0 * f32::EPSILON * extent;
+    // Lower bound on the distance to the mesh and the caps (shrunk for rounding).
+    let lower = |s: usize, p: Vec3A| (dist[s] * (1.0 - 1e-5)).min(caps.lower_distance(p, step));
+    let mut links = vec![0u8; n];
+    links.par_chunks_mut(slice).enumerate().for_each_init(
+        || Vec::with_capacity(64),
+        |stack, (k, out)| {
+            for j in 0..ny {
+                for i in 0..nx {
+                    let s = i + nx * j + slice * k;
+                    let p = Vec3A::from(position(i, j, k));
+                    let dp = lower(s, p);
+                    let mut bits = 0u8;
+                    for (axis, ok, stride) in
+                        [(0, i + 1 < nx, 1), (1, j + 1 < ny, nx), (2, k + 1 < nz, slice)]
+                    {
+                        if !ok {
+                            continue;
+                        }
+                        let q = Vec3A::from(position(
+                            i + (axis == 0) as usize,
+                            j + (axis == 1) as usize,
+                            k + (axis == 2) as usize,
+                        ));
+                        let linked = dp + lower(s + stride, q) > step || {
+                            let end = q[axis];
+                            !tree.axis_segment_may_meet(p, axis, end, eps, stack)
+                                && !caps.axis_segment_may_meet(p, axis, end, eps)
+                        };
+                        bits |= (linked as u8) << axis;
+                    }
+                    out[i + nx * j] = bits;
+                }
+            }
+        },
+    );
+
+    // Union-find with `parent[s] <= s` (roots are their components' smallest samples).
+    fn find(parent: &mut [u32], base: usize, mut x: usize) -> usize {
+        loop {
+            let p = parent[x - base] as usize;
+            if p == x {
+                return x;
+            }
+            let gp = parent[p - base];
+            parent[x - base] = gp;
+            x = gp as usize;
+        }
+    }
+    fn union(parent: &mut [u32], base: usize, a: usize, b: usize) {
+        let (ra, rb) = (find(parent, base, a), find(parent, base, b));
+        if ra != rb {
+            parent[ra.max(rb) - base] = ra.min(rb) as u32;
+        }
+    }
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    parent.par_chunks_mut(slice).zip(links.par_chunks(slice)).enumerate().for_each(|(k, (par, l))| {
+        let base = k * slice;
+        for (s, &bits) in l.iter().enumerate() {
+            if bits & 1 != 0 {
+                union(par, base, base + s, base + s + 1);
+            }
+            if bits & 2 != 0 {
+                union(par, base, base + s, base + s + nx);
+            }
+        }
+    });
+    for (s, &bits) in links[..n.saturating_sub(slice)].iter().enumerate() {
+        if bits & 4 != 0 {
+            union(&mut parent, 0, s, s + slice);
+        }
+    }
+    drop(links);
+    // Roots, and per root the sample farthest from the mesh.
+    let mut far: Vec<u32> = vec![u32::MAX; n];
+    for s in 0..n {
+        let r = parent[parent[s] as usize];
+        parent[s] = r;
+        let f = &mut far[r as usize];
+        if *f == u32::MAX || dist[s] > dist[*f as usize] {
+            *f = s as u32;
+        }
+    }
+
+    // 3. W per component.
+    const FALLBACK: i32 = i32::MIN;
+    let coords = |s: usize| (s % nx, (s / nx) % ny, s / slice);
+    let roots: Vec<u32> = (0..n as u32).filter(|&s| parent[s as usize] == s).collect();
+    let evaluated: Vec<(u32, i32, u64)> = roots
+        .par_iter()
+        .map_init(
+            || Vec::with_capacity(256),
+            |stack, &r| {
+                let (i, j, k) = coords(far[r as usize] as usize);
+                let p = position(i, j, k);
+                let mut nodes = 0;
+                let w =
+                    wind.winding_for_sign(tree, p, stack, &mut nodes) + caps.winding_number(Vec3A::from(p));
+                let whole = w.round();
+                (r, if (w - whole).abs() <= 0.25 { whole as i32 } else { FALLBACK }, nodes)
+            },
+        )
+        .collect();
+    drop(far);
+    let mut component = vec![0i32; n];
+    for &(r, w, nodes) in &evaluated {
+        component[r as usize] = w;
+        stats.winding_nodes += nodes;
+        stats.winding_evaluations += 1;
+    }
+
+    // 4. Signs.
+    let extra = grid
+        .values
+        .par_chunks_mut(slice)
+        .enumerate()
+        .map_init(
+            || Vec::with_capacity(256),
+            |stack, (k, out)| {
+                let mut extra = SampleStats::default();
+                for j in 0..ny {
+                    for i in 0..nx {
+                        let s = i + nx * j;
+                        let w = component[parent[s + slice * k] as usize];
+                        let p = position(i, j, k);
+                        let inside = if w == FALLBACK {
+                            extra.winding_evaluations += 1;
+                            wind.winding_for_sign(tree, p, stack, &mut extra.winding_nodes) >= winding::INSIDE
+                        } else if caps.is_empty() || caps.winding_bound(Vec3A::from(p)) < 0.49 {
+                            w >= 1
+                        } else {
+                            w as f32 - caps.winding_number(Vec3A::from(p)) >= winding::INSIDE
+                        };
+                        if inside {
+                            out[s] = -out[s];
+                        }
+                    }
+                }
+                extra
+            },
+        )
+        .reduce(SampleStats::default, add_stats);
+    stats.winding_nodes += extra.winding_nodes;
+    stats.winding_evaluations += extra.winding_evaluations;
+    stats
 }
 
 /// Signed distance queries against a mesh for a sequence of nearby points (one per

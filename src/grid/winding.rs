@@ -29,7 +29,7 @@ use std::f32::consts::PI;
 
 use glam::{Mat3A, Vec3, Vec3A};
 
-use super::closest::TriangleBvh;
+use super::closest::{TriangleBvh, axis_segment_box, axis_segment_may_meet_triangle, box_distance2};
 use crate::mesh::TriangleMesh;
 
 /// The winding number at and above which a point counts as inside.
@@ -237,6 +237,180 @@ pub fn is_closed(mesh: &TriangleMesh) -> bool {
         return false;
     }
     edges.iter().all(|&e| edges.binary_search(&e.rotate_left(32)).is_ok())
+}
+
+/// Triangles that close a mesh's holes, for signing open meshes exactly (see
+/// [`Caps::new`]).
+///
+/// Every directed edge `a → b` of the mesh that is not cancelled by an edge `b → a` (net,
+/// counting multiplicities) gets the cap triangle `(c, b, a)`, where `c` is the centroid of
+/// the vertices of the boundary loop (connected set of such edges) it belongs to. The mesh
+/// with its caps is then closed as a chain (every directed edge is cancelled), so its
+/// winding number `W` is an integer, constant off the mesh and the caps in every connected
+/// region, however the caps lie (they may cut through the mesh), and the mesh's own
+/// winding number is `W - w_caps`: the caps' winding number is exact and cheap (few
+/// triangles), and small away from the holes.
+#[derive(Clone, Debug, Default)]
+pub struct Caps {
+    /// Cap triangles, grouped by loop.
+    pub triangles: Vec<[Vec3A; 3]>,
+    /// Per loop: the range of its triangles, their box and total area.
+    groups: Vec<CapGroup>,
+    /// The box around every cap triangle (empty: inverted).
+    lo: Vec3A,
+    hi: Vec3A,
+    /// Total area of the caps.
+    area: f32,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct CapGroup {
+    first: u32,
+    end: u32,
+    lo: Vec3A,
+    hi: Vec3A,
+    area: f32,
+}
+
+impl Caps {
+    /// The caps of `mesh` (none for a closed mesh).
+    pub fn new(mesh: &TriangleMesh) -> Self {
+        // Net multiplicity of every undirected edge: + for lo -> hi, - for hi -> lo.
+        let mut edges: Vec<(u64, i32)> = mesh
+            .triangles
+            .iter()
+            .flat_map(|&[a, b, c]| [(a, b), (b, c), (c, a)])
+            .map(
+                |(a, b)| {
+                    if a < b { ((a as u64) << 32 | b as u64, 1) } else { ((b as u64) << 32 | a as u64, -1) }
+                },
+            )
+            .collect();
+        edges.sort_unstable_by_key(|e| e.0);
+        let mut open: Vec<(u32, u32)> = Vec::new();
+        let mut i = 0;
+        while i < edges.len() {
+            let key = edges[i].0;
+            let mut net = 0;
+            while i < edges.len() && edges[i].0 == key {
+                net += edges[i].1;
+                i += 1;
+            }
+            let (lo, hi) = ((key >> 32) as u32, key as u32);
+            for _ in 0..net.unsigned_abs() {
+                open.push(if net > 0 { (lo, hi) } else { (hi, lo) });
+            }
+        }
+        let mut caps = Caps { lo: Vec3A::INFINITY, hi: Vec3A::NEG_INFINITY, ..Caps::default() };
+        if open.is_empty() {
+            return caps;
+        }
+        // Loops: connected sets of open edges (union-find over their vertices).
+        let mut verts: Vec<u32> = open.iter().flat_map(|&(a, b)| [a, b]).collect();
+        verts.sort_unstable();
+        verts.dedup();
+        let id = |v: u32| verts.binary_search(&v).expect("vertex of an open edge") as u32;
+        let mut parent: Vec<u32> = (0..verts.len() as u32).collect();
+        fn find(parent: &mut [u32], mut x: u32) -> u32 {
+            while parent[x as usize] != x {
+                parent[x as usize] = parent[parent[x as usize] as usize];
+                x = parent[x as usize];
+            }
+            x
+        }
+        for &(a, b) in &open {
+            let (ra, rb) = (find(&mut parent, id(a)), find(&mut parent, id(b)));
+            if ra != rb {
+                parent[ra.max(rb) as usize] = ra.min(rb);
+            }
+        }
+        let roots: Vec<u32> = (0..verts.len() as u32).map(|v| find(&mut parent, v)).collect();
+        let mut sum = vec![(glam::DVec3::ZERO, 0u32); verts.len()];
+        for (v, &r) in roots.iter().enumerate() {
+            sum[r as usize].0 += mesh.positions[verts[v] as usize].as_dvec3();
+            sum[r as usize].1 += 1;
+        }
+        let mut by_loop: Vec<(u32, u32, u32)> =
+            open.iter().map(|&(a, b)| (roots[id(a) as usize], a, b)).collect();
+        by_loop.sort_unstable();
+        let mut k = 0;
+        while k < by_loop.len() {
+            let r = by_loop[k].0;
+            let (s, count) = sum[r as usize];
+            let c = Vec3A::from((s / count as f64).as_vec3());
+            let first = caps.triangles.len() as u32;
+            let (mut lo, mut hi, mut area) = (c, c, 0.0f32);
+            while k < by_loop.len() && by_loop[k].0 == r {
+                let (_, a, b) = by_loop[k];
+                let (a, b) =
+                    (Vec3A::from(mesh.positions[a as usize]), Vec3A::from(mesh.positions[b as usize]));
+                caps.triangles.push([c, b, a]);
+                lo = lo.min(a).min(b);
+                hi = hi.max(a).max(b);
+                area += 0.5 * (b - c).cross(a - c).length();
+                k += 1;
+            }
+            caps.groups.push(CapGroup { first, end: caps.triangles.len() as u32, lo, hi, area });
+            caps.lo = caps.lo.min(lo);
+            caps.hi = caps.hi.max(hi);
+            caps.area += area;
+        }
+        caps
+    }
+
+    /// Whether there are no caps (the mesh is closed as a chain).
+    pub fn is_empty(&self) -> bool {
+        self.triangles.is_empty()
+    }
+
+    /// Number of loops (holes).
+    pub fn loops(&self) -> usize {
+        self.groups.len()
+    }
+
+    /// A lower bound on the distance from `q` to the caps, or `f32::INFINITY` when it is
+    /// more than `far`.
+    #[inline]
+    pub fn lower_distance(&self, q: Vec3A, far: f32) -> f32 {
+        if self.is_empty() || box_distance2(q, self.lo, self.hi) > far * far {
+            return f32::INFINITY;
+        }
+        let d2 = self.groups.iter().map(|g| box_distance2(q, g.lo, g.hi)).fold(f32::INFINITY, f32::min);
+        d2.sqrt()
+    }
+
+    /// An upper bound on `|w_caps(q)|` (each loop's area over `4π` times its box's
+    /// distance squared: a surface subtends at most its area over the squared distance).
+    #[inline]
+    pub fn winding_bound(&self, q: Vec3A) -> f32 {
+        if self.is_empty() {
+            return 0.0;
+        }
+        let all = self.area / (4.0 * PI * box_distance2(q, self.lo, self.hi));
+        if all < 0.25 {
+            return all;
+        }
+        self.groups.iter().map(|g| g.area / (4.0 * PI * box_distance2(q, g.lo, g.hi))).sum()
+    }
+
+    /// The caps' exact winding number at `q`.
+    pub fn winding_number(&self, q: Vec3A) -> f32 {
+        let omega: f32 = self.triangles.iter().map(|&[a, b, c]| triangle_solid_angle(q, a, b, c)).sum();
+        omega / (4.0 * PI)
+    }
+
+    /// [`TriangleBvh::axis_segment_may_meet`] for the caps.
+    pub fn axis_segment_may_meet(&self, p: Vec3A, axis: usize, end: f32, eps: f32) -> bool {
+        if self.is_empty() {
+            return false;
+        }
+        let (lo, hi) = axis_segment_box(p, axis, end, eps);
+        self.groups.iter().filter(|g| !(g.lo.cmpgt(hi).any() || g.hi.cmplt(lo).any())).any(|g| {
+            self.triangles[g.first as usize..g.end as usize]
+                .iter()
+                .any(|&[a, b, c]| axis_segment_may_meet_triangle(p, axis, end, eps, a, b, c))
+        })
+    }
 }
 
 /// The matrix `u vᵀ`.
