@@ -19,6 +19,7 @@ use crate::grid::io::{load_grid, save_grid};
 use crate::grid::voxelize::voxelize_mesh;
 use crate::grid::{DEFAULT_MAX_GRID_BYTES, check_size, grid_layout, sample_mesh};
 use crate::mesh::{MeshFormat, TriangleMesh, load_mesh, save_mesh};
+use crate::progress::Stage;
 use crate::render::{Frame, render, write_png};
 use crate::repr::GridFill;
 use crate::repr::{MeshMethod, Representation, build_scene, grid_file_mesh};
@@ -288,10 +289,18 @@ pub fn convert_command(
                 budget.check(&what, mesh_to_grid_bytes(mesh.triangles.len(), dims, fill))?;
             }
             let load = start.elapsed();
+            // One unit per z-slice of exact sampling (voxelizing is quick and shows none).
+            let slices = mesh.bounds().and_then(|(lo, hi)| grid_layout(lo, hi, res, margin).ok());
+            let stage = Stage::start(
+                &format!("sampling {}", input.display()),
+                slices.map_or(0, |(_, _, d)| d.z as u64),
+                fill == GridFill::Sample,
+            );
             let grid = match fill {
                 GridFill::Sample => sample_mesh(&mesh, res, margin)?,
                 GridFill::Voxelize => voxelize_mesh(&mesh, res, margin)?,
             };
+            drop(stage);
             let sample = start.elapsed() - load;
             let how = match fill {
                 GridFill::Sample => "sampled",

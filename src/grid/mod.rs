@@ -323,6 +323,7 @@ fn fill(grid: &mut SdfGrid, tree: &TriangleBvh, wind: &FastWinding, closed: bool
                     out[i as usize + nx as usize * j as usize] = sampler.sample(p);
                 }
             }
+            crate::progress::advance(1);
             sampler.stats
         })
         .reduce(SampleStats::default, |a, b| SampleStats {
@@ -390,6 +391,7 @@ fn fill_by_regions(grid: &mut SdfGrid, tree: &TriangleBvh, wind: &FastWinding, c
                     out[i + nx * j] = sampler.unsigned(position(i, j, k));
                 }
             }
+            crate::progress::advance(1);
             sampler.stats.samples = slice as u64;
             sampler.stats
         })
