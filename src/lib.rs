@@ -31,3 +31,4 @@ pub mod tessellate;
 pub mod tracer;
 pub mod transform;
 pub mod triangle;
+pub mod wide_bvh;

@@ -1,9 +1,14 @@
 //! Watertight ray/triangle intersection (Woop, Benthin and Wald 2013): the ray is sheared
 //! so it runs along +z, and edge functions are evaluated in 2D with a fallback to f64 when
 //! one is exactly zero. Rays through shared edges and vertices of a closed mesh never pass
-//! between its triangles.
+//! between its triangles. [`ShearedRay::intersect4`] runs the same test on four triangles
+//! at once (structure-of-arrays, vectorised by the compiler) with bit-identical results.
+
+use std::ops::{Add, Div, Mul, Sub};
 
 use glam::{DVec3, Vec3};
+
+use crate::wide_bvh::F4;
 
 /// Per-ray precomputation of the shear that maps the ray to the +z axis.
 #[derive(Clone, Copy, Debug)]
@@ -84,6 +89,78 @@ impl ShearedRay {
             return None;
         }
         Some(TriHit { t, bary: [u * inv, v * inv, w * inv] })
+    }
+}
+
+/// Four triangles in structure-of-arrays layout: `v[vertex][axis][lane]` (scene units,
+/// the mesh's local frame). Unused lanes hold NaN vertices, which never hit.
+pub type Tri4 = [[[f32; 4]; 3]; 3];
+
+impl ShearedRay {
+    /// [`ShearedRay::intersect`] on the four triangles of `tri` at once: per lane, the hit's
+    /// `t` (bit-identical to the one-triangle test) or `f32::NAN` for a miss. Lanes with an
+    /// edge function exactly zero in f32 are redone one at a time in f64, as there.
+    #[inline(always)]
+    pub fn intersect4(&self, tri: &Tri4, t_min: f32, t_max: f32) -> [f32; 4] {
+        let [kx, ky, kz] = self.k;
+        let (sx, sy, sz) = (F4::splat(self.shear.x), F4::splat(self.shear.y), F4::splat(self.shear.z));
+        let (ox, oy, oz) =
+            (F4::splat(self.origin[kx]), F4::splat(self.origin[ky]), F4::splat(self.origin[kz]));
+        // Per vertex: sheared x, y and the z offset along the ray's main axis.
+        let vertex = |v: &[[f32; 4]; 3]| {
+            let z = F4::load(&v[kz]).sub(oz);
+            (F4::load(&v[kx]).sub(ox).sub(sx.mul(z)), F4::load(&v[ky]).sub(oy).sub(sy.mul(z)), z)
+        };
+        let (ax, ay, az) = vertex(&tri[0]);
+        let (bx, by, bz) = vertex(&tri[1]);
+        let (cx, cy, cz) = vertex(&tri[2]);
+        let mut u = cx.mul(by).sub(cy.mul(bx));
+        let mut v = ax.mul(cy).sub(ay.mul(cx));
+        let mut w = bx.mul(ay).sub(by.mul(ax));
+        let zero = F4::splat(0.0);
+        if (u.eq(zero) | v.eq(zero) | w.eq(zero)) != 0 {
+            let mut uvw = [u.to_array(), v.to_array(), w.to_array()];
+            self.edges_f64(tri, &mut uvw);
+            (u, v, w) = (F4::load(&uvw[0]), F4::load(&uvw[1]), F4::load(&uvw[2]));
+        }
+        let outside = (u.lt(zero) | v.lt(zero) | w.lt(zero)) & (zero.lt(u) | zero.lt(v) | zero.lt(w));
+        let det = u.add(v).add(w);
+        let t_scaled = u.mul(sz.mul(az)).add(v.mul(sz.mul(bz))).add(w.mul(sz.mul(cz)));
+        let t = t_scaled.mul(F4::splat(1.0).div(det));
+        let ok = !outside & !det.eq(zero) & F4::splat(t_min).le(t) & t.le(F4::splat(t_max)) & 0xf;
+        let mut out = t.to_array();
+        for (l, x) in out.iter_mut().enumerate() {
+            if ok & (1 << l) == 0 {
+                *x = f32::NAN;
+            }
+        }
+        out
+    }
+
+    /// The edge functions of the lanes of `tri` where one is exactly zero in f32, redone
+    /// in f64 (the rare path of [`ShearedRay::intersect4`]).
+    #[cold]
+    #[inline(never)]
+    fn edges_f64(&self, tri: &Tri4, uvw: &mut [[f32; 4]; 3]) {
+        let [kx, ky, kz] = self.k;
+        for l in 0..4 {
+            if uvw[0][l] != 0.0 && uvw[1][l] != 0.0 && uvw[2][l] != 0.0 {
+                continue;
+            }
+            let (sx, sy) = (self.shear.x, self.shear.y);
+            let o = self.origin;
+            let p = |i: usize| Vec3::new(tri[i][0][l], tri[i][1][l], tri[i][2][l]) - o;
+            let (a, b, c) = (p(0), p(1), p(2));
+            let ax = (a[kx] - sx * a[kz]) as f64;
+            let ay = (a[ky] - sy * a[kz]) as f64;
+            let bx = (b[kx] - sx * b[kz]) as f64;
+            let by = (b[ky] - sy * b[kz]) as f64;
+            let cx = (c[kx] - sx * c[kz]) as f64;
+            let cy = (c[ky] - sy * c[kz]) as f64;
+            uvw[0][l] = (cx * by - cy * bx) as f32;
+            uvw[1][l] = (ax * cy - ay * cx) as f32;
+            uvw[2][l] = (bx * ay - by * ax) as f32;
+        }
     }
 }
 
