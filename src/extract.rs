@@ -99,14 +99,44 @@ pub fn extract(
     res: u32,
     method: ExtractMethod,
 ) -> TriangleMesh {
-    let Some(grid) = Grid::sample(f, bounds, res.max(1)) else {
-        return TriangleMesh::default();
+    match sample_grid(f, bounds, res) {
+        Some(grid) => extract_sampled(f, &grid, method),
+        None => TriangleMesh::default(),
+    }
+}
+
+/// The first half of [`extract`]: samples `f` on its grid (see there). `None` when the
+/// bounds' longest extent is zero or not finite.
+///
+/// # Panics
+/// When the grid has `u32::MAX` points or more.
+pub fn sample_grid(f: &(impl Fn(DVec3) -> f64 + Sync), bounds: &Aabb, res: u32) -> Option<SampleGrid> {
+    SampleGrid::sample(f, bounds, res.max(1))
+}
+
+/// The second half of [`extract`]: extracts the zero isosurface of `f` from `grid`, which
+/// must have been sampled from the same `f` by [`sample_grid`] (crossings are refined and
+/// gradients taken on `f` itself).
+pub fn extract_sampled(
+    f: &(impl Fn(DVec3) -> f64 + Sync),
+    grid: &SampleGrid,
+    method: ExtractMethod,
+) -> TriangleMesh {
+    let (mesh, unique) = match method {
+        // Crossings on two different grid edges are at least 0.5 EDGE_MARGIN h apart (they
+        // are kept that far from the edges' ends; edges that share no end are far apart).
+        ExtractMethod::MarchingCubes => {
+            (marching_tetrahedra(f, grid), grid.separated_in_f32(0.5 * EDGE_MARGIN * grid.h))
+        }
+        // Vertices of different cells are at least 2 EDGE_MARGIN h apart (clamped into
+        // their cells with that margin); a cell with several vertices may repeat one.
+        ExtractMethod::DualContouring => {
+            let (mesh, one_per_cell) = dual_contouring(f, grid);
+            let unique = one_per_cell && grid.separated_in_f32(2.0 * EDGE_MARGIN * grid.h);
+            (mesh, unique)
+        }
     };
-    let mesh = match method {
-        ExtractMethod::MarchingCubes => marching_tetrahedra(f, &grid),
-        ExtractMethod::DualContouring => dual_contouring(f, &grid),
-    };
-    clean_up(mesh)
+    clean_up(mesh, unique)
 }
 
 /// Extracts `object`'s surface through its [`SdfTree`] within its bounds (see [`extract`]).
@@ -122,8 +152,10 @@ pub fn extract_object(object: &Object, res: u32, method: ExtractMethod) -> Optio
     Some(extract(&|p| tree.distance(p), &bounds, res, method))
 }
 
-/// Samples on the grid's corners.
-struct Grid {
+/// Samples of a function on the corners of a regular grid of cubic cells (from
+/// [`sample_grid`]); point `(x, y, z)` is at `origin + cell * (x, y, z)` and its sample is
+/// `values[x + n[0] * (y + n[1] * z)]`. Samples on the outermost layer are positive.
+pub struct SampleGrid {
     origin: DVec3,
     /// Cell size.
     h: f64,
@@ -132,8 +164,28 @@ struct Grid {
     values: Vec<f32>,
 }
 
-impl Grid {
-    fn sample(f: &(impl Fn(DVec3) -> f64 + Sync), bounds: &Aabb, res: u32) -> Option<Grid> {
+impl SampleGrid {
+    /// Position of grid point (0, 0, 0).
+    pub fn origin(&self) -> DVec3 {
+        self.origin
+    }
+
+    /// Cell side.
+    pub fn cell(&self) -> f64 {
+        self.h
+    }
+
+    /// Grid points per axis (cells + 1).
+    pub fn dims(&self) -> [usize; 3] {
+        self.n
+    }
+
+    /// The samples, x fastest.
+    pub fn values(&self) -> &[f32] {
+        &self.values
+    }
+
+    fn sample(f: &(impl Fn(DVec3) -> f64 + Sync), bounds: &Aabb, res: u32) -> Option<SampleGrid> {
         let (lo, hi) = (bounds.min.as_dvec3(), bounds.max.as_dvec3());
         let ext = (hi - lo).max(DVec3::ZERO);
         let longest = ext.max_element();
@@ -152,7 +204,7 @@ impl Grid {
         }
         // Grid point indices are stored as u32 (res up to about 1600).
         assert!(n[0] * n[1] * n[2] < u32::MAX as usize, "extraction grid too large: {n:?} points");
-        let mut grid = Grid { origin, h, n, values: vec![0.0; n[0] * n[1] * n[2]] };
+        let mut grid = SampleGrid { origin, h, n, values: vec![0.0; n[0] * n[1] * n[2]] };
         let slice = n[0] * n[1];
         let (origin, nn) = (grid.origin, grid.n);
         grid.values.par_chunks_mut(slice).enumerate().for_each(|(z, vals)| {
@@ -170,6 +222,14 @@ impl Grid {
             }
         });
         Some(grid)
+    }
+
+    /// Whether points within the grid that are at least `sep` apart stay distinct when
+    /// rounded to f32 (each coordinate moves by at most half an ulp, `2^-24 |x|`).
+    fn separated_in_f32(&self, sep: f64) -> bool {
+        let far =
+            self.pos(self.n[0] - 1, self.n[1] - 1, self.n[2] - 1).abs().max(self.origin.abs()).max_element();
+        sep > 8.0 * f32::EPSILON as f64 * far
     }
 
     #[inline]
@@ -257,7 +317,12 @@ impl Edges {
 /// One z-slice's crossing points, their normals and its active cells.
 type SliceCrossings = (Vec<DVec3>, Vec<DVec3>, Vec<(u32, u8)>);
 
-fn edge_crossings(f: &(impl Fn(DVec3) -> f64 + Sync), grid: &Grid, ndirs: usize, normals: bool) -> Edges {
+fn edge_crossings(
+    f: &(impl Fn(DVec3) -> f64 + Sync),
+    grid: &SampleGrid,
+    ndirs: usize,
+    normals: bool,
+) -> Edges {
     let n = grid.n;
     let slice = n[0] * n[1];
     let mut mask = vec![0u8; grid.values.len()];
@@ -281,13 +346,23 @@ fn edge_crossings(f: &(impl Fn(DVec3) -> f64 + Sync), grid: &Grid, ndirs: usize,
             if z + 1 >= n[2] {
                 return (pts, nrm, active);
             }
+            // The inside bits of the four samples at (x, y..y+1, z..z+1), spread to the
+            // cube corners with x bit 0: bit k goes to corner 2 k.
+            let (dy, dz) = (n[0], slice);
+            let column = |i: usize| -> u8 {
+                (vals[i] < 0.0) as u8
+                    | ((vals[i + dy] < 0.0) as u8) << 2
+                    | ((vals[i + dz] < 0.0) as u8) << 4
+                    | ((vals[i + dy + dz] < 0.0) as u8) << 6
+            };
             for y in 0..n[1] - 1 {
+                let row = grid.idx(0, y, z);
+                let mut lo = column(row);
                 for x in 0..n[0] - 1 {
-                    let i = grid.idx(x, y, z);
-                    let cube = corner_offsets
-                        .iter()
-                        .enumerate()
-                        .fold(0u8, |m, (c, &o)| m | (((vals[i + o] < 0.0) as u8) << c));
+                    let i = row + x;
+                    let hi = column(i + 1);
+                    let cube = lo | hi << 1;
+                    lo = hi;
                     if cube == 0 || cube == 0xff {
                         continue;
                     }
@@ -416,28 +491,64 @@ fn tet_table() -> TetTable {
     })
 }
 
-fn marching_tetrahedra(f: &(impl Fn(DVec3) -> f64 + Sync), grid: &Grid) -> TriangleMesh {
-    let edges = edge_crossings(f, grid, DIRS.len(), false);
+/// Per cube inside mask (bit c = corner c inside): the triangles of all six tetrahedra,
+/// as tet edges, in `tris[start[m]..start[m + 1]]`.
+struct CubeTable {
+    start: [u16; 257],
+    tris: Vec<[TetEdge; 3]>,
+}
+
+fn cube_table() -> CubeTable {
     let table = tet_table();
+    let mut start = [0u16; 257];
+    let mut tris = Vec::new();
+    for (cm, s) in start.iter_mut().take(256).enumerate() {
+        *s = tris.len() as u16;
+        for (t, tet) in TETS.iter().enumerate() {
+            let m = tet.iter().enumerate().fold(0, |m, (k, &c)| m | (((cm >> c) & 1) << k));
+            tris.extend_from_slice(&table[t][m]);
+        }
+    }
+    start[256] = tris.len() as u16;
+    CubeTable { start, tris }
+}
+
+fn marching_tetrahedra(f: &(impl Fn(DVec3) -> f64 + Sync), grid: &SampleGrid) -> TriangleMesh {
+    let edges = edge_crossings(f, grid, DIRS.len(), false);
+    let table = cube_table();
     let corner_offsets = grid.corner_offsets();
-    let triangles: Vec<[u32; 3]> = edges
+    let per_slice: Vec<Vec<[u32; 3]>> = edges
         .active
         .par_iter()
-        .flat_map_iter(|cells| {
-            let mut out = Vec::with_capacity(cells.len() * 2);
+        .map(|cells| {
+            let count: usize = cells
+                .iter()
+                .map(|&(_, cm)| (table.start[cm as usize + 1] - table.start[cm as usize]) as usize)
+                .sum();
+            let mut out = Vec::with_capacity(count);
             for &(i0, cm) in cells {
                 let i0 = i0 as usize;
-                for (t, tet) in TETS.iter().enumerate() {
-                    let m = tet.iter().enumerate().fold(0, |m, (k, &c)| m | (((cm >> c) & 1) << k));
-                    for tri in &table[t][m as usize] {
-                        out.push(tri.map(|(c, d)| edges.vertex(i0 + corner_offsets[c as usize], d as usize)));
-                    }
+                let (a, b) = (table.start[cm as usize] as usize, table.start[cm as usize + 1] as usize);
+                for tri in &table.tris[a..b] {
+                    out.push(tri.map(|(c, d)| edges.vertex(i0 + corner_offsets[c as usize], d as usize)));
                 }
             }
             out
         })
         .collect();
-    TriangleMesh { positions: edges.points.iter().map(|p| p.as_vec3()).collect(), triangles, normals: None }
+    let triangles = concat(per_slice);
+    let positions = edges.points.par_iter().map(|p| p.as_vec3()).collect();
+    TriangleMesh { positions, triangles, normals: None }
+}
+
+/// The vectors of `parts` one after another.
+fn concat<T: Copy + Send + Sync>(parts: Vec<Vec<T>>) -> Vec<T> {
+    let total = parts.iter().map(Vec::len).sum();
+    let mut out = Vec::with_capacity(total);
+    for p in &parts {
+        out.extend_from_slice(p);
+    }
+    out
 }
 
 // ---------------------------------------------------------------------------------------
@@ -550,7 +661,8 @@ impl CubeTopology {
     }
 }
 
-fn dual_contouring(f: &(impl Fn(DVec3) -> f64 + Sync), grid: &Grid) -> TriangleMesh {
+/// The mesh, and whether every active cell got exactly one vertex.
+fn dual_contouring(f: &(impl Fn(DVec3) -> f64 + Sync), grid: &SampleGrid) -> (TriangleMesh, bool) {
     let edges = edge_crossings(f, grid, 3, true);
     let n = grid.n;
     let nc = [n[0] - 1, n[1] - 1, n[2] - 1];
@@ -672,7 +784,9 @@ fn dual_contouring(f: &(impl Fn(DVec3) -> f64 + Sync), grid: &Grid) -> TriangleM
             out
         })
         .collect();
-    TriangleMesh { positions, triangles, normals: None }
+    let cells: usize = edges.active.iter().map(Vec::len).sum();
+    let one_per_cell = positions.len() == cells;
+    (TriangleMesh { positions, triangles, normals: None }, one_per_cell)
 }
 
 /// Splits the quad `q` (counter-clockwise about `axis`, the outward direction) along the
@@ -731,17 +845,101 @@ impl Qef {
             a[2][0] * c.x + a[2][1] * c.y + a[2][2] * c.z,
         );
         let rhs = self.atb - ac;
-        let (vals, vecs) = sym_eigen(a);
-        let max = vals.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         let mut x = c;
-        if max > 0.0 {
-            for k in 0..3 {
-                if vals[k] > QEF_TRUNCATION * max {
-                    x += vecs[k] * (vecs[k].dot(rhs) / vals[k]);
+        if let Some(dx) = truncated_solve(a, rhs) {
+            x += dx;
+        } else {
+            let (vals, vecs) = sym_eigen(a);
+            let max = vals.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            if max > 0.0 {
+                for k in 0..3 {
+                    if vals[k] > QEF_TRUNCATION * max {
+                        x += vecs[k] * (vecs[k].dot(rhs) / vals[k]);
+                    }
                 }
             }
         }
         if x.is_finite() { x } else { c }
+    }
+}
+
+/// `A⁺ rhs` of the symmetric positive semi-definite `a` with eigenvalues at or below
+/// [`QEF_TRUNCATION`] times the largest treated as zero, by closed-form eigenvalues
+/// (trigonometric method) and eigenvectors of isolated eigenvalues (cross products of
+/// the rows of `a - lambda I`). `None` when an eigenvalue is within 20% of the threshold
+/// or the matrix is not positive (then [`sym_eigen`] decides). The same result as the
+/// truncated sum over [`sym_eigen`]'s eigenpairs up to rounding, at under half the cost.
+fn truncated_solve(a: [[f64; 3]; 3], rhs: DVec3) -> Option<DVec3> {
+    let p1 = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+    let q = (a[0][0] + a[1][1] + a[2][2]) / 3.0;
+    let (d0, d1, d2) = (a[0][0] - q, a[1][1] - q, a[2][2] - q);
+    let p = ((d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * p1) / 6.0).sqrt();
+    if !(q > 0.0) || !p.is_finite() {
+        return None;
+    }
+    if p <= 1e-12 * q {
+        // A multiple of the identity (up to rounding): every eigenvalue is kept.
+        return Some(rhs / q);
+    }
+    // B = (A - q I) / p; r = det(B) / 2.
+    let b = [
+        [d0 / p, a[0][1] / p, a[0][2] / p],
+        [a[0][1] / p, d1 / p, a[1][2] / p],
+        [a[0][2] / p, a[1][2] / p, d2 / p],
+    ];
+    let det = b[0][0] * (b[1][1] * b[2][2] - b[1][2] * b[2][1])
+        - b[0][1] * (b[1][0] * b[2][2] - b[1][2] * b[2][0])
+        + b[0][2] * (b[1][0] * b[2][1] - b[1][1] * b[2][0]);
+    let phi = (0.5 * det).clamp(-1.0, 1.0).acos() / 3.0;
+    let l1 = q + 2.0 * p * phi.cos();
+    let l3 = q + 2.0 * p * (phi + 2.0 * std::f64::consts::FRAC_PI_3).cos();
+    let l2 = 3.0 * q - l1 - l3;
+    let max = l1.abs().max(l3.abs());
+    let t = QEF_TRUNCATION * max;
+    let (lo, hi) = (0.8 * t, 1.2 * t);
+    if [l1, l2, l3].iter().any(|&l| l > lo && l < hi) || !(l1 > hi) {
+        return None;
+    }
+    // Unit eigenvector of an eigenvalue `l` well apart from the others.
+    let eigenvector = |l: f64| -> Option<DVec3> {
+        let r = [
+            DVec3::new(a[0][0] - l, a[0][1], a[0][2]),
+            DVec3::new(a[1][0], a[1][1] - l, a[1][2]),
+            DVec3::new(a[2][0], a[2][1], a[2][2] - l),
+        ];
+        let c = [r[0].cross(r[1]), r[0].cross(r[2]), r[1].cross(r[2])];
+        let best = c.into_iter().max_by(|x, y| x.length_squared().total_cmp(&y.length_squared()))?;
+        let n2 = best.length_squared();
+        (n2 > 0.0 && n2.is_finite()).then(|| best / n2.sqrt())
+    };
+    let solve3 = |m: [[f64; 3]; 3], v: DVec3| -> Option<DVec3> {
+        let (c0, c1, c2) = (
+            DVec3::new(m[0][0], m[1][0], m[2][0]),
+            DVec3::new(m[0][1], m[1][1], m[2][1]),
+            DVec3::new(m[0][2], m[1][2], m[2][2]),
+        );
+        let det = c0.dot(c1.cross(c2));
+        (det != 0.0 && det.is_finite()).then(|| {
+            // Cramer's rule.
+            DVec3::new(v.dot(c1.cross(c2)), c0.dot(v.cross(c2)), c0.dot(c1.cross(v))) / det
+        })
+    };
+    if l2 <= lo {
+        // Rank one: only the largest eigenvalue is kept.
+        let v = eigenvector(l1)?;
+        Some(v * (v.dot(rhs) / l1))
+    } else if l3 <= lo {
+        // Rank two: drop the smallest eigenvalue's direction, lift it to l1 to invert.
+        let v = eigenvector(l3)?;
+        let mut m = a;
+        for (r, row) in m.iter_mut().enumerate() {
+            for (c, x) in row.iter_mut().enumerate() {
+                *x += (l1 - l3) * v[r] * v[c];
+            }
+        }
+        solve3(m, rhs - v * v.dot(rhs))
+    } else {
+        solve3(a, rhs)
     }
 }
 
@@ -787,16 +985,22 @@ fn sym_eigen(mut a: [[f64; 3]; 3]) -> ([f64; 3], [DVec3; 3]) {
 // ---------------------------------------------------------------------------------------
 // Clean-up.
 
-/// Welds bit-identical positions (none by construction; checked cheaply by sorting), drops
-/// triangles that repeat a vertex or have zero area, and removes unused vertices.
-fn clean_up(mut mesh: TriangleMesh) -> TriangleMesh {
-    let mut keys: Vec<[u32; 3]> =
-        mesh.positions.par_iter().map(|p| (*p + Vec3::ZERO).to_array().map(f32::to_bits)).collect();
-    keys.par_sort_unstable();
-    let duplicates = keys.windows(2).any(|w| w[0] == w[1]);
-    drop(keys);
-    if duplicates {
-        mesh.weld();
+/// Welds bit-identical positions (none by construction; checked by sorting unless
+/// `unique` says the construction proves it), drops triangles that repeat a vertex or have
+/// zero area, and removes unused vertices (every vertex is used by construction, so only
+/// after welding or dropping).
+fn clean_up(mut mesh: TriangleMesh, unique: bool) -> TriangleMesh {
+    let mut changed = false;
+    if !unique {
+        let mut keys: Vec<[u32; 3]> =
+            mesh.positions.par_iter().map(|p| (*p + Vec3::ZERO).to_array().map(f32::to_bits)).collect();
+        keys.par_sort_unstable();
+        let duplicates = keys.par_windows(2).any(|w| w[0] == w[1]);
+        drop(keys);
+        if duplicates {
+            mesh.weld();
+            changed = true;
+        }
     }
     let pos = &mesh.positions;
     let bad = |t: &[u32; 3]| {
@@ -808,6 +1012,18 @@ fn clean_up(mut mesh: TriangleMesh) -> TriangleMesh {
     if mesh.triangles.par_iter().any(bad) {
         let tris = std::mem::take(&mut mesh.triangles);
         mesh.triangles = tris.into_iter().filter(|t| !bad(t)).collect();
+        changed = true;
+    }
+    if !changed {
+        debug_assert!(
+            {
+                let mut used = vec![false; mesh.positions.len()];
+                mesh.triangles.iter().flatten().for_each(|&i| used[i as usize] = true);
+                used.iter().all(|&u| u)
+            },
+            "a vertex no triangle uses"
+        );
+        return mesh;
     }
     // Remove vertices no triangle uses.
     let mut used = vec![false; mesh.positions.len()];
@@ -868,6 +1084,45 @@ mod tests {
                 assert_eq!(tris.len(), expected);
             }
         }
+    }
+
+    #[test]
+    fn truncated_solve_matches_jacobi() {
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut rnd = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let mut fast = 0;
+        for i in 0..20_000 {
+            // Sums of 1 to 6 normals spread around one direction: rank one to three.
+            let base = DVec3::new(rnd(), rnd(), rnd()).normalize();
+            let spread = [0.0, 1e-6, 1e-3, 0.05, 0.2, 0.5, 2.0][i % 7];
+            let mut q = Qef::default();
+            for _ in 0..1 + i % 6 {
+                let n = (base + DVec3::new(rnd(), rnd(), rnd()) * spread).normalize();
+                q.add(DVec3::new(rnd(), rnd(), rnd()) * 0.01, n);
+            }
+            let c = q.points / q.count as f64;
+            let a = q.ata;
+            let rhs = q.atb - DVec3::from_array(a.map(|row| DVec3::from_array(row).dot(c)));
+            let (vals, vecs) = sym_eigen(a);
+            let max = vals.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let reference: DVec3 = (0..3)
+                .filter(|&k| vals[k] > QEF_TRUNCATION * max)
+                .map(|k| vecs[k] * (vecs[k].dot(rhs) / vals[k]))
+                .sum();
+            if let Some(x) = truncated_solve(a, rhs) {
+                fast += 1;
+                assert!(
+                    (x - reference).length() <= 1e-8 * reference.length().max(1e-12),
+                    "{a:?}: {x} vs {reference}"
+                );
+            }
+        }
+        assert!(fast > 18_000, "fast path taken {fast} times of 20000");
     }
 
     #[test]
