@@ -352,7 +352,15 @@ pub fn convert_command(
             let scene = load_scene(input)?;
             let mut out = TriangleMesh::default();
             let mut text = String::new();
-            for o in &scene.objects {
+            // One unit per z-slice sampled; each object has at most res + 3 slices.
+            let per_object = res as u64 + 3;
+            let stage = Stage::start(
+                &format!("extracting {}", input.display()),
+                per_object * scene.objects.len() as u64,
+                true,
+            );
+            for (done, o) in scene.objects.iter().enumerate() {
+                crate::progress::set(per_object * done as u64);
                 let extracted = extract_object(o, res, method)
                     .or_else(|| grid_file_mesh(o, res, MeshMethod::Extracted(method)));
                 match extracted {
@@ -376,6 +384,7 @@ pub fn convert_command(
                     }
                 }
             }
+            drop(stage);
             if out.triangles.is_empty() {
                 return Err(Error::input(input, None, "no bounded SDF object to extract a mesh from"));
             }

@@ -220,6 +220,7 @@ impl SampleGrid {
                     vals[x + nn[0] * y] = v;
                 }
             }
+            crate::progress::advance(1);
         });
         Some(grid)
     }

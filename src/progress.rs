@@ -71,6 +71,19 @@ pub fn advance(n: u64) {
     }
 }
 
+/// Sets the current stage's progress to `done` units (no-op when no bar is shown); for
+/// stages whose parts report fewer units than they were estimated at.
+pub fn set(done: u64) {
+    if !ACTIVE.load(Ordering::Relaxed) {
+        return;
+    }
+    if let Ok(b) = BAR.lock()
+        && let Some(bar) = b.as_ref()
+    {
+        bar.set_position(done);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -82,6 +95,7 @@ mod tests {
         assert!(!stage.shown);
         assert!(!ACTIVE.load(Ordering::Relaxed));
         advance(5);
+        set(7);
         drop(stage);
         assert!(BAR.lock().unwrap().is_none());
     }
