@@ -417,6 +417,23 @@ fn npy_field<'a>(dict: &'a str, key: &str) -> Option<&'a str> {
     None
 }
 
+/// `s` (text from a file) fit for a one-line message: control characters such as line
+/// ends escaped, cut after 80 characters.
+fn one_line(s: &str) -> String {
+    let mut out = String::new();
+    for c in s.chars().take(80) {
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    if s.chars().nth(80).is_some() {
+        out.push_str("...");
+    }
+    out
+}
+
 fn load_npy(path: &Path, file: &mut File, len: u64) -> Result<SdfGrid> {
     let mut pre = [0u8; 8];
     let have = len.min(8) as usize;
@@ -454,39 +471,40 @@ fn load_npy(path: &Path, file: &mut File, len: u64) -> Result<SdfGrid> {
     let text = String::from_utf8(text).map_err(|_| bad(path, "the .npy header is not valid text"))?;
     let dict = text.trim();
     let field = |key: &str| {
-        npy_field(dict, key).ok_or_else(|| bad(path, format!("the .npy header has no '{key}' entry: {dict}")))
+        npy_field(dict, key)
+            .ok_or_else(|| bad(path, format!("the .npy header has no '{key}' entry: {}", one_line(dict))))
     };
     let descr = field("descr")?;
     let descr_val = descr.trim_matches(|c| c == '\'' || c == '"');
     if descr_val != "<f4" {
-        return Err(bad(path, format!("unsupported .npy dtype {descr}; only '<f4' (little-endian float32)")));
+        return Err(bad(
+            path,
+            format!("unsupported .npy dtype {}; only '<f4' (little-endian float32)", one_line(descr)),
+        ));
     }
     match field("fortran_order")? {
         "False" => {}
         "True" => return Err(bad(path, "Fortran-order .npy arrays are not supported; save in C order")),
-        other => return Err(bad(path, format!("invalid .npy fortran_order {other}"))),
+        other => return Err(bad(path, format!("invalid .npy fortran_order {}", one_line(other)))),
     }
     let shape_text = field("shape")?;
+    let shown = one_line(shape_text);
     let inner = shape_text
         .strip_prefix('(')
         .and_then(|s| s.strip_suffix(')'))
-        .ok_or_else(|| bad(path, format!("invalid .npy shape {shape_text}")))?;
+        .ok_or_else(|| bad(path, format!("invalid .npy shape {shown}")))?;
     let shape = inner
         .split(',')
         .map(str::trim)
         .filter(|s| !s.is_empty())
         .map(|s| s.trim_end_matches('L').parse::<u64>())
         .collect::<std::result::Result<Vec<_>, _>>()
-        .map_err(|_| bad(path, format!("invalid .npy shape {shape_text}")))?;
+        .map_err(|_| bad(path, format!("invalid .npy shape {shown}")))?;
     if shape.len() != 3 {
-        return Err(bad(
-            path,
-            format!("the .npy array has shape {shape_text}; a grid needs 3 axes (nz, ny, nx)"),
-        ));
+        return Err(bad(path, format!("the .npy array has shape {shown}; a grid needs 3 axes (nz, ny, nx)")));
     }
     let axis = |n: u64| {
-        u32::try_from(n)
-            .map_err(|_| bad(path, format!("the .npy shape {shape_text} is too large for a grid")))
+        u32::try_from(n).map_err(|_| bad(path, format!("the .npy shape {shown} is too large for a grid")))
     };
     let dims = UVec3::new(axis(shape[2])?, axis(shape[1])?, axis(shape[0])?);
     let count = check_dims_and_length(path, dims, data_start, len, "the grid")?;

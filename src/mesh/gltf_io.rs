@@ -19,6 +19,7 @@ use gltf::mesh::Mode;
 
 use super::TriangleMesh;
 use super::build::{RawMesh, check_vertex_count, non_finite};
+use super::text::one_line;
 use crate::error::{Error, Location, Result};
 
 /// Most triangles one file may expand to through instancing, to bound time and memory.
@@ -246,6 +247,20 @@ fn percent_decode(uri: &str) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
+/// Reads at most `declared` bytes of an external buffer file, which must be a regular
+/// file: a URI naming a device, a FIFO or a folder (`/dev/zero`, `/dev/stdin`) would
+/// otherwise read without end or block. Bytes past `declared` are never used.
+fn read_buffer_file(file: &Path, declared: usize) -> std::io::Result<Vec<u8>> {
+    use std::io::Read;
+    let f = std::fs::File::open(file)?;
+    if !f.metadata()?.is_file() {
+        return Err(std::io::Error::other("not a regular file"));
+    }
+    let mut out = Vec::new();
+    f.take(declared as u64).read_to_end(&mut out)?;
+    Ok(out)
+}
+
 /// Buffers, loaded on first use.
 struct Buffers<'a> {
     path: &'a Path,
@@ -267,13 +282,15 @@ impl<'a> Buffers<'a> {
                     let bytes = if uri.starts_with("data:") {
                         decode_data_uri(uri).map_err(|e| err(format!("bad data URI: {e}")))?
                     } else if uri.contains("://") {
-                        return Err(err(format!("external URI '{uri}' is not supported")));
+                        return Err(err(format!("external URI '{}' is not supported", one_line(uri, 200))));
                     } else {
                         let rel = PathBuf::from(percent_decode(uri));
                         let base = self.path.parent().unwrap_or(Path::new(""));
                         let file = base.join(&rel);
-                        std::fs::read(&file)
-                            .map_err(|e| err(format!("cannot read '{uri}' ({}): {e}", file.display())))?
+                        read_buffer_file(&file, declared).map_err(|e| {
+                            let file = one_line(&file.display().to_string(), usize::MAX);
+                            err(format!("cannot read '{}' ({file}): {e}", one_line(uri, 200)))
+                        })?
                     };
                     self.loaded.insert(i, bytes);
                 }
@@ -284,7 +301,7 @@ impl<'a> Buffers<'a> {
             let src = match buffer.source() {
                 gltf::buffer::Source::Bin => "the GLB binary chunk".to_string(),
                 gltf::buffer::Source::Uri(u) if u.starts_with("data:") => "its data URI".into(),
-                gltf::buffer::Source::Uri(u) => format!("'{u}'"),
+                gltf::buffer::Source::Uri(u) => format!("'{}'", one_line(u, 200)),
             };
             return Err(Error::input(
                 self.path,

@@ -168,6 +168,19 @@ fn format_for(path: &Path, supported: &[&str], verb: &str) -> Result<MeshFormat>
 pub fn load_mesh(path: &Path) -> Result<(TriangleMesh, LoadReport)> {
     let format = format_for(path, LOADABLE_EXTENSIONS, "read")?;
     let data = std::fs::read(path).map_err(|e| Error::io(path, format!("cannot read: {e}")))?;
+    load_mesh_bytes(path, data, format)
+}
+
+/// Loads a triangle mesh of `format` from bytes already in memory, exactly as
+/// [`load_mesh`] would from a file holding them (used by the fuzz targets in `fuzz/`).
+///
+/// `path` is not read: it names the data in error messages and, for glTF, is the file
+/// whose folder relative buffer URIs are resolved against. [`MeshFormat::Gltf`] and
+/// [`MeshFormat::Glb`] behave alike (the GLB magic decides).
+///
+/// # Errors
+/// As [`load_mesh`], except that the extension of `path` is not checked.
+pub fn load_mesh_bytes(path: &Path, data: Vec<u8>, format: MeshFormat) -> Result<(TriangleMesh, LoadReport)> {
     let raw = match format {
         MeshFormat::Obj => obj::read(path, data)?,
         MeshFormat::Ply => ply::read(path, &data)?,

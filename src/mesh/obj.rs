@@ -71,9 +71,9 @@ fn scan(path: &Path, data: &mut [u8]) -> Result<Scan> {
                 "line is not valid UTF-8 text",
             ));
         };
-        // Words with their byte offsets in the line.
-        let mut words =
-            text.split_ascii_whitespace().map(|w| (w, w.as_ptr() as usize - text.as_ptr() as usize));
+        // Words with their byte offsets in the line, split where tobj splits them (at any
+        // Unicode white space, vertical tab included) so that both see the same keywords.
+        let mut words = text.split_whitespace().map(|w| (w, w.as_ptr() as usize - text.as_ptr() as usize));
         let Some((keyword, _)) = words.next() else {
             continue;
         };

@@ -33,6 +33,23 @@ impl Token<'_> {
     }
 }
 
+/// `s` (text from a file) fit for a one-line message: control characters such as line
+/// ends escaped, cut after `max` characters.
+pub(crate) fn one_line(s: &str, max: usize) -> String {
+    let mut out = String::new();
+    for c in s.chars().take(max) {
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    if s.chars().nth(max).is_some() {
+        out.push_str("...");
+    }
+    out
+}
+
 fn is_space(b: u8) -> bool {
     matches!(b, b' ' | b'\t' | b'\r' | b'\n' | 0x0b | 0x0c)
 }
