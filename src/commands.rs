@@ -298,7 +298,11 @@ pub fn convert_command(
             );
             let grid = match fill {
                 GridFill::Sample => sample_mesh(&mesh, res, margin)?,
-                GridFill::Voxelize => voxelize_mesh(&mesh, res, margin)?,
+                // Voxelizing fails on meshes it finds open: name the file.
+                GridFill::Voxelize => voxelize_mesh(&mesh, res, margin).map_err(|e| match e {
+                    Error::Usage(m) => Error::input(input, None, m),
+                    other => other,
+                })?,
             };
             drop(stage);
             let sample = start.elapsed() - load;

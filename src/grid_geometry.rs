@@ -155,18 +155,13 @@ impl GridObject {
         &self.grid
     }
 
-    /// The interpolated field at world point `p`, world units.
+    /// The interpolated field at world point `p`, world units (outside the grid's box it is
+    /// continued as a distance bound, see [`SdfGrid::trilinear`]).
     fn field(&self, p: DVec3) -> f64 {
         match &self.placement {
             None => self.grid.trilinear(p.as_vec3()) as f64,
             Some(m) => self.grid.trilinear(m.to_local.transform_point3(p).as_vec3()) as f64 * m.scale,
         }
-    }
-
-    /// The interpolated field at world point `p`, world units (outside the grid's box it is
-    /// continued as a distance bound, see [`SdfGrid::trilinear`]).
-    pub fn field_at(&self, p: DVec3) -> f64 {
-        self.field(p)
     }
 
     fn distance(&self, p: DVec3) -> f64 {

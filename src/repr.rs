@@ -486,16 +486,13 @@ pub fn grid_file_mesh(o: &Object, resolution: u32, method: MeshMethod) -> Option
         MeshMethod::Extracted(m) => m,
         MeshMethod::Parametric => ExtractMethod::MarchingCubes,
     };
-    let g = GridObject::placed(
-        SdfGrid::clone(grid),
-        &o.compiled_transform(),
-        o.material,
-        MarchParams::default(),
-        String::new(),
-    );
-    let bounds = g.bounds()?;
-    let mesh =
-        crate::extract::extract(&|p| g.field_at(p), &bounds, resolution.min(MAX_EXTRACT_RESOLUTION), how);
+    // The field of `GridObject::placed`: the grid's frame under a rigid transform with
+    // uniform scale (checked when the scene is read), so distances scale exactly.
+    let t = o.compiled_transform();
+    let (to_local, scale) = (t.to_local_f64, t.min_scale as f64);
+    let f = |p: DVec3| grid.trilinear(to_local.transform_point3(p).as_vec3()) as f64 * scale;
+    let bounds = o.bounds()?;
+    let mesh = crate::extract::extract(&f, &bounds, resolution.min(MAX_EXTRACT_RESOLUTION), how);
     (!mesh.triangles.is_empty()).then_some(mesh)
 }
 
