@@ -32,6 +32,7 @@
 //! our methods are measured. Without `--bench` in the arguments (as under `cargo test
 //! --all-targets`) it runs a quick smoke check at a small resolution instead.
 
+use sdfmesh::metrics::median;
 use std::path::Path;
 use std::time::Instant;
 
@@ -440,19 +441,6 @@ fn case_error(case: &Case, meshes: &[TriangleMesh]) -> ErrStats {
 
 fn count(meshes: &[TriangleMesh]) -> (usize, usize) {
     meshes.iter().fold((0, 0), |(t, v), m| (t + m.triangles.len(), v + m.positions.len()))
-}
-
-fn median(v: &[f64]) -> f64 {
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    let n = s.len();
-    if n == 0 {
-        f64::NAN
-    } else if n % 2 == 1 {
-        s[n / 2]
-    } else {
-        0.5 * (s[n / 2 - 1] + s[n / 2])
-    }
 }
 
 /// Timings of one contender in one pool.

@@ -36,6 +36,7 @@
 //! under `cargo test --all-targets`) it runs a quick smoke check on a small generated mesh
 //! instead. Without the `peers` feature it measures ours only.
 
+use sdfmesh::metrics::median;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -116,12 +117,6 @@ impl Rng {
     fn below(&mut self, n: usize) -> usize {
         (self.next() % n as u64) as usize
     }
-}
-
-fn median(v: &[f64]) -> f64 {
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    if s.is_empty() { f64::NAN } else { s[s.len() / 2] }
 }
 
 /// The box `[-h, h]` with a dent-free closed surface (12 triangles) plus a second, open

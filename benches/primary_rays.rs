@@ -23,6 +23,7 @@
 //! check on a small image instead. `tools/bench-embree` installs Embree and runs it with
 //! the feature.
 
+use sdfmesh::metrics::median;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -204,19 +205,6 @@ fn race(contenders: &mut [Contender<'_>], pool: &ThreadPool, frame: &Frame, fram
             c.secs.push(wall);
             c.cpu_secs.extend(cpu);
         }
-    }
-}
-
-fn median(v: &[f64]) -> f64 {
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    let n = s.len();
-    if n == 0 {
-        f64::NAN
-    } else if n % 2 == 1 {
-        s[n / 2]
-    } else {
-        0.5 * (s[n / 2 - 1] + s[n / 2])
     }
 }
 
