@@ -154,20 +154,7 @@ impl Geometry for MeshGeometry {
     }
 
     fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
-        // Untransformed rays are read field by field: a caller that has just stored the
-        // ray stalls a wider copy of it (no store forwarding), which perf showed at 5% of
-        // this function's samples.
-        let local = if self.transform.identity {
-            // SAFETY: a read of an f32 through a valid reference; volatile only so that
-            // the compiler keeps the reads apart.
-            let f = |x: &f32| unsafe { std::ptr::read_volatile(x) };
-            Ray::new(
-                Vec3::new(f(&ray.origin.x), f(&ray.origin.y), f(&ray.origin.z)),
-                Vec3::new(f(&ray.dir.x), f(&ray.dir.y), f(&ray.dir.z)),
-            )
-        } else {
-            self.transform.ray_to_local(ray)
-        };
+        let local = if self.transform.identity { *ray } else { self.transform.ray_to_local(ray) };
         let (i, t) = self.bvh.closest_hit(local.origin, local.dir, t_min, t_max, stats)?;
         let sheared = ShearedRay::new(local.origin, local.dir);
         let [a, b, c] = self.corners(i);
