@@ -282,18 +282,21 @@ pub fn convert_command(
                 return Err(Error::Usage("--res must be at least 1".into()));
             }
             let (mesh, report) = load_mesh(input)?;
-            if let Some((lo, hi)) = mesh.bounds() {
-                let (_, _, dims) = grid_layout(lo, hi, res, margin)?;
+            // Checked before any work: the grid's size against the memory budget.
+            let layout = match mesh.bounds() {
+                Some((lo, hi)) => Some(grid_layout(lo, hi, res, margin)?),
+                None => None,
+            };
+            if let Some((_, _, dims)) = layout {
                 let what =
                     format!("a grid of {}x{}x{} samples for {}", dims.x, dims.y, dims.z, input.display());
                 budget.check(&what, mesh_to_grid_bytes(mesh.triangles.len(), dims, fill))?;
             }
             let load = start.elapsed();
             // One unit per z-slice of exact sampling (voxelizing is quick and shows none).
-            let slices = mesh.bounds().and_then(|(lo, hi)| grid_layout(lo, hi, res, margin).ok());
             let stage = Stage::start(
                 &format!("sampling {}", input.display()),
-                slices.map_or(0, |(_, _, d)| d.z as u64),
+                layout.map_or(0, |(_, _, d)| d.z as u64),
                 fill == GridFill::Sample,
             );
             let grid = match fill {
