@@ -168,13 +168,7 @@ impl BandGrid {
             let x11 = lerp(g(sz + sy), g(sz + sy + 1), t.x);
             offset + scale * lerp(lerp(x00, x10, t.y), lerp(x01, x11, t.y), t.z)
         };
-        if d == 0.0 {
-            value
-        } else if value >= 0.0 {
-            (d * d + value * value).sqrt()
-        } else {
-            value + d
-        }
+        super::continue_outside(value, d)
     }
 
     /// Bytes of memory this grid holds: the struct and every allocated array's capacity.

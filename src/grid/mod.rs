@@ -84,6 +84,20 @@ pub fn check_size(dims: UVec3, max_bytes: u64) -> Result<()> {
     Ok(())
 }
 
+/// The field at a point `d >= 0` outside a grid's box whose nearest box point has the
+/// interpolated value `value` (see [`SdfGrid::trilinear`]): `sqrt(d^2 + value^2)` when
+/// `value >= 0`, `value + d` otherwise; `value` itself at `d == 0`.
+#[inline]
+pub(crate) fn continue_outside(value: f32, d: f32) -> f32 {
+    if d == 0.0 {
+        value
+    } else if value >= 0.0 {
+        (d * d + value * value).sqrt()
+    } else {
+        value + d
+    }
+}
+
 fn human_bytes(b: u128) -> String {
     const GIB: f64 = (1u64 << 30) as f64;
     const MIB: f64 = (1u64 << 20) as f64;
@@ -217,13 +231,7 @@ impl SdfGrid {
         let x01 = lerp(v[base + sz], v[base + sz + sx], t.x);
         let x11 = lerp(v[base + sz + sy], v[base + sz + sy + sx], t.x);
         let value = lerp(lerp(x00, x10, t.y), lerp(x01, x11, t.y), t.z);
-        if d == 0.0 {
-            value
-        } else if value >= 0.0 {
-            (d * d + value * value).sqrt()
-        } else {
-            value + d
-        }
+        continue_outside(value, d)
     }
 
     /// Bytes of memory this grid holds: the struct and the allocated sample capacity.
