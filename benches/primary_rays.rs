@@ -6,8 +6,8 @@
 //!   tiles: BVH build time (median of 3), bytes, Mrays/s (median, min and max of 5 frames
 //!   after a warm-up), BVH nodes and triangle tests per ray.
 //! * A sweep of obvhs build presets and leaf sizes (1 thread; each Bvh2 is collapsed
-//!   into the 4-wide BVH `MeshGeometry` traces) to choose `MeshGeometry::BUILD_PARAMS`
-//!   by measurement. Nodes per ray count 4-wide nodes visited, tests per ray triangles.
+//!   into the 8-wide BVH `MeshGeometry` traces) to choose `MeshGeometry::BUILD_PARAMS`
+//!   by measurement. Nodes per ray count 8-wide nodes visited, tests per ray triangles.
 //! * With `--features embree` (Debian's `libembree-dev`, Embree 3), the same frames
 //!   traced by Embree one ray at a time (`rtcIntersect1`), in packets of 8
 //!   (`rtcIntersect8`) and as a coherent stream of one tile (`rtcIntersect1M`), the
@@ -20,7 +20,8 @@
 //! would reach per thread on an otherwise idle machine, and it is far less noisy when
 //! other jobs share the cores). `cargo bench --bench primary_rays [MESH-SUBSTRING]` runs
 //! it; without `--bench` (as under `cargo test --all-targets`) it runs a quick smoke
-//! check on a small image instead. `tools/bench-embree` installs Embree and runs it with
+//! check on a small image instead, and with `--quick` the full-size frames on one thread
+//! without the preset sweep. `tools/bench-embree` installs Embree and runs it with
 //! the feature.
 
 use sdfmesh::metrics::median;
@@ -63,6 +64,10 @@ struct Plan {
 }
 
 const FULL: Plan = Plan { size: 1000, frames: 5, builds: 3, threads: &[1, 2], presets: true };
+
+/// `--quick`: the full-size frames on one thread, without the preset sweep (for
+/// profiling and quick comparisons while tuning).
+const QUICK: Plan = Plan { size: 1000, frames: 5, builds: 1, threads: &[1], presets: false };
 
 const SMOKE: Plan = Plan { size: 64, frames: 1, builds: 1, threads: &[1], presets: false };
 
@@ -391,7 +396,7 @@ fn per_ray(total: u64, rays: u64) -> Option<f64> {
 }
 
 /// The obvhs presets compared, by name: the five presets as they are (leaves of up to 8
-/// triangles, which the 4-wide BVH splits into packets of at most 4), then the fast and
+/// triangles, which the 8-wide BVH splits into packets of at most 4), then the fast and
 /// medium presets with 1 to 4 triangles per leaf (one packet per leaf).
 fn presets() -> Vec<(String, BvhBuildParams)> {
     let mut v: Vec<(String, BvhBuildParams)> = vec![
@@ -438,7 +443,7 @@ fn preset_sweep(label: &str, mesh: &TriangleMesh, frame: &Frame, plan: &Plan) {
     race(&mut cs, &pool1, frame, plan.frames);
     println!(
         "\nBVH build presets on {label}, 1 thread (obvhs builds from boxes, so slow_build's \
-         pre_split has no effect; the Bvh2 is collapsed into the 4-wide BVH either way)"
+         pre_split has no effect; the Bvh2 is collapsed into the 8-wide BVH either way)"
     );
     println!(
         "{:<26} {:>8} {:>7} {:>7} {:>6} {:>6} {:>7} {:>7} {:>7} {:>21}",
@@ -573,7 +578,9 @@ fn bench_mesh(path: &Path, plan: &Plan) -> Vec<Row> {
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let plan = if args.iter().any(|a| a == "--bench") {
+    let plan = if args.iter().any(|a| a == "--quick") {
+        QUICK
+    } else if args.iter().any(|a| a == "--bench") {
         FULL
     } else {
         println!("smoke mode (run with `cargo bench --bench primary_rays` for the benchmark)");
@@ -581,8 +588,11 @@ fn main() {
     };
     let filters: Vec<&String> = args.iter().filter(|a| !a.starts_with('-')).collect();
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes");
-    let meshes: &[&str] =
-        if plan.presets { &["armadillo.obj", "stanford-bunny.obj"] } else { &["stanford-bunny.obj"] };
+    let meshes: &[&str] = if plan.size == FULL.size {
+        &["armadillo.obj", "stanford-bunny.obj"]
+    } else {
+        &["stanford-bunny.obj"]
+    };
     println!(
         "primary rays: {0}x{0}, 16x16 tiles, closest hit only, t in [0, inf); threads {1:?}; \
          {2} timed frames after 1 warm-up, interleaved across tracers; {3} CPUs available",

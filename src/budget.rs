@@ -26,8 +26,8 @@ pub const FALLBACK_BYTES: u64 = 8 << 30;
 pub const DEFAULT_FRACTION: f64 = 0.5;
 
 /// Bytes per triangle of a traced mesh (positions, indices and BVH; measured on the
-/// armadillo with the 4-wide BVH: 7.99 MB for 86k triangles is 92 bytes, rounded up).
-pub const BYTES_PER_TRACED_TRIANGLE: u64 = 96;
+/// armadillo with the 8-wide BVH: 8.46 MB for 86k triangles is 98 bytes, rounded up).
+pub const BYTES_PER_TRACED_TRIANGLE: u64 = 100;
 
 /// Bytes per grid sample while extracting a surface (f32 sample plus working memory, see
 /// [`crate::extract::extract`]): marching cubes.

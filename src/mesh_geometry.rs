@@ -1,5 +1,5 @@
 //! Triangle meshes in the tracer: a BVH per mesh (an obvhs PLOC BVH2 collapsed into the
-//! 4-wide [`WideBvh`] with triangle corners pre-gathered into leaf packets; the triangle
+//! 8-wide [`WideBvh`] with triangle corners pre-gathered into leaf packets; the triangle
 //! list reordered into leaf order), the watertight ray/triangle test, flat or smooth
 //! (vertex-normal) shading, instancing under a transform, and exact byte counts.
 
@@ -15,7 +15,7 @@ use crate::mesh::TriangleMesh;
 pub use crate::shape::Shading;
 use crate::transform::Transform;
 use crate::triangle::ShearedRay;
-use crate::wide_bvh::WideBvh;
+use crate::wide_bvh::{LeafHit, WideBvh};
 
 /// A triangle mesh ready for tracing.
 pub struct MeshGeometry {
@@ -155,29 +155,29 @@ impl Geometry for MeshGeometry {
 
     fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
         let local = if self.transform.identity { *ray } else { self.transform.ray_to_local(ray) };
-        let (i, t) = self.bvh.closest_hit(local.origin, local.dir, t_min, t_max, stats)?;
-        let sheared = ShearedRay::new(local.origin, local.dir);
-        let [a, b, c] = self.corners(i);
-        // The same test on the winner alone, for its barycentrics (bit-identical `t`).
-        let h =
-            sheared.intersect(a, b, c, t, t).unwrap_or(crate::triangle::TriHit { t, bary: [1.0 / 3.0; 3] });
+        let LeafHit { triangle: i, t, corners: [a, b, c] } =
+            self.bvh.closest_hit(local.origin, local.dir, t_min, t_max, stats)?;
         let geometric = (b - a).cross(c - a);
         let mut shading = geometric;
         if let Some(normals) = &self.normals {
+            // The same test on the winner alone, for its barycentrics (bit-identical `t`).
+            let bary = ShearedRay::new(local.origin, local.dir)
+                .intersect(a, b, c, t, t)
+                .map_or([1.0 / 3.0; 3], |h| h.bary);
             let t = self.triangles[i as usize];
-            let s = normals[t[0] as usize] * h.bary[0]
-                + normals[t[1] as usize] * h.bary[1]
-                + normals[t[2] as usize] * h.bary[2];
+            let s = normals[t[0] as usize] * bary[0]
+                + normals[t[1] as usize] * bary[1]
+                + normals[t[2] as usize] * bary[2];
             // Keep the side the geometric normal is on, so inside/outside stays consistent.
             if s.dot(geometric) > 0.0 {
                 shading = s;
             }
         }
-        let point = ray.at(h.t);
-        let local_point = local.at(h.t);
+        let point = ray.at(t);
+        let local_point = local.at(t);
         let m = max_abs(point).max(max_abs(ray.origin)).max(max_abs(local_point) * self.transform.max_scale);
         Some(Hit {
-            t: h.t,
+            t,
             point,
             normal: self.transform.normal_to_world(geometric),
             shading_normal: self.transform.normal_to_world(shading),
@@ -228,7 +228,7 @@ impl Geometry for MeshGeometry {
 
     fn describe(&self) -> String {
         format!(
-            "{}: {} triangles, 4-wide BVH of {} nodes and {} leaf packets (depth {}) built in {:.1} ms, {}",
+            "{}: {} triangles, 8-wide BVH of {} nodes and {} leaf packets (depth {}) built in {:.1} ms, {}",
             self.label,
             self.triangles.len(),
             self.bvh.nodes.len(),
