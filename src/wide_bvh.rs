@@ -73,7 +73,8 @@ pub struct WideBvh {
     pub packets: Vec<Packet>,
     /// Deepest node level (root = 1), which bounds the traversal stack.
     pub depth: usize,
-    /// Whether the walks test boxes with AVX2 (true only where the CPU has it).
+    /// Whether the walks test boxes with AVX2 and count lanes with POPCNT and BMI1 (true only
+    /// where the CPU has all three).
     avx2: bool,
 }
 
@@ -145,7 +146,7 @@ impl BoxTest for BoxRay {
 }
 
 /// The AVX2 box test: all eight lanes in one 256-bit register. Only built by walks that
-/// run under `#[target_feature(enable = "avx2")]`, which are only called where
+/// run under `#[target_feature(enable = "avx2,popcnt,bmi1")]`, which are only called where
 /// [`WideBvh::avx2`] says the CPU has it.
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy, Debug)]
@@ -413,7 +414,9 @@ impl WideBvh {
         w.packets.shrink_to_fit();
         #[cfg(target_arch = "x86_64")]
         {
-            w.avx2 = std::arch::is_x86_feature_detected!("avx2");
+            w.avx2 = std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("popcnt")
+                && std::arch::is_x86_feature_detected!("bmi1");
         }
         w
     }
@@ -529,14 +532,14 @@ impl WideBvh {
     ) -> Option<LeafHit> {
         #[cfg(target_arch = "x86_64")]
         if self.avx2 {
-            // SAFETY: `avx2` is only set where the CPU has AVX2.
+            // SAFETY: `avx2` is only set where the CPU has AVX2, POPCNT and BMI1.
             return unsafe { self.closest_hit_avx2(origin, dir, t_min, t_max, stats) };
         }
         closest_walk::<BoxRay>(self, origin, dir, t_min, t_max, stats)
     }
 
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,popcnt,bmi1")]
     fn closest_hit_avx2(
         &self,
         origin: Vec3,
@@ -554,14 +557,14 @@ impl WideBvh {
     pub fn any_hit(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
         #[cfg(target_arch = "x86_64")]
         if self.avx2 {
-            // SAFETY: `avx2` is only set where the CPU has AVX2.
+            // SAFETY: `avx2` is only set where the CPU has AVX2, POPCNT and BMI1.
             return unsafe { self.any_hit_avx2(origin, dir, t_min, t_max, stats) };
         }
         any_walk::<BoxRay>(self, origin, dir, t_min, t_max, stats)
     }
 
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,popcnt,bmi1")]
     fn any_hit_avx2(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
         any_walk::<BoxRayAvx2>(self, origin, dir, t_min, t_max, stats)
     }
