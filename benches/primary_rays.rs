@@ -4,7 +4,8 @@
 //!
 //! * Our tracer (`MeshGeometry::closest_hit`) on 1 and 2 rayon threads, rays in 16x16
 //!   tiles: BVH build time (median of 3), bytes, Mrays/s (median, min and max of 5 frames
-//!   after a warm-up), BVH nodes and triangle tests per ray.
+//!   after a warm-up), BVH nodes and triangle tests per ray; where the CPU has AVX2, also
+//!   the same BVH walked with the portable box test (two SSE halves per node).
 //! * A sweep of obvhs build presets and leaf sizes (1 thread; each Bvh2 is collapsed
 //!   into the 8-wide BVH `MeshGeometry` traces) to choose `MeshGeometry::BUILD_PARAMS`
 //!   by measurement. Nodes per ray count 8-wide nodes visited, tests per ray triangles.
@@ -353,7 +354,7 @@ fn opt(v: Option<f64>, prec: usize) -> String {
 
 fn print_table(rows: &[Row]) {
     println!(
-        "{:<16} {:<21} {:>3} {:>8} {:>7} {:>6} {:>6} {:>6} {:>7} {:>6} {:>7} {:>7} {:>21} {:>5}",
+        "{:<16} {:<23} {:>3} {:>8} {:>7} {:>6} {:>6} {:>6} {:>7} {:>6} {:>7} {:>7} {:>21} {:>5}",
         "mesh",
         "tracer",
         "thr",
@@ -372,7 +373,7 @@ fn print_table(rows: &[Row]) {
     for r in rows {
         let (lo, hi) = min_max(&r.mrays);
         println!(
-            "{:<16} {:<21} {:>3} {:>8} {:>7.2} {:>6.2} {:>6.2} {:>6} {:>7} {:>6} {:>7} {:>7} {:>21} {:>5}",
+            "{:<16} {:<23} {:>3} {:>8} {:>7.2} {:>6.2} {:>6.2} {:>6} {:>7} {:>6} {:>7} {:>7} {:>21} {:>5}",
             r.mesh,
             r.tracer,
             r.threads,
@@ -510,6 +511,13 @@ fn bench_mesh(path: &Path, plan: &Plan) -> Vec<Row> {
         plan.builds,
         opt(ours_cpu_ms, 1)
     );
+    // The same BVH walked with the portable box test (two SSE halves per node), to show
+    // what the AVX2 test brings; only where the CPU has AVX2.
+    let portable = ours.uses_avx2().then(|| {
+        let (mut g, _, _) = build_ours(&mesh, MeshGeometry::BUILD_PARAMS, 1);
+        g.use_portable_box_test();
+        g
+    });
     #[cfg(feature = "embree")]
     let emb = embree::Bench::new(&mesh, plan.builds);
 
@@ -522,6 +530,9 @@ fn bench_mesh(path: &Path, plan: &Plan) -> Vec<Row> {
         cs[0].bytes = format!("{}/{}", ours.bytes_used(), ours.accel_bytes());
         #[cfg(feature = "embree")]
         cs.extend(emb.contenders());
+        if let Some(p) = &portable {
+            cs.push(Contender::new("ours portable box test", ours_tile(p)));
+        }
         race(&mut cs, &pool, &frame, plan.frames);
         if ours_out.is_empty() {
             ours_out = cs[0].out.clone();

@@ -136,6 +136,17 @@ impl MeshGeometry {
         self.triangles.len()
     }
 
+    /// Makes the BVH walks use the portable box test even where the CPU has AVX2 (for
+    /// measuring what AVX2 brings; hits are bit-identical).
+    pub fn use_portable_box_test(&mut self) {
+        self.bvh.use_portable_box_test();
+    }
+
+    /// Whether the BVH walks use the AVX2 box test.
+    pub fn uses_avx2(&self) -> bool {
+        self.bvh.uses_avx2()
+    }
+
     /// Bytes of the BVH alone (its struct, nodes and leaf packets).
     pub fn accel_bytes(&self) -> usize {
         self.bvh.bytes_used()
