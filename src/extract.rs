@@ -1,15 +1,25 @@
 //! Extraction of triangle meshes from signed distance functions (issue 4: SDF -> mesh).
 //!
 //! [`extract`] samples a function once per corner of a regular grid (in parallel over
-//! z-slices) and extracts its zero isosurface with one of two methods:
+//! z-slices) and extracts its zero isosurface with one of three methods:
 //!
-//! - [`ExtractMethod::MarchingCubes`]: every cube is split into six tetrahedra around its
-//!   main diagonal (the Kuhn / Freudenthal split, the same in every cell, so neighbouring
-//!   cells cut their shared faces along the same diagonal) and each tetrahedron is
-//!   triangulated on its own ("marching tetrahedra"). There is no ambiguous case, so the
-//!   result is always watertight and edge-manifold. Vertices lie on the grid's edges (the
-//!   12 cube edges, 6 face diagonals and the main diagonal of each cell), one per
-//!   sign-changing edge, shared by every cell and tetrahedron that uses the edge.
+//! - [`ExtractMethod::MarchingCubes`] (the default): classic marching cubes, one vertex per
+//!   sign-changing cube edge, each cube's configuration triangulated from a case table
+//!   generated at first use ([`McTable`]). Ambiguous faces are resolved by the asymptotic
+//!   decider, from the face's four samples only, so both cells sharing a face cut it
+//!   alike; diagonals between two edges of one face are used only by the cell below the
+//!   face. So the output is watertight and edge-manifold by construction (checked over
+//!   every pair of neighbouring configurations in the unit tests). Quadrilaterals and
+//!   polygons up to 7 vertices take the triangulation that folds least on the actual
+//!   vertices; the rare cycle that cannot avoid a diagonal on a lower face gets a vertex
+//!   of its own at the mean of its crossings.
+//! - [`ExtractMethod::MarchingTetrahedra`]: every cube is split into six tetrahedra around
+//!   its main diagonal (the Kuhn / Freudenthal split, the same in every cell, so
+//!   neighbouring cells cut their shared faces along the same diagonal) and each
+//!   tetrahedron is triangulated on its own. There is no ambiguous case, so the result is
+//!   always watertight and edge-manifold. Vertices lie on the grid's edges (the 12 cube
+//!   edges, 6 face diagonals and the main diagonal of each cell), one per sign-changing
+//!   edge; about three times marching cubes' triangles.
 //! - [`ExtractMethod::DualContouring`]: one vertex per surface component of each
 //!   sign-changing cell, placed by minimising a quadratic error function built from the
 //!   crossing points on the component's cell edges and the function's gradient there
@@ -25,8 +35,16 @@
 //!   agree on. Where both cells would join the face's two sheets into one component (the
 //!   dual edge between them would then be used four times), both flip that face's pairing.
 //!   With this the output was closed and edge-manifold in every test (random blobs, CSG,
-//!   gyroids at 4 cells per period), but unlike marching tetrahedra this is not proven:
+//!   gyroids at 4 cells per period), but unlike marching cubes and tetrahedra this is not
+//!   proven (on value noise at the cell scale it can leave a hole):
 //!   check with [`TriangleMesh::is_closed`] where it matters.
+//!
+//! Only cells with corners of both signs are visited: the samples' signs are packed 64
+//! to a word per x-row ([`Signs`]), and a cell row's active cells are a few word
+//! operations over its four corner rows. The sign-changing grid edges are bit rows too
+//! ([`Crossings`]), numbered by slice, row, direction and x, so the vertex on an edge is
+//! the count of crossings before it in its word plus the word's start: vertices are
+//! shared between cells without hashing, sorting or per-point index arrays.
 //!
 //! Crossing points on grid edges start from linear interpolation of the two sampled values
 //! and are refined by [`REFINE_STEPS`] Illinois (regula falsi) steps on `f` along the edge,
@@ -86,7 +104,7 @@ const DIRS: [[usize; 3]; 7] = [[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [1, 0
 ///
 /// Output: closed, consistently outward-oriented (`(b - a) × (c - a)` points to positive
 /// `f`), edge-manifold, no duplicate vertices (vertices on grid edges are shared between
-/// cells through an edge-indexed map), no degenerate triangles (any that slip through are
+/// cells through the edges' numbering), no degenerate triangles (any that slip through are
 /// dropped after welding), for any `f` that is negative inside a region strictly inside
 /// the padded bounds. Marching cubes guarantees closed and edge-manifold output; dual
 /// contouring gave it in every test (see the module documentation).
@@ -94,7 +112,7 @@ const DIRS: [[usize; 3]; 7] = [[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [1, 0
 /// Cells are cubes of side `longest extent / res`; the other axes get as many cells as
 /// cover them, centred. `res` 0 counts as 1. Bounds with a non-finite or zero longest
 /// extent give an empty mesh. The grid holds `(res + 3)^3` samples at most (f32, plus
-/// about 5 bytes per sample of working memory, 9 for dual contouring).
+/// under 1 byte per sample of working memory, 9 for dual contouring).
 ///
 /// # Panics
 /// When the grid has `u32::MAX` points or more (`res` above about 1600).
