@@ -904,13 +904,9 @@ impl McTable {
         for len in 2..m {
             for i in 0..m - len {
                 let j = i + len;
-                let (mut best, mut at) = (f64::INFINITY, 0);
-                for k in i + 1..j {
-                    let c = cost[i][k] + cost[k][j] + chord(i, k) + chord(k, j);
-                    if c < best {
-                        (best, at) = (c, k);
-                    }
-                }
+                let (best, at) = (i + 1..j)
+                    .map(|k| (cost[i][k] + cost[k][j] + chord(i, k) + chord(k, j), k))
+                    .fold((f64::INFINITY, 0), |b, c| if c.0 < b.0 { c } else { b });
                 cost[i][j] = best;
                 split[i][j] = at;
             }
