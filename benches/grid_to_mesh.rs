@@ -123,11 +123,11 @@ fn off_grid(mut case: Case, frac: f32) -> Case {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Method {
     /// Our marching cubes (`ExtractMethod::MarchingCubes`, the default `--method mc`).
-    OursMc,
+    Mc,
     /// Our marching tetrahedra (`ExtractMethod::MarchingTetrahedra`).
-    OursMt,
+    Mt,
     /// Our dual contouring.
-    OursDc,
+    Dc,
     /// fast-surface-nets' `surface_nets`.
     #[cfg(feature = "peers")]
     Fsn,
@@ -139,7 +139,7 @@ enum Method {
 impl Method {
     fn all() -> Vec<Method> {
         #[allow(unused_mut)]
-        let mut v = vec![Method::OursMc, Method::OursMt, Method::OursDc];
+        let mut v = vec![Method::Mc, Method::Mt, Method::Dc];
         #[cfg(feature = "peers")]
         v.extend([Method::Fsn, Method::Mcubes]);
         v
@@ -147,9 +147,9 @@ impl Method {
 
     fn name(self) -> &'static str {
         match self {
-            Method::OursMc => "ours marching cubes",
-            Method::OursMt => "ours marching tetrahedra",
-            Method::OursDc => "ours dual contouring",
+            Method::Mc => "ours marching cubes",
+            Method::Mt => "ours marching tetrahedra",
+            Method::Dc => "ours dual contouring",
             #[cfg(feature = "peers")]
             Method::Fsn => "fast-surface-nets 0.2",
             #[cfg(feature = "peers")]
@@ -264,10 +264,10 @@ fn mcubes_extract(values: Vec<f32>, lattice: &SampleGrid) -> TriangleMesh {
 fn run(method: Method, part: &Part, lattice: &SampleGrid, res: u32) -> (TriangleMesh, Secs, Secs) {
     let f = &part.sdf;
     match method {
-        Method::OursMc | Method::OursMt | Method::OursDc => {
+        Method::Mc | Method::Mt | Method::Dc => {
             let how = match method {
-                Method::OursMc => ExtractMethod::MarchingCubes,
-                Method::OursMt => ExtractMethod::MarchingTetrahedra,
+                Method::Mc => ExtractMethod::MarchingCubes,
+                Method::Mt => ExtractMethod::MarchingTetrahedra,
                 _ => ExtractMethod::DualContouring,
             };
             let (grid, s) = timed(|| sample_grid(f, &part.bounds, res).expect("bounded part"));
@@ -531,9 +531,8 @@ fn speed(case: &Case, plan: &Plan) {
         }
         #[cfg(feature = "peers")]
         if let Some(&(_, pe, pt)) = totals.iter().find(|(m, _, _)| *m == Method::Fsn) {
-            for &(m, e, t) in totals
-                .iter()
-                .filter(|(m, _, _)| matches!(m, Method::OursMc | Method::OursMt | Method::OursDc))
+            for &(m, e, t) in
+                totals.iter().filter(|(m, _, _)| matches!(m, Method::Mc | Method::Mt | Method::Dc))
             {
                 println!(
                     "   {} / fast-surface-nets: extract {:.2}x, sample + extract {:.2}x (below 1: ours faster)",
@@ -609,7 +608,7 @@ fn sweep(case: &Case, plan: &Plan) {
         }
         curves.push(curve);
     }
-    let dc = methods.iter().position(|&m| m == Method::OursDc).expect("dc");
+    let dc = methods.iter().position(|&m| m == Method::Dc).expect("dc");
     for (b, &base) in methods.iter().enumerate() {
         if b == dc {
             continue;
