@@ -1,6 +1,6 @@
 //! SDF -> grid -> triangle mesh (issue 4, item 7): our extraction (`sdfmesh::extract`,
-//! marching tetrahedra and dual contouring) against `fast-surface-nets` (naive surface
-//! nets) and `mcubes` (classic Lorensen marching cubes, Bourke's tables).
+//! marching cubes, marching tetrahedra and dual contouring) against `fast-surface-nets`
+//! (naive surface nets) and `mcubes` (classic Lorensen marching cubes, Bourke's tables).
 //!
 //! * Speed: a unit sphere (`|p| - 1`) and the thesis CSG scene (`thesis_sdf_csg.toml`,
 //!   every object on its own grid as `toolkit convert --to mesh` does) at 128 cells along
@@ -26,7 +26,7 @@
 //!   each method swept over resolutions, the plain methods' error interpolated on log-log
 //!   axes at the triangle counts of our dual contouring, and the ratio printed. The plain
 //!   baselines: `mcubes` (classic marching cubes, linear interpolation) and
-//!   fast-surface-nets (with `--features peers`), and our marching tetrahedra.
+//!   fast-surface-nets (with `--features peers`), and our marching cubes and tetrahedra.
 //!
 //! `cargo bench --features peers --bench grid_to_mesh` runs it all; without `peers` only
 //! our methods are measured. Without `--bench` in the arguments (as under `cargo test
@@ -122,10 +122,12 @@ fn off_grid(mut case: Case, frac: f32) -> Case {
 /// Who extracts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Method {
-    /// Our marching tetrahedra (`ExtractMethod::MarchingCubes`).
-    OursMt,
+    /// Our marching cubes (`ExtractMethod::MarchingCubes`, the default `--method mc`).
+    Mc,
+    /// Our marching tetrahedra (`ExtractMethod::MarchingTetrahedra`).
+    Mt,
     /// Our dual contouring.
-    OursDc,
+    Dc,
     /// fast-surface-nets' `surface_nets`.
     #[cfg(feature = "peers")]
     Fsn,
@@ -137,7 +139,7 @@ enum Method {
 impl Method {
     fn all() -> Vec<Method> {
         #[allow(unused_mut)]
-        let mut v = vec![Method::OursMt, Method::OursDc];
+        let mut v = vec![Method::Mc, Method::Mt, Method::Dc];
         #[cfg(feature = "peers")]
         v.extend([Method::Fsn, Method::Mcubes]);
         v
@@ -145,8 +147,9 @@ impl Method {
 
     fn name(self) -> &'static str {
         match self {
-            Method::OursMt => "ours marching tetrahedra",
-            Method::OursDc => "ours dual contouring",
+            Method::Mc => "ours marching cubes",
+            Method::Mt => "ours marching tetrahedra",
+            Method::Dc => "ours dual contouring",
             #[cfg(feature = "peers")]
             Method::Fsn => "fast-surface-nets 0.2",
             #[cfg(feature = "peers")]
@@ -261,11 +264,11 @@ fn mcubes_extract(values: Vec<f32>, lattice: &SampleGrid) -> TriangleMesh {
 fn run(method: Method, part: &Part, lattice: &SampleGrid, res: u32) -> (TriangleMesh, Secs, Secs) {
     let f = &part.sdf;
     match method {
-        Method::OursMt | Method::OursDc => {
-            let how = if method == Method::OursMt {
-                ExtractMethod::MarchingCubes
-            } else {
-                ExtractMethod::DualContouring
+        Method::Mc | Method::Mt | Method::Dc => {
+            let how = match method {
+                Method::Mc => ExtractMethod::MarchingCubes,
+                Method::Mt => ExtractMethod::MarchingTetrahedra,
+                _ => ExtractMethod::DualContouring,
             };
             let (grid, s) = timed(|| sample_grid(f, &part.bounds, res).expect("bounded part"));
             let (mesh, e) = timed(|| extract_sampled(f, &grid, how));
@@ -528,7 +531,9 @@ fn speed(case: &Case, plan: &Plan) {
         }
         #[cfg(feature = "peers")]
         if let Some(&(_, pe, pt)) = totals.iter().find(|(m, _, _)| *m == Method::Fsn) {
-            for &(m, e, t) in totals.iter().filter(|(m, _, _)| matches!(m, Method::OursMt | Method::OursDc)) {
+            for &(m, e, t) in
+                totals.iter().filter(|(m, _, _)| matches!(m, Method::Mc | Method::Mt | Method::Dc))
+            {
                 println!(
                     "   {} / fast-surface-nets: extract {:.2}x, sample + extract {:.2}x (below 1: ours faster)",
                     m.name(),
@@ -603,7 +608,7 @@ fn sweep(case: &Case, plan: &Plan) {
         }
         curves.push(curve);
     }
-    let dc = methods.iter().position(|&m| m == Method::OursDc).expect("dc");
+    let dc = methods.iter().position(|&m| m == Method::Dc).expect("dc");
     for (b, &base) in methods.iter().enumerate() {
         if b == dc {
             continue;

@@ -120,7 +120,7 @@ pub fn mesh_to_grid_bytes(triangles: usize, dims: UVec3, fill: GridFill) -> u64 
 /// box, times the cells along an axis).
 pub fn extraction_bytes(res: u32, method: ExtractMethod) -> u64 {
     let per = match method {
-        ExtractMethod::MarchingCubes => EXTRACT_BYTES_PER_SAMPLE_MC,
+        ExtractMethod::MarchingCubes | ExtractMethod::MarchingTetrahedra => EXTRACT_BYTES_PER_SAMPLE_MC,
         ExtractMethod::DualContouring => EXTRACT_BYTES_PER_SAMPLE_DC,
     };
     let r = res as u64 + 3;

@@ -1,15 +1,25 @@
 //! Extraction of triangle meshes from signed distance functions (issue 4: SDF -> mesh).
 //!
 //! [`extract`] samples a function once per corner of a regular grid (in parallel over
-//! z-slices) and extracts its zero isosurface with one of two methods:
+//! z-slices) and extracts its zero isosurface with one of three methods:
 //!
-//! - [`ExtractMethod::MarchingCubes`]: every cube is split into six tetrahedra around its
-//!   main diagonal (the Kuhn / Freudenthal split, the same in every cell, so neighbouring
-//!   cells cut their shared faces along the same diagonal) and each tetrahedron is
-//!   triangulated on its own ("marching tetrahedra"). There is no ambiguous case, so the
-//!   result is always watertight and edge-manifold. Vertices lie on the grid's edges (the
-//!   12 cube edges, 6 face diagonals and the main diagonal of each cell), one per
-//!   sign-changing edge, shared by every cell and tetrahedron that uses the edge.
+//! - [`ExtractMethod::MarchingCubes`] (the default): classic marching cubes, one vertex per
+//!   sign-changing cube edge, each cube's configuration triangulated from a case table
+//!   generated at first use ([`McTable`]). Ambiguous faces are resolved by the asymptotic
+//!   decider, from the face's four samples only, so both cells sharing a face cut it
+//!   alike; diagonals between two edges of one face are used only by the cell below the
+//!   face. So the output is watertight and edge-manifold by construction (checked over
+//!   every pair of neighbouring configurations in the unit tests). Quadrilaterals and
+//!   polygons up to 7 vertices take the triangulation that folds least on the actual
+//!   vertices; the rare cycle that cannot avoid a diagonal on a lower face gets a vertex
+//!   of its own at the mean of its crossings.
+//! - [`ExtractMethod::MarchingTetrahedra`]: every cube is split into six tetrahedra around
+//!   its main diagonal (the Kuhn / Freudenthal split, the same in every cell, so
+//!   neighbouring cells cut their shared faces along the same diagonal) and each
+//!   tetrahedron is triangulated on its own. There is no ambiguous case, so the result is
+//!   always watertight and edge-manifold. Vertices lie on the grid's edges (the 12 cube
+//!   edges, 6 face diagonals and the main diagonal of each cell), one per sign-changing
+//!   edge; about three times marching cubes' triangles.
 //! - [`ExtractMethod::DualContouring`]: one vertex per surface component of each
 //!   sign-changing cell, placed by minimising a quadratic error function built from the
 //!   crossing points on the component's cell edges and the function's gradient there
@@ -25,8 +35,16 @@
 //!   agree on. Where both cells would join the face's two sheets into one component (the
 //!   dual edge between them would then be used four times), both flip that face's pairing.
 //!   With this the output was closed and edge-manifold in every test (random blobs, CSG,
-//!   gyroids at 4 cells per period), but unlike marching tetrahedra this is not proven:
+//!   gyroids at 4 cells per period), but unlike marching cubes and tetrahedra this is not
+//!   proven (on value noise at the cell scale it can leave a hole):
 //!   check with [`TriangleMesh::is_closed`] where it matters.
+//!
+//! Only cells with corners of both signs are visited: the samples' signs are packed 64
+//! to a word per x-row ([`Signs`]), and a cell row's active cells are a few word
+//! operations over its four corner rows. The sign-changing grid edges are bit rows too
+//! ([`Crossings`]), numbered by slice, row, direction and x, so the vertex on an edge is
+//! the count of crossings before it in its word plus the word's start: vertices are
+//! shared between cells without hashing, sorting or per-point index arrays.
 //!
 //! Crossing points on grid edges start from linear interpolation of the two sampled values
 //! and are refined by [`REFINE_STEPS`] Illinois (regula falsi) steps on `f` along the edge,
@@ -51,13 +69,18 @@ use crate::shape::Object;
 /// How [`extract`] turns samples into triangles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum ExtractMethod {
-    /// Marching cubes done as marching tetrahedra on a consistent six-tetrahedron split of
-    /// each cube: watertight and manifold in every case, vertices on grid edges, sharp
-    /// features cut off.
+    /// Classic marching cubes: one vertex per sign-changing cube edge, each cube's
+    /// configuration triangulated from a generated case table whose ambiguous faces are
+    /// resolved by the asymptotic decider (the face's corner samples alone, so both cells
+    /// sharing a face agree): watertight and edge-manifold in every case, sharp features
+    /// cut off.
     MarchingCubes,
+    /// Marching tetrahedra on a consistent six-tetrahedron split of each cube: watertight
+    /// and manifold in every case, about three times marching cubes' triangles.
+    MarchingTetrahedra,
     /// Dual contouring: one QEF-placed vertex per surface component of a sign-changing
-    /// cell, quads across sign-changing edges; keeps sharp features; about a third of
-    /// marching tetrahedra's triangles.
+    /// cell, quads across sign-changing edges; keeps sharp features; about as many
+    /// triangles as marching cubes.
     DualContouring,
 }
 
@@ -81,7 +104,7 @@ const DIRS: [[usize; 3]; 7] = [[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [1, 0
 ///
 /// Output: closed, consistently outward-oriented (`(b - a) × (c - a)` points to positive
 /// `f`), edge-manifold, no duplicate vertices (vertices on grid edges are shared between
-/// cells through an edge-indexed map), no degenerate triangles (any that slip through are
+/// cells through the edges' numbering), no degenerate triangles (any that slip through are
 /// dropped after welding), for any `f` that is negative inside a region strictly inside
 /// the padded bounds. Marching cubes guarantees closed and edge-manifold output; dual
 /// contouring gave it in every test (see the module documentation).
@@ -89,7 +112,7 @@ const DIRS: [[usize; 3]; 7] = [[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [1, 0
 /// Cells are cubes of side `longest extent / res`; the other axes get as many cells as
 /// cover them, centred. `res` 0 counts as 1. Bounds with a non-finite or zero longest
 /// extent give an empty mesh. The grid holds `(res + 3)^3` samples at most (f32, plus
-/// about 5 bytes per sample of working memory, 9 for dual contouring).
+/// under 1 byte per sample of working memory, 9 for dual contouring).
 ///
 /// # Panics
 /// When the grid has `u32::MAX` points or more (`res` above about 1600).
@@ -125,7 +148,12 @@ pub fn extract_sampled(
     let (mesh, unique) = match method {
         // Crossings on two different grid edges are at least 0.5 EDGE_MARGIN h apart (they
         // are kept that far from the edges' ends; edges that share no end are far apart).
+        // A cycle's own vertex (rare) is not on a grid edge: then the check runs.
         ExtractMethod::MarchingCubes => {
+            let (mesh, on_edges) = marching_cubes(f, grid);
+            (mesh, on_edges && grid.separated_in_f32(0.5 * EDGE_MARGIN * grid.h))
+        }
+        ExtractMethod::MarchingTetrahedra => {
             (marching_tetrahedra(f, grid), grid.separated_in_f32(0.5 * EDGE_MARGIN * grid.h))
         }
         // Vertices of different cells are at least 2 EDGE_MARGIN h apart (clamped into
@@ -208,16 +236,25 @@ impl SampleGrid {
         let slice = n[0] * n[1];
         let (origin, nn) = (grid.origin, grid.n);
         grid.values.par_chunks_mut(slice).enumerate().for_each(|(z, vals)| {
-            for y in 0..nn[1] {
-                for x in 0..nn[0] {
-                    let p = origin + h * DVec3::new(x as f64, y as f64, z as f64);
-                    let mut v = f(p) as f32;
-                    let boundary =
-                        x == 0 || y == 0 || z == 0 || x + 1 == nn[0] || y + 1 == nn[1] || z + 1 == nn[2];
-                    if boundary && !(v > 0.0) {
-                        v = f32::MIN_POSITIVE;
-                    }
-                    vals[x + nn[0] * y] = v;
+            for (y, row) in vals.chunks_exact_mut(nn[0]).enumerate() {
+                for (x, v) in row.iter_mut().enumerate() {
+                    *v = f(origin + h * DVec3::new(x as f64, y as f64, z as f64)) as f32;
+                }
+            }
+            // The outermost layer positive: whole slices at the ends, else the rows at
+            // y = 0 and the last y, and both ends of the others.
+            let outside = |v: &mut f32| {
+                if !(*v > 0.0) {
+                    *v = f32::MIN_POSITIVE;
+                }
+            };
+            let rows = vals.len() / nn[0];
+            for (y, row) in vals.chunks_exact_mut(nn[0]).enumerate() {
+                if z == 0 || z + 1 == nn[2] || y == 0 || y + 1 == rows {
+                    row.iter_mut().for_each(outside);
+                } else {
+                    outside(&mut row[0]);
+                    outside(&mut row[nn[0] - 1]);
                 }
             }
             crate::progress::advance(1);
@@ -292,127 +329,208 @@ fn interp(a: f64, fa: f64, b: f64, fb: f64) -> f64 {
     if s.is_finite() { a + (b - a) * s.clamp(0.0, 1.0) } else { 0.5 * (a + b) }
 }
 
-/// Crossings on the grid edges that change sign, for the first `ndirs` of [`DIRS`].
-struct Edges {
-    /// Per grid point: bit `d` set when the edge in direction `d` changes sign.
-    mask: Vec<u8>,
-    /// Per grid point: index of the point's first crossing in `points`.
-    base: Vec<u32>,
-    points: Vec<DVec3>,
-    /// Unit gradient of `f` at each crossing (dual contouring only).
-    normals: Vec<DVec3>,
-    /// Per z-slice: the cells with corners of both signs, as (index of the cell's lowest
-    /// corner, inside bit per corner).
-    active: Vec<Vec<(u32, u8)>>,
+/// The inside bits of a grid's samples (`< 0`), 64 points of an x-row per word.
+struct Signs {
+    n: [usize; 3],
+    /// Words per row.
+    words: usize,
+    /// Row `(y, z)` is `bits[(y + n[1] z) words ..][..words]`; bit `x % 64` of word `x / 64`
+    /// is point `(x, y, z)`.
+    bits: Vec<u64>,
 }
 
-impl Edges {
-    #[inline]
-    fn vertex(&self, p: usize, dir: usize) -> u32 {
-        let m = self.mask[p];
-        debug_assert!(m & (1 << dir) != 0);
-        self.base[p] + (m & ((1u8 << dir) - 1)).count_ones()
-    }
-}
-
-/// One z-slice's crossing points, their normals and its active cells.
-type SliceCrossings = (Vec<DVec3>, Vec<DVec3>, Vec<(u32, u8)>);
-
-fn edge_crossings(
-    f: &(impl Fn(DVec3) -> f64 + Sync),
-    grid: &SampleGrid,
-    ndirs: usize,
-    normals: bool,
-) -> Edges {
-    let n = grid.n;
-    let slice = n[0] * n[1];
-    let mut mask = vec![0u8; grid.values.len()];
-    let mut base = vec![0u32; grid.values.len()];
-    let eps = 0.01 * grid.h;
-    let corner_offsets = grid.corner_offsets();
-    // Cube corner reached by each direction.
-    let dir_corner: [u32; 7] =
-        std::array::from_fn(|d| (DIRS[d][0] | DIRS[d][1] << 1 | DIRS[d][2] << 2) as u32);
-    let vals = &grid.values;
-    let per_slice: Vec<SliceCrossings> = mask
-        .par_chunks_mut(slice)
-        .zip(base.par_chunks_mut(slice))
-        .enumerate()
-        .map(|(z, (mask, base))| {
-            let mut pts = Vec::new();
-            let mut nrm = Vec::new();
-            let mut active = Vec::new();
-            // Edges from points on the upper faces stay on those faces, whose samples are
-            // all positive: no crossings there.
-            if z + 1 >= n[2] {
-                return (pts, nrm, active);
-            }
-            // The inside bits of the four samples at (x, y..y+1, z..z+1), spread to the
-            // cube corners with x bit 0: bit k goes to corner 2 k.
-            let (dy, dz) = (n[0], slice);
-            let column = |i: usize| -> u8 {
-                (vals[i] < 0.0) as u8
-                    | ((vals[i + dy] < 0.0) as u8) << 2
-                    | ((vals[i + dz] < 0.0) as u8) << 4
-                    | ((vals[i + dy + dz] < 0.0) as u8) << 6
-            };
-            for y in 0..n[1] - 1 {
-                let row = grid.idx(0, y, z);
-                let mut lo = column(row);
-                for x in 0..n[0] - 1 {
-                    let i = row + x;
-                    let hi = column(i + 1);
-                    let cube = lo | hi << 1;
-                    lo = hi;
-                    if cube == 0 || cube == 0xff {
-                        continue;
-                    }
-                    active.push((i as u32, cube));
-                    let ins = cube & 1;
-                    let mut m = 0u8;
-                    base[x + n[0] * y] = pts.len() as u32;
-                    for d in 0..ndirs {
-                        if (cube >> dir_corner[d]) & 1 == ins {
-                            continue;
-                        }
-                        m |= 1 << d;
-                        let o = DIRS[d];
-                        let (p0, p1) = (grid.pos(x, y, z), grid.pos(x + o[0], y + o[1], z + o[2]));
-                        let v1 = vals[i + corner_offsets[dir_corner[d] as usize]];
-                        let t = crossing(f, p0, vals[i] as f64, p1, v1 as f64);
-                        let p = p0.lerp(p1, t);
-                        pts.push(p);
-                        if normals {
-                            nrm.push(gradient(f, p, eps));
-                        }
-                    }
-                    mask[x + n[0] * y] = m;
+impl Signs {
+    fn new(grid: &SampleGrid) -> Signs {
+        let n = grid.n;
+        let words = n[0].div_ceil(64);
+        let mut bits = vec![0u64; words * n[1] * n[2]];
+        bits.par_chunks_mut(words * n[1]).zip(grid.values.par_chunks(n[0] * n[1])).for_each(|(b, v)| {
+            for (brow, vrow) in b.chunks_exact_mut(words).zip(v.chunks_exact(n[0])) {
+                for (word, vals) in brow.iter_mut().zip(vrow.chunks(64)) {
+                    *word = vals.iter().enumerate().fold(0u64, |w, (k, &s)| w | ((s < 0.0) as u64) << k);
                 }
             }
-            (pts, nrm, active)
-        })
-        .collect();
-    let mut offsets = Vec::with_capacity(per_slice.len());
-    let mut total = 0usize;
-    for (p, _, _) in &per_slice {
-        offsets.push(total);
-        total += p.len();
+        });
+        Signs { n, words, bits }
     }
-    assert!(total < u32::MAX as usize, "too many vertices for u32 indices");
-    base.par_chunks_mut(slice).zip(offsets.par_iter()).for_each(|(b, &off)| {
-        if off > 0 {
-            b.iter_mut().for_each(|v| *v += off as u32);
+
+    #[inline]
+    fn row(&self, y: usize, z: usize) -> &[u64] {
+        let s = (y + self.n[1] * z) * self.words;
+        &self.bits[s..s + self.words]
+    }
+
+    /// Calls `visit(x, y, config)` for every cell of the z-slab `z` (cells `(x, y, z)`)
+    /// whose corners have both signs, with `config` bit `c` set when [`corner`] `c` is
+    /// inside. Eight cells per byte of a row are skipped at once when all their corners
+    /// share a sign.
+    #[inline]
+    fn active_cells(&self, z: usize, mut visit: impl FnMut(usize, usize, u8)) {
+        let (n, words) = (self.n, self.words);
+        for y in 0..n[1] - 1 {
+            let r = [self.row(y, z), self.row(y + 1, z), self.row(y, z + 1), self.row(y + 1, z + 1)];
+            for w in 0..words {
+                let word = |k: usize| -> (u64, u64) {
+                    let any = r[0][k] | r[1][k] | r[2][k] | r[3][k];
+                    let all = r[0][k] & r[1][k] & r[2][k] & r[3][k];
+                    (any, all)
+                };
+                let (any, all) = word(w);
+                // The same for each cell's upper x corner (bit x + 1).
+                let (any_hi, all_hi) = if w + 1 < words {
+                    let (a, b) = word(w + 1);
+                    ((any >> 1) | (a << 63), (all >> 1) | (b << 63))
+                } else {
+                    (any >> 1, all >> 1)
+                };
+                // Cells x < n[0] - 1 only.
+                let last = n[0] - 1 - 64 * w;
+                let valid = if last >= 64 { u64::MAX } else { (1u64 << last) - 1 };
+                let mut active = (any | any_hi) & !(all & all_hi) & valid;
+                while active != 0 {
+                    let b = active.trailing_zeros() as usize;
+                    active &= active - 1;
+                    let x = 64 * w + b;
+                    let pair = |row: &[u64]| -> u8 {
+                        let lo = (row[w] >> b) & 1;
+                        let hi = if b < 63 { (row[w] >> (b + 1)) & 1 } else { row[w + 1] & 1 };
+                        (lo | hi << 1) as u8
+                    };
+                    let config = pair(r[0]) | pair(r[1]) << 2 | pair(r[2]) << 4 | pair(r[3]) << 6;
+                    visit(x, y, config);
+                }
+            }
         }
-    });
-    let mut points = Vec::with_capacity(total);
-    let mut nrms = Vec::with_capacity(if normals { total } else { 0 });
-    let mut active = Vec::with_capacity(per_slice.len());
-    for (p, nm, a) in per_slice {
-        points.extend(p);
-        nrms.extend(nm);
-        active.push(a);
     }
-    Edges { mask, base, points, normals: nrms, active }
+}
+
+/// The grid edges whose samples change sign, for the first `ndirs` of [`DIRS`], and the
+/// index of the vertex on each: crossings are numbered by z-slice, then row, direction
+/// and x of the edge's lower end, so an edge's vertex index is a prefix count of a row's
+/// crossing bits (no hashing, no sort).
+struct Crossings {
+    n: [usize; 3],
+    ndirs: usize,
+    words: usize,
+    /// Word `((y + n[1] z) ndirs + d) words + x / 64`, bit `x % 64`: the edge from point
+    /// `(x, y, z)` in direction `d` changes sign.
+    bits: Vec<u64>,
+    /// Per word of `bits`: the index of its first crossing.
+    base: Vec<u32>,
+}
+
+impl Crossings {
+    /// Finds the crossing edges and numbers them; `make(p0, v0, p1, v1)` turns each (its
+    /// end points and their samples, inside end or not) into an output vertex. Returns
+    /// the vertices in index order.
+    fn new<T: Copy + Default + Send>(
+        grid: &SampleGrid,
+        signs: &Signs,
+        ndirs: usize,
+        make: impl Fn(DVec3, f64, DVec3, f64) -> T + Sync,
+    ) -> (Crossings, Vec<T>) {
+        let (n, words) = (grid.n, signs.words);
+        let per_slice = n[1] * ndirs * words;
+        let mut bits = vec![0u64; per_slice * n[2]];
+        bits.par_chunks_mut(per_slice).enumerate().for_each(|(z, b)| {
+            for y in 0..n[1] {
+                let a = signs.row(y, z);
+                for (d, o) in DIRS.iter().enumerate().take(ndirs) {
+                    if y + o[1] >= n[1] || z + o[2] >= n[2] {
+                        continue;
+                    }
+                    let other = signs.row(y + o[1], z + o[2]);
+                    let out = &mut b[(y * ndirs + d) * words..][..words];
+                    for w in 0..words {
+                        let mut v = other[w];
+                        if o[0] == 1 {
+                            v = (v >> 1) | other.get(w + 1).map_or(0, |&u| u << 63);
+                        }
+                        out[w] = a[w] ^ v;
+                    }
+                    // Edges from points x < n[0] - o[0] only.
+                    let limit = n[0] - o[0];
+                    let lw = limit / 64;
+                    if lw < words {
+                        out[lw] &= (1u64 << (limit % 64)) - 1;
+                        out[lw + 1..].iter_mut().for_each(|v| *v = 0);
+                    }
+                }
+            }
+        });
+        let mut base = vec![0u32; bits.len()];
+        let mut total = 0u64;
+        let mut slice_start = Vec::with_capacity(n[2] + 1);
+        for (k, (b, c)) in base.iter_mut().zip(&bits).enumerate() {
+            if k % per_slice == 0 {
+                slice_start.push(total as usize);
+            }
+            *b = total as u32;
+            total += c.count_ones() as u64;
+        }
+        slice_start.push(total as usize);
+        assert!(total < u32::MAX as u64, "too many vertices for u32 indices");
+        let cross = Crossings { n, ndirs, words, bits, base };
+        let mut out = vec![T::default(); total as usize];
+        // Disjoint output ranges per z-slice.
+        let mut parts = Vec::with_capacity(n[2]);
+        let mut rest = out.as_mut_slice();
+        for z in 0..n[2] {
+            let (head, tail) = rest.split_at_mut(slice_start[z + 1] - slice_start[z]);
+            parts.push(head);
+            rest = tail;
+        }
+        let offsets: [usize; 7] = std::array::from_fn(|d| grid.idx(DIRS[d][0], DIRS[d][1], DIRS[d][2]));
+        parts.into_par_iter().enumerate().for_each(|(z, part)| {
+            let mut k = 0;
+            for y in 0..n[1] {
+                for d in 0..ndirs {
+                    let row = &cross.bits[((y + n[1] * z) * ndirs + d) * words..][..words];
+                    for (w, &word) in row.iter().enumerate() {
+                        let mut m = word;
+                        while m != 0 {
+                            let x = 64 * w + m.trailing_zeros() as usize;
+                            m &= m - 1;
+                            let i = grid.idx(x, y, z);
+                            let o = DIRS[d];
+                            let p0 = grid.pos(x, y, z);
+                            let p1 = grid.pos(x + o[0], y + o[1], z + o[2]);
+                            part[k] = make(p0, grid.values[i] as f64, p1, grid.values[i + offsets[d]] as f64);
+                            k += 1;
+                        }
+                    }
+                }
+            }
+            debug_assert_eq!(k, part.len());
+        });
+        (cross, out)
+    }
+
+    /// The vertex on the sign-changing edge from point `(x, y, z)` in direction `d`.
+    #[inline]
+    fn vertex(&self, x: usize, y: usize, z: usize, d: usize) -> u32 {
+        let k = ((y + self.n[1] * z) * self.ndirs + d) * self.words + x / 64;
+        debug_assert!((self.bits[k] >> (x % 64)) & 1 != 0);
+        self.base[k] + (self.bits[k] & ((1u64 << (x % 64)) - 1)).count_ones()
+    }
+
+    /// Number of crossings on edges from points of z-slice `z`.
+    fn in_slice(&self, z: usize) -> usize {
+        let per_slice = self.n[1] * self.ndirs * self.words;
+        let next = if z + 1 < self.n[2] {
+            self.base[(z + 1) * per_slice] as usize
+        } else {
+            let last = self.bits.len() - 1;
+            self.base[last] as usize + self.bits[last].count_ones() as usize
+        };
+        next - self.base[z * per_slice] as usize
+    }
+}
+
+/// A crossing point on the edge `p0`-`p1` with samples `v0`, `v1` (see [`crossing`]).
+#[inline]
+fn crossing_point(f: &impl Fn(DVec3) -> f64, p0: DVec3, v0: f64, p1: DVec3, v1: f64) -> DVec3 {
+    p0.lerp(p1, crossing(f, p0, v0, p1, v1))
 }
 
 /// Unit gradient of `f` at `p` by central differences with step `eps`.
@@ -515,31 +633,30 @@ fn cube_table() -> CubeTable {
 }
 
 fn marching_tetrahedra(f: &(impl Fn(DVec3) -> f64 + Sync), grid: &SampleGrid) -> TriangleMesh {
-    let edges = edge_crossings(f, grid, DIRS.len(), false);
+    let signs = Signs::new(grid);
+    let (cross, positions) = Crossings::new(grid, &signs, DIRS.len(), |p0, v0, p1, v1| {
+        crossing_point(f, p0, v0, p1, v1).as_vec3()
+    });
     let table = cube_table();
-    let corner_offsets = grid.corner_offsets();
-    let per_slice: Vec<Vec<[u32; 3]>> = edges
-        .active
-        .par_iter()
-        .map(|cells| {
-            let count: usize = cells
-                .iter()
-                .map(|&(_, cm)| (table.start[cm as usize + 1] - table.start[cm as usize]) as usize)
-                .sum();
-            let mut out = Vec::with_capacity(count);
-            for &(i0, cm) in cells {
-                let i0 = i0 as usize;
+    let n = grid.n;
+    let per_slab: Vec<Vec<[u32; 3]>> = (0..n[2] - 1)
+        .into_par_iter()
+        .map(|z| {
+            // About two triangles per vertex.
+            let mut out = Vec::with_capacity(2 * cross.in_slice(z) + 16);
+            signs.active_cells(z, |x, y, cm| {
                 let (a, b) = (table.start[cm as usize] as usize, table.start[cm as usize + 1] as usize);
                 for tri in &table.tris[a..b] {
-                    out.push(tri.map(|(c, d)| edges.vertex(i0 + corner_offsets[c as usize], d as usize)));
+                    out.push(tri.map(|(c, d)| {
+                        let c = c as usize;
+                        cross.vertex(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2), d as usize)
+                    }));
                 }
-            }
+            });
             out
         })
         .collect();
-    let triangles = concat(per_slice);
-    let positions = edges.points.par_iter().map(|p| p.as_vec3()).collect();
-    TriangleMesh { positions, triangles, normals: None }
+    TriangleMesh { positions, triangles: concat(per_slab), normals: None }
 }
 
 /// The vectors of `parts` one after another.
@@ -550,6 +667,462 @@ fn concat<T: Copy + Send + Sync>(parts: Vec<Vec<T>>) -> Vec<T> {
         out.extend_from_slice(p);
     }
     out
+}
+
+// ---------------------------------------------------------------------------------------
+// Marching cubes.
+
+/// The marching cubes case table: per cube configuration (bit `c` set when [`corner`] `c`
+/// is inside) and choice on each ambiguous face, the surface's polygons as cube edges
+/// (numbered as in [`CubeTopology`]). Generated, not typed in: the crossings on each face
+/// are paired into segments (on a face with four, the pairing is a per-face choice), the
+/// segments are oriented and chained into cycles, and each cycle is triangulated. Every
+/// mesh edge between vertices on one cube face is then either a segment, which the two
+/// cells sharing the face produce alike (same choice, from the face's corner values only)
+/// and in opposite directions, or a diagonal, which only the cell below the face may use
+/// (diagonals on a cell's lower faces, x, y or z = 0, are never used); every other mesh
+/// edge is inside one cell. So the output is closed and edge-manifold by construction.
+///
+/// Polygons of 4 to 7 vertices list every allowed triangulation; [`marching_cubes`] takes
+/// the one that folds least on the actual vertices (a fold the wrong way turns triangles
+/// inside out at sharp edges). Larger ones have one (the shortest diagonals between the
+/// edges' midpoints). The few cycles that cannot be triangulated without a diagonal on a
+/// lower face (they pass twice through two or three lower faces, all ambiguous) get a
+/// vertex of their own at the mean of their crossings, fanned to the cycle.
+struct McTable {
+    /// Per configuration: a bit per ambiguous face (four crossings, corners alternating).
+    ambiguous: [u8; 256],
+    /// Per configuration: the cube edges that change sign.
+    crossing: [u16; 256],
+    /// Per configuration: its first case; the case is this plus the choices on its
+    /// ambiguous faces, packed in face order.
+    first_case: [u16; 257],
+    /// Per case: its polygons are `polys[case_start[k]..case_start[k + 1]]`.
+    case_start: Vec<u16>,
+    polys: Vec<McPolygon>,
+    /// Triangles as cube edges; `MC_CENTRE + j` stands for the case's `j`-th cycle
+    /// vertex.
+    tris: Vec<[u8; 3]>,
+    /// Per case: the cube edges (a bit each) of the cycles that get a vertex of their
+    /// own, `centres[centre_start[k]..centre_start[k + 1]]`.
+    centre_start: Vec<u16>,
+    centres: Vec<u16>,
+}
+
+/// One polygon of a case: `options` triangulations of `per` triangles each, one after
+/// another in [`McTable`]'s triangles from `first`.
+#[derive(Clone, Copy, Debug)]
+struct McPolygon {
+    first: u32,
+    options: u8,
+    per: u8,
+}
+
+/// Index in [`McTable`]'s triangles of the first cycle vertex (after the 12 cube edges).
+const MC_CENTRE: u8 = 12;
+
+/// Faces `x = 0`, `y = 0`, `z = 0` of a cell, a bit per face (numbered as in
+/// [`CubeTopology`]: `2 axis + side`).
+const LOWER_FACES: u8 = 0b01_0101;
+
+/// Polygons up to this many vertices list all their allowed triangulations (42 for 7).
+const MC_OPTIONS_UP_TO: usize = 7;
+
+/// The table, built on first use.
+fn mc_table() -> &'static McTable {
+    static TABLE: std::sync::OnceLock<McTable> = std::sync::OnceLock::new();
+    TABLE.get_or_init(McTable::new)
+}
+
+/// Every triangulation of the polygon `0..m` as triangles `[i, j, k]` with `i < j < k`.
+fn polygon_triangulations(m: usize) -> Vec<Vec<[usize; 3]>> {
+    fn between(i: usize, j: usize) -> Vec<Vec<[usize; 3]>> {
+        if j < i + 2 {
+            return vec![Vec::new()];
+        }
+        let mut all = Vec::new();
+        for k in i + 1..j {
+            for left in between(i, k) {
+                for right in between(k, j) {
+                    let mut t = vec![[i, k, j]];
+                    t.extend(&left);
+                    t.extend(&right);
+                    all.push(t);
+                }
+            }
+        }
+        all
+    }
+    between(0, m - 1)
+}
+
+impl McTable {
+    fn new() -> McTable {
+        let topo = CubeTopology::new();
+        let mut table = McTable {
+            ambiguous: [0; 256],
+            crossing: [0; 256],
+            first_case: [0; 257],
+            case_start: Vec::new(),
+            polys: Vec::new(),
+            tris: Vec::new(),
+            centre_start: Vec::new(),
+            centres: Vec::new(),
+        };
+        let triangulations: Vec<Vec<Vec<[usize; 3]>>> = (0..=MC_OPTIONS_UP_TO)
+            .map(|m| if m >= 3 { polygon_triangulations(m) } else { Vec::new() })
+            .collect();
+        for config in 0..256usize {
+            let inside = |c: usize| (config >> c) & 1 != 0;
+            for (k, &(c, d)) in topo.edges.iter().enumerate() {
+                if inside(c) != inside(c | 1 << d) {
+                    table.crossing[config] |= 1 << k;
+                }
+            }
+            for (fi, (corners, _)) in topo.faces.iter().enumerate() {
+                let s = corners.map(inside);
+                if s[0] == s[2] && s[1] == s[3] && s[0] != s[1] {
+                    table.ambiguous[config] |= 1 << fi;
+                }
+            }
+            table.first_case[config] = table.case_start.len() as u16;
+            let faces: Vec<usize> = (0..6).filter(|fi| table.ambiguous[config] & (1 << fi) != 0).collect();
+            for choice in 0..1usize << faces.len() {
+                // Bit set: the face's centre counts as inside (its positive corners are cut
+                // off), else its negative corners are cut off.
+                let centre_inside =
+                    faces.iter().enumerate().fold(0u8, |m, (j, &fi)| m | (((choice >> j) & 1) as u8) << fi);
+                table.case_start.push(table.polys.len() as u16);
+                table.centre_start.push(table.centres.len() as u16);
+                for cycle in Self::cycles(&topo, config, centre_inside) {
+                    table.add_cycle(&topo, &cycle, &triangulations);
+                }
+            }
+        }
+        table.first_case[256] = table.case_start.len() as u16;
+        table.case_start.push(table.polys.len() as u16);
+        table.centre_start.push(table.centres.len() as u16);
+        table
+    }
+
+    /// The surface's cycles of `config` with the ambiguous faces' centres inside where
+    /// `centre_inside` has their bit, as cube edges in counter-clockwise order seen from
+    /// outside.
+    fn cycles(topo: &CubeTopology, config: usize, centre_inside: u8) -> Vec<Vec<usize>> {
+        let inside = |c: usize| (config >> c) & 1 != 0;
+        // Oriented segments: next[a] = b. A segment a -> b on a face with outward normal
+        // `nf` that cuts off corner `c` runs so that `(nf x (b - a)) . (c - a)` is negative
+        // for an inside `c` (the surface's normal points to positive `f`, and the polygon
+        // turns counter-clockwise about it).
+        let mut next = [usize::MAX; 12];
+        let mut link = |nf: DVec3, a: usize, b: usize, c: usize| {
+            let s = nf.cross(edge_mid(topo, b) - edge_mid(topo, a)).dot(corner_pos(c) - edge_mid(topo, a));
+            let (a, b) = if (s < 0.0) == inside(c) { (a, b) } else { (b, a) };
+            assert_eq!(next[a], usize::MAX, "config {config}: edge {a} starts two segments");
+            next[a] = b;
+        };
+        for (fi, (corners, fe)) in topo.faces.iter().enumerate() {
+            let mut nf = DVec3::ZERO;
+            nf[fi / 2] = if fi % 2 == 1 { 1.0 } else { -1.0 };
+            let on: Vec<usize> =
+                (0..4).filter(|&i| inside(corners[i]) != inside(corners[(i + 1) % 4])).collect();
+            match on.len() {
+                2 => {
+                    // Any inside corner of the face lies on the inside of the segment.
+                    let c = corners.iter().copied().find(|&c| inside(c)).expect("a face with a crossing");
+                    link(nf, fe[on[0]], fe[on[1]], c);
+                }
+                4 => {
+                    // Corner i is cut off by the segment from edge i - 1 to edge i.
+                    let cut_inside = centre_inside & (1 << fi) == 0;
+                    for i in (0..4).filter(|&i| inside(corners[i]) == cut_inside) {
+                        link(nf, fe[(i + 3) % 4], fe[i], corners[i]);
+                    }
+                }
+                _ => {}
+            }
+        }
+        let mut cycles = Vec::new();
+        let mut seen = 0u16;
+        for start in 0..12 {
+            if next[start] == usize::MAX || seen & (1 << start) != 0 {
+                continue;
+            }
+            let mut cycle = Vec::new();
+            let mut k = start;
+            while seen & (1 << k) == 0 {
+                seen |= 1 << k;
+                cycle.push(k);
+                k = next[k];
+                assert_ne!(k, usize::MAX, "config {config}: open chain");
+            }
+            assert_eq!(k, start, "config {config}: chains merge");
+            cycles.push(cycle);
+        }
+        cycles
+    }
+
+    /// Adds the triangulations of `cycle` to the current case.
+    fn add_cycle(&mut self, topo: &CubeTopology, cycle: &[usize], triangulations: &[Vec<Vec<[usize; 3]>>]) {
+        let m = cycle.len();
+        // Whether the diagonal between cycle vertices i and j may be used (see the type).
+        let allowed = |i: usize, j: usize| {
+            let adjacent = j == i + 1 || (i == 0 && j == m - 1);
+            adjacent || edge_faces(topo, cycle[i]) & edge_faces(topo, cycle[j]) & LOWER_FACES == 0
+        };
+        let ok =
+            |t: &[[usize; 3]]| t.iter().all(|&[i, j, k]| allowed(i, j) && allowed(j, k) && allowed(i, k));
+        let first = self.tris.len() as u32;
+        let push = |tris: &mut Vec<[u8; 3]>, t: &[[usize; 3]]| {
+            tris.extend(t.iter().map(|tri| tri.map(|i| cycle[i] as u8)));
+        };
+        let options: Vec<&Vec<[usize; 3]>> = if m <= MC_OPTIONS_UP_TO {
+            triangulations[m].iter().filter(|t| ok(t)).collect()
+        } else {
+            Vec::new()
+        };
+        if !options.is_empty() {
+            for t in &options {
+                push(&mut self.tris, t);
+            }
+            self.polys.push(McPolygon { first, options: options.len() as u8, per: (m - 2) as u8 });
+            return;
+        }
+        // One triangulation: the shortest allowed diagonals between the edges' midpoints
+        // (dynamic programming over the polygon's sub-chains).
+        let chord = |i: usize, j: usize| -> f64 {
+            if !allowed(i, j) {
+                1e9
+            } else if j == i + 1 || (i == 0 && j == m - 1) {
+                0.0
+            } else {
+                (edge_mid(topo, cycle[i]) - edge_mid(topo, cycle[j])).length()
+            }
+        };
+        let mut cost = vec![vec![0.0f64; m]; m];
+        let mut split = vec![vec![0usize; m]; m];
+        for len in 2..m {
+            for i in 0..m - len {
+                let j = i + len;
+                let (best, at) = (i + 1..j)
+                    .map(|k| (cost[i][k] + cost[k][j] + chord(i, k) + chord(k, j), k))
+                    .fold((f64::INFINITY, 0), |b, c| if c.0 < b.0 { c } else { b });
+                cost[i][j] = best;
+                split[i][j] = at;
+            }
+        }
+        if cost[0][m - 1] < 1e9 {
+            let mut t = Vec::new();
+            let mut stack = vec![(0, m - 1)];
+            while let Some((i, j)) = stack.pop() {
+                if j >= i + 2 {
+                    let k = split[i][j];
+                    t.push([i, k, j]);
+                    stack.push((i, k));
+                    stack.push((k, j));
+                }
+            }
+            push(&mut self.tris, &t);
+            self.polys.push(McPolygon { first, options: 1, per: (m - 2) as u8 });
+        } else {
+            // A fan around a vertex of the cycle's own.
+            let case = self.case_start.len() - 1;
+            let c = MC_CENTRE + (self.centres.len() - self.centre_start[case] as usize) as u8;
+            self.centres.push(cycle.iter().fold(0u16, |mask, &k| mask | 1 << k));
+            for i in 0..m {
+                self.tris.push([cycle[i] as u8, cycle[(i + 1) % m] as u8, c]);
+            }
+            self.polys.push(McPolygon { first, options: 1, per: m as u8 });
+        }
+    }
+
+    /// The case of a cell with inside bits `config` and corner samples `values` (read
+    /// only when the configuration has an ambiguous face).
+    #[inline]
+    fn case(&self, topo: &CubeTopology, config: u8, values: impl FnOnce() -> [f32; 8]) -> usize {
+        let c = config as usize;
+        let mut case = self.first_case[c] as usize;
+        let amb = self.ambiguous[c];
+        if amb != 0 {
+            let v = values();
+            let mut j = 0;
+            for (fi, (corners, _)) in topo.faces.iter().enumerate() {
+                if amb & (1 << fi) != 0 {
+                    let [a, b, c, d] = corners.map(|k| v[k] as f64);
+                    if face_centre_inside(a, b, c, d) {
+                        case += 1 << j;
+                    }
+                    j += 1;
+                }
+            }
+        }
+        case
+    }
+
+    /// The polygons of `case`.
+    #[inline]
+    fn polygons(&self, case: usize) -> &[McPolygon] {
+        &self.polys[self.case_start[case] as usize..self.case_start[case + 1] as usize]
+    }
+
+    /// The triangles of option `o` of polygon `p`.
+    #[inline]
+    fn option(&self, p: McPolygon, o: usize) -> &[[u8; 3]] {
+        let start = p.first as usize + o * p.per as usize;
+        &self.tris[start..start + p.per as usize]
+    }
+
+    /// The cycles of `case` that get a vertex of their own (cube edges, a bit each).
+    #[inline]
+    fn centres(&self, case: usize) -> &[u16] {
+        &self.centres[self.centre_start[case] as usize..self.centre_start[case + 1] as usize]
+    }
+}
+
+/// Position of cube corner `c` in the unit cube.
+fn corner_pos(c: usize) -> DVec3 {
+    let o = corner(c);
+    DVec3::new(o[0] as f64, o[1] as f64, o[2] as f64)
+}
+
+/// Midpoint of cube edge `k` in the unit cube.
+fn edge_mid(topo: &CubeTopology, k: usize) -> DVec3 {
+    let (c, d) = topo.edges[k];
+    corner_pos(c) + 0.5 * corner_pos(1 << d)
+}
+
+/// The faces of cube edge `k` (a bit per face; none for a cycle's own vertex).
+fn edge_faces(topo: &CubeTopology, k: usize) -> u8 {
+    if k >= MC_CENTRE as usize {
+        return 0;
+    }
+    let (c, d) = topo.edges[k];
+    let (u, w) = ((d + 1) % 3, (d + 2) % 3);
+    1 << (2 * u + ((c >> u) & 1)) | 1 << (2 * w + ((c >> w) & 1))
+}
+
+/// How little the triangles `tris` (vertex indices into `pos`) fold: the smallest cosine
+/// between two of their normals; -2 when one is degenerate.
+#[inline]
+fn flatness(pos: &[Vec3], tris: &[[u32; 3]]) -> f64 {
+    if let [t0, t1] = tris {
+        // A quadrilateral: one cosine, one square root.
+        let normal = |t: &[u32; 3]| {
+            let [a, b, c] = t.map(|i| pos[i as usize].as_dvec3());
+            (b - a).cross(c - a)
+        };
+        let (n0, n1) = (normal(t0), normal(t1));
+        let c = n0.dot(n1) / (n0.length_squared() * n1.length_squared()).sqrt();
+        return if c.is_finite() { c } else { -2.0 };
+    }
+    let mut normals = [DVec3::ZERO; MC_OPTIONS_UP_TO - 2];
+    for (n, t) in normals.iter_mut().zip(tris) {
+        let [a, b, c] = t.map(|i| pos[i as usize].as_dvec3());
+        *n = (b - a).cross(c - a);
+        let len = n.length();
+        if !(len > 0.0) {
+            return -2.0;
+        }
+        *n /= len;
+    }
+    let normals = &normals[..tris.len()];
+    let mut worst = 1.0f64;
+    for (i, a) in normals.iter().enumerate() {
+        for b in &normals[i + 1..] {
+            worst = worst.min(a.dot(*b));
+        }
+    }
+    worst
+}
+
+/// The asymptotic decider: whether the centre of a face with corner samples `a, b, c, d`
+/// (in cyclic order, `a`, `c` of one sign and `b`, `d` of the other) is inside, by the
+/// sign of the bilinear interpolant at its saddle. Symmetric under rotating and
+/// reversing the corners, so both cells sharing the face decide alike.
+#[inline]
+fn face_centre_inside(a: f64, b: f64, c: f64, d: f64) -> bool {
+    let den = a + c - b - d;
+    let saddle = if den != 0.0 { (a * c - b * d) / den } else { 0.25 * (a + b + c + d) };
+    saddle < 0.0
+}
+
+fn marching_cubes(f: &(impl Fn(DVec3) -> f64 + Sync), grid: &SampleGrid) -> (TriangleMesh, bool) {
+    let signs = Signs::new(grid);
+    let (cross, mut positions) =
+        Crossings::new(grid, &signs, 3, |p0, v0, p1, v1| crossing_point(f, p0, v0, p1, v1).as_vec3());
+    let table = mc_table();
+    let topo = CubeTopology::new();
+    let n = grid.n;
+    let corner_offsets = grid.corner_offsets();
+    // Cycle vertices get indices from `CYCLE_VERTEX` up in their slab until the end.
+    const CYCLE_VERTEX: u32 = 1 << 31;
+    assert!(positions.len() < CYCLE_VERTEX as usize, "too many vertices");
+    let per_slab: Vec<(Vec<[u32; 3]>, Vec<Vec3>)> = (0..n[2] - 1)
+        .into_par_iter()
+        .map(|z| {
+            // About two triangles per vertex.
+            let mut out = Vec::with_capacity(2 * cross.in_slice(z) + 16);
+            let mut extra = Vec::new();
+            let mut scratch = [[0u32; 3]; MC_OPTIONS_UP_TO - 2];
+            signs.active_cells(z, |x, y, config| {
+                let mut ids = [0u32; 12 + 4];
+                let mut m = table.crossing[config as usize];
+                while m != 0 {
+                    let k = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    let (c, d) = topo.edges[k];
+                    ids[k] = cross.vertex(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2), d);
+                }
+                let values = || {
+                    let i = grid.idx(x, y, z);
+                    corner_offsets.map(|o| grid.values[i + o])
+                };
+                let case = table.case(&topo, config, values);
+                for (j, &cycle) in table.centres(case).iter().enumerate() {
+                    let mut sum = DVec3::ZERO;
+                    let mut m = cycle;
+                    while m != 0 {
+                        sum += positions[ids[m.trailing_zeros() as usize] as usize].as_dvec3();
+                        m &= m - 1;
+                    }
+                    ids[MC_CENTRE as usize + j] = CYCLE_VERTEX + extra.len() as u32;
+                    extra.push((sum / cycle.count_ones() as f64).as_vec3());
+                }
+                for &p in table.polygons(case) {
+                    let mut best = 0;
+                    if p.options > 1 {
+                        let mut top = f64::NEG_INFINITY;
+                        let tris = &mut scratch[..p.per as usize];
+                        for o in 0..p.options as usize {
+                            for (t, e) in tris.iter_mut().zip(table.option(p, o)) {
+                                *t = e.map(|k| ids[k as usize]);
+                            }
+                            let s = flatness(&positions, tris);
+                            if s > top {
+                                (top, best) = (s, o);
+                            }
+                        }
+                    }
+                    out.extend(table.option(p, best).iter().map(|t| t.map(|k| ids[k as usize])));
+                }
+            });
+            (out, extra)
+        })
+        .collect();
+    let mut next = positions.len() as u32;
+    let mut parts = Vec::with_capacity(per_slab.len());
+    let cycle_vertices = per_slab.iter().any(|(_, e)| !e.is_empty());
+    for (mut tris, extra) in per_slab {
+        if !extra.is_empty() {
+            for t in &mut tris {
+                t.iter_mut().filter(|i| **i >= CYCLE_VERTEX).for_each(|i| *i = *i - CYCLE_VERTEX + next);
+            }
+            next += extra.len() as u32;
+            positions.extend(extra);
+        }
+        parts.push(tris);
+    }
+    (TriangleMesh { positions, triangles: concat(parts), normals: None }, !cycle_vertices)
 }
 
 // ---------------------------------------------------------------------------------------
@@ -664,7 +1237,12 @@ impl CubeTopology {
 
 /// The mesh, and whether every active cell got exactly one vertex.
 fn dual_contouring(f: &(impl Fn(DVec3) -> f64 + Sync), grid: &SampleGrid) -> (TriangleMesh, bool) {
-    let edges = edge_crossings(f, grid, 3, true);
+    let signs = Signs::new(grid);
+    let eps = 0.01 * grid.h;
+    let (cross, crossings) = Crossings::new(grid, &signs, 3, |p0, v0, p1, v1| {
+        let p = crossing_point(f, p0, v0, p1, v1);
+        (p, gradient(f, p, eps))
+    });
     let n = grid.n;
     let nc = [n[0] - 1, n[1] - 1, n[2] - 1];
     let cidx = |x: usize, y: usize, z: usize| x + nc[0] * (y + nc[1] * z);
@@ -676,7 +1254,7 @@ fn dual_contouring(f: &(impl Fn(DVec3) -> f64 + Sync), grid: &SampleGrid) -> (Tr
         let values = corner_offsets.map(|o| grid.values[i0 + o]);
         let mut crossing = 0u16;
         for (k, &(c, d)) in topo.edges.iter().enumerate() {
-            if edges.mask[i0 + corner_offsets[c]] & (1 << d) != 0 {
+            if (values[c] < 0.0) != (values[c | 1 << d] < 0.0) {
                 crossing |= 1 << k;
             }
         }
@@ -685,15 +1263,16 @@ fn dual_contouring(f: &(impl Fn(DVec3) -> f64 + Sync), grid: &SampleGrid) -> (Tr
     // Per cell: index of its first vertex and its edges' component labels (2 bits each).
     let mut cell_vertex = vec![u32::MAX; nc[0] * nc[1] * nc[2]];
     let mut cell_labels = vec![0u32; cell_vertex.len()];
-    let per_slice: Vec<Vec<DVec3>> = cell_vertex
+    let per_slab: Vec<(Vec<DVec3>, usize)> = cell_vertex
         .par_chunks_mut(cslice)
         .zip(cell_labels.par_chunks_mut(cslice))
         .enumerate()
         .map(|(z, (cv, cl))| {
             let mut verts = Vec::new();
-            for &(i0, _) in &edges.active[z] {
-                let i0 = i0 as usize;
-                let (x, y) = (i0 % n[0], (i0 / n[0]) % n[1]);
+            let mut cells = 0;
+            signs.active_cells(z, |x, y, _| {
+                cells += 1;
+                let i0 = grid.idx(x, y, z);
                 let (values, crossing) = config(i0);
                 let (mut labels, mut count, merged) = topo.components(&values, crossing, 0);
                 if merged != 0 {
@@ -719,8 +1298,9 @@ fn dual_contouring(f: &(impl Fn(DVec3) -> f64 + Sync), grid: &SampleGrid) -> (Tr
                 let mut packed = 0u32;
                 for (k, &(c, d)) in topo.edges.iter().enumerate() {
                     if labels[k] != u8::MAX {
-                        let v = edges.vertex(i0 + corner_offsets[c], d) as usize;
-                        qefs[labels[k] as usize].add(edges.points[v], edges.normals[v]);
+                        let v = cross.vertex(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2), d) as usize;
+                        let (p, nrm) = crossings[v];
+                        qefs[labels[k] as usize].add(p, nrm);
                         packed |= (labels[k] as u32) << (2 * k);
                     }
                 }
@@ -731,63 +1311,69 @@ fn dual_contouring(f: &(impl Fn(DVec3) -> f64 + Sync), grid: &SampleGrid) -> (Tr
                 for q in &qefs[..count as usize] {
                     verts.push(q.solve().clamp(lo + margin, lo + DVec3::splat(grid.h) - margin));
                 }
-            }
-            verts
+            });
+            (verts, cells)
         })
         .collect();
-    let mut offsets = Vec::with_capacity(per_slice.len());
+    drop(crossings);
+    let mut offsets = Vec::with_capacity(per_slab.len());
     let mut total = 0usize;
-    for v in &per_slice {
+    let mut cells = 0usize;
+    for (v, c) in &per_slab {
         offsets.push(total as u32);
         total += v.len();
+        cells += c;
     }
     assert!(total < u32::MAX as usize, "too many vertices for u32 indices");
     cell_vertex.par_chunks_mut(cslice).zip(offsets.par_iter()).for_each(|(cv, &off)| {
         cv.iter_mut().filter(|v| **v != u32::MAX).for_each(|v| *v += off);
     });
-    let positions: Vec<Vec3> = per_slice.into_iter().flatten().map(|p| p.as_vec3()).collect();
+    let positions: Vec<Vec3> = per_slab.into_iter().flat_map(|(v, _)| v).map(|p| p.as_vec3()).collect();
 
-    let triangles: Vec<[u32; 3]> = edges
-        .active
-        .par_iter()
-        .flat_map_iter(|cells| {
-            let mut out = Vec::new();
-            for &(i, _) in cells {
-                let i = i as usize;
-                let m = edges.mask[i];
-                let p = [i % n[0], (i / n[0]) % n[1], i / (n[0] * n[1])];
+    // A quad across every sign-changing cube edge, over the four cells around it.
+    let per_slice: Vec<Vec<[u32; 3]>> = (0..n[2])
+        .into_par_iter()
+        .map(|z| {
+            let mut out = Vec::with_capacity(2 * cross.in_slice(z));
+            for y in 0..n[1] {
                 for d in 0..3 {
-                    if m & (1 << d) == 0 {
-                        continue;
+                    let row = &cross.bits[((y + n[1] * z) * 3 + d) * cross.words..][..cross.words];
+                    for (w, &word) in row.iter().enumerate() {
+                        let mut m = word;
+                        while m != 0 {
+                            let x = 64 * w + m.trailing_zeros() as usize;
+                            m &= m - 1;
+                            let p = [x, y, z];
+                            // Cells around the edge, counter-clockwise about +d; in each,
+                            // the edge's local index is 4 d + (1 - du) + 2 (1 - dw). Edges
+                            // on the grid's faces never change sign, so all four exist.
+                            let (u, w) = ((d + 1) % 3, (d + 2) % 3);
+                            let cell = |du: usize, dw: usize| {
+                                let mut c = p;
+                                c[u] -= 1 - du;
+                                c[w] -= 1 - dw;
+                                let ci = cidx(c[0], c[1], c[2]);
+                                let k = 4 * d + (1 - du) + 2 * (1 - dw);
+                                debug_assert!(cell_vertex[ci] != u32::MAX);
+                                cell_vertex[ci] + ((cell_labels[ci] >> (2 * k)) & 3)
+                            };
+                            let mut q = [cell(0, 0), cell(1, 0), cell(1, 1), cell(0, 1)];
+                            let mut axis = DVec3::ZERO;
+                            axis[d] = 1.0;
+                            if !grid.inside(grid.idx(x, y, z)) {
+                                q.reverse();
+                                axis = -axis;
+                            }
+                            out.extend(split_quad(&positions, q, axis));
+                        }
                     }
-                    // Cells around the edge, counter-clockwise about +d; in each, the
-                    // edge's local index is 4 d + (1 - du) + 2 (1 - dw).
-                    let (u, w) = ((d + 1) % 3, (d + 2) % 3);
-                    let cell = |du: usize, dw: usize| {
-                        let mut c = p;
-                        c[u] -= 1 - du;
-                        c[w] -= 1 - dw;
-                        let ci = cidx(c[0], c[1], c[2]);
-                        let k = 4 * d + (1 - du) + 2 * (1 - dw);
-                        debug_assert!(cell_vertex[ci] != u32::MAX);
-                        cell_vertex[ci] + ((cell_labels[ci] >> (2 * k)) & 3)
-                    };
-                    let mut q = [cell(0, 0), cell(1, 0), cell(1, 1), cell(0, 1)];
-                    let mut axis = DVec3::ZERO;
-                    axis[d] = 1.0;
-                    if !grid.inside(i) {
-                        q.reverse();
-                        axis = -axis;
-                    }
-                    out.extend(split_quad(&positions, q, axis));
                 }
             }
             out
         })
         .collect();
-    let cells: usize = edges.active.iter().map(Vec::len).sum();
     let one_per_cell = positions.len() == cells;
-    (TriangleMesh { positions, triangles, normals: None }, one_per_cell)
+    (TriangleMesh { positions, triangles: concat(per_slice), normals: None }, one_per_cell)
 }
 
 /// Splits the quad `q` (counter-clockwise about `axis`, the outward direction) along the
@@ -1068,6 +1654,259 @@ mod tests {
             );
             assert!((av - v * vals[k]).length() < 1e-12, "{k}: {av} vs {}", v * vals[k]);
             assert!((v.length() - 1.0).abs() < 1e-12);
+        }
+    }
+
+    /// Directed edges of `tris` with their number of uses.
+    fn directed(tris: &[[u8; 3]]) -> std::collections::HashMap<(u8, u8), u32> {
+        let mut uses = std::collections::HashMap::new();
+        for t in tris {
+            for k in 0..3 {
+                *uses.entry((t[k], t[(k + 1) % 3])).or_insert(0) += 1;
+            }
+        }
+        uses
+    }
+
+    /// The triangles of `case` with the first option of every polygon.
+    fn first_options(t: &McTable, case: usize) -> Vec<[u8; 3]> {
+        t.polygons(case).iter().flat_map(|&p| t.option(p, 0).to_vec()).collect()
+    }
+
+    /// Every option of every polygon of every case: each directed edge used once; edges
+    /// between two vertices on one lower face used one way only (segments), inner edges
+    /// both ways; all the configuration's crossing edges used; the normals point from the
+    /// inside ends of the vertices' cube edges to the outside ends (summed over a case).
+    #[test]
+    fn mc_cases_are_closed_inside_the_cell() {
+        let t = mc_table();
+        let topo = CubeTopology::new();
+        let faces = |k: u8| edge_faces(&topo, k as usize);
+        let (mut cases, mut options, mut own) = (0, 0, 0);
+        for config in 0..256 {
+            let (first, last) = (t.first_case[config] as usize, t.first_case[config + 1] as usize);
+            assert_eq!(last - first, 1 << t.ambiguous[config].count_ones(), "config {config}");
+            for case in first..last {
+                cases += 1;
+                own += t.centres(case).len();
+                let mut used = 0u16;
+                for &p in t.polygons(case) {
+                    for o in 0..p.options as usize {
+                        options += 1;
+                        let tris = t.option(p, o);
+                        used |=
+                            tris.iter().flatten().filter(|&&k| k < MC_CENTRE).fold(0u16, |m, &k| m | 1 << k);
+                        let uses = directed(tris);
+                        for (&(a, b), &n) in &uses {
+                            assert_eq!(n, 1, "config {config}: directed edge {a}->{b} used {n} times");
+                            let back = uses.get(&(b, a)).copied().unwrap_or(0);
+                            let shared = faces(a) & faces(b);
+                            if shared & LOWER_FACES != 0 {
+                                assert_eq!(
+                                    back, 0,
+                                    "config {config}: lower face edge {a}-{b} used both ways"
+                                );
+                            } else if shared == 0 {
+                                assert_eq!(back, 1, "config {config}: inner edge {a}-{b} not closed");
+                            }
+                        }
+                    }
+                }
+                assert_eq!(used, t.crossing[config], "config {config} case {case}: edges used");
+                // Orientation, with vertices at the edges' midpoints (a triangle across a
+                // tunnel may point either way, so summed over the case).
+                let mid = |k: u8| {
+                    if k < MC_CENTRE {
+                        return edge_mid(&topo, k as usize);
+                    }
+                    let cycle = t.centres(case)[(k - MC_CENTRE) as usize];
+                    let ks: Vec<usize> = (0..12).filter(|e| cycle & (1 << e) != 0).collect();
+                    ks.iter().map(|&e| edge_mid(&topo, e)).sum::<DVec3>() / ks.len() as f64
+                };
+                let tris = first_options(t, case);
+                let mut outwards = 0.0;
+                for tri in &tris {
+                    let [a, b, c] = tri.map(mid);
+                    let nrm = (b - a).cross(c - a);
+                    for &k in tri.iter().filter(|&&k| k < MC_CENTRE) {
+                        let (c, d) = topo.edges[k as usize];
+                        let dir = if config >> c & 1 != 0 { corner_pos(1 << d) } else { -corner_pos(1 << d) };
+                        outwards += nrm.dot(dir);
+                    }
+                }
+                assert!(tris.is_empty() || outwards > 0.0, "config {config} case {case}: faces inwards");
+            }
+        }
+        assert!(cases > 256 && options > cases, "{cases} cases, {options} options");
+        println!("{cases} cases, {options} polygon triangulations, {own} cycles with a vertex of their own");
+    }
+
+    /// Two cells sharing a face with the same samples on it, whatever the rest of their
+    /// corners and choices: the segments on the face are the same, in opposite directions.
+    #[test]
+    fn mc_cells_agree_across_every_face() {
+        let t = mc_table();
+        let topo = CubeTopology::new();
+        let faces = |k: u8| edge_faces(&topo, k as usize);
+        let mut checked = 0u64;
+        for a in 0..3 {
+            let (lo_face, hi_face) = (2 * a, 2 * a + 1);
+            // The segments a case puts on `face` (edges on it used one way only; the cell
+            // below a face may also use its diagonals, both ways), in the upper cell's
+            // edge numbering when `shift` (the edge's lower corner moved across the face).
+            let segments = |case: usize, face: usize, shift: bool| -> Vec<(u8, u8)> {
+                let uses = directed(&first_options(t, case));
+                let map = |k: u8| -> u8 {
+                    if !shift {
+                        return k;
+                    }
+                    let (c, d) = topo.edges[k as usize];
+                    topo.edges.iter().position(|&e| e == (c ^ 1 << a, d)).unwrap() as u8
+                };
+                let mut s: Vec<(u8, u8)> = uses
+                    .keys()
+                    .copied()
+                    .filter(|&(p, q)| faces(p) & faces(q) & (1 << face) != 0 && !uses.contains_key(&(q, p)))
+                    .map(|(p, q)| (map(p), map(q)))
+                    .collect();
+                s.sort_unstable();
+                s
+            };
+            let choice_bit = |config: usize, face: usize| -> Option<usize> {
+                let amb = t.ambiguous[config];
+                (amb & (1 << face) != 0).then(|| (amb & ((1 << face) - 1)).count_ones() as usize)
+            };
+            for lower in 0..256usize {
+                for upper in 0..256usize {
+                    // `upper`'s corners with bit a clear are `lower`'s with bit a set.
+                    if (0..8)
+                        .filter(|c| c & (1 << a) == 0)
+                        .any(|c| (upper >> c) & 1 != (lower >> (c | 1 << a)) & 1)
+                    {
+                        continue;
+                    }
+                    let (fl, ll) = (t.first_case[lower] as usize, t.first_case[lower + 1] as usize);
+                    let (fu, lu) = (t.first_case[upper] as usize, t.first_case[upper + 1] as usize);
+                    let (bl, bu) = (choice_bit(lower, hi_face), choice_bit(upper, lo_face));
+                    assert_eq!(bl.is_some(), bu.is_some());
+                    for cl in fl..ll {
+                        for cu in fu..lu {
+                            if let (Some(bl), Some(bu)) = (bl, bu)
+                                && ((cl - fl) >> bl) & 1 != ((cu - fu) >> bu) & 1
+                            {
+                                continue;
+                            }
+                            let mut mine = segments(cl, hi_face, true);
+                            mine.iter_mut().for_each(|e| *e = (e.1, e.0));
+                            mine.sort_unstable();
+                            assert_eq!(mine, segments(cu, lo_face, false), "axis {a}: {lower} | {upper}");
+                            checked += 1;
+                        }
+                    }
+                }
+            }
+        }
+        assert!(checked > 3 * 256 * 16, "{checked} pairs");
+    }
+
+    #[test]
+    fn polygon_triangulations_are_catalan() {
+        for (m, count) in [(3, 1), (4, 2), (5, 5), (6, 14), (7, 42)] {
+            let all = polygon_triangulations(m);
+            assert_eq!(all.len(), count);
+            for t in &all {
+                assert_eq!(t.len(), m - 2);
+                // Each inner diagonal twice, each side once.
+                let mut sides = std::collections::HashMap::new();
+                for &[i, j, k] in t {
+                    assert!(i < j && j < k);
+                    for e in [(i, j), (j, k), (i, k)] {
+                        *sides.entry(e).or_insert(0) += 1;
+                    }
+                }
+                for (&(i, j), &n) in &sides {
+                    let side = j == i + 1 || (i == 0 && j == m - 1);
+                    assert_eq!(n, if side { 1 } else { 2 }, "{m}-gon {t:?}");
+                }
+            }
+        }
+    }
+
+    /// A grid of random samples (some exactly zero) with its outer layer positive.
+    fn random_grid(n: [usize; 3], seed: u64) -> SampleGrid {
+        let mut state = seed | 1;
+        let mut values = vec![0.0f32; n[0] * n[1] * n[2]];
+        for (i, v) in values.iter_mut().enumerate() {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let (x, y, z) = (i % n[0], (i / n[0]) % n[1], i / (n[0] * n[1]));
+            let boundary = x == 0 || y == 0 || z == 0 || x + 1 == n[0] || y + 1 == n[1] || z + 1 == n[2];
+            *v = match state % 16 {
+                _ if boundary => 1.0,
+                0 => 0.0,
+                r => r as f32 / 8.0 - 1.0,
+            };
+        }
+        SampleGrid { origin: DVec3::new(-1.0, 0.5, 2.0), h: 0.25, n, values }
+    }
+
+    #[test]
+    fn bit_scans_match_plain_loops() {
+        for (s, n) in
+            [[5, 4, 3], [64, 3, 4], [65, 4, 5], [130, 5, 4], [129, 3, 3], [200, 6, 3]].into_iter().enumerate()
+        {
+            let grid = random_grid(n, 0x9e37_79b9 + s as u64);
+            let signs = Signs::new(&grid);
+            let mut fast = Vec::new();
+            for z in 0..n[2] - 1 {
+                signs.active_cells(z, |x, y, c| fast.push((x, y, z, c)));
+            }
+            let mut slow = Vec::new();
+            for z in 0..n[2] - 1 {
+                for y in 0..n[1] - 1 {
+                    for x in 0..n[0] - 1 {
+                        let c = (0..8).fold(0u8, |m, c| {
+                            let o = corner(c);
+                            m | ((grid.values[grid.idx(x + o[0], y + o[1], z + o[2])] < 0.0) as u8) << c
+                        });
+                        if c != 0 && c != 0xff {
+                            slow.push((x, y, z, c));
+                        }
+                    }
+                }
+            }
+            assert!(slow.len() > 10, "{n:?}: {} active cells", slow.len());
+            assert_eq!(fast, slow, "{n:?}");
+            let (cross, ends) = Crossings::new(&grid, &signs, DIRS.len(), |p0, _, p1, _| (p0, p1));
+            let mut k = 0;
+            for z in 0..n[2] {
+                for y in 0..n[1] {
+                    for (d, o) in DIRS.iter().enumerate() {
+                        for x in 0..n[0] {
+                            if x + o[0] >= n[0] || y + o[1] >= n[1] || z + o[2] >= n[2] {
+                                continue;
+                            }
+                            let (i0, i1) = (grid.idx(x, y, z), grid.idx(x + o[0], y + o[1], z + o[2]));
+                            if grid.inside(i0) != grid.inside(i1) {
+                                assert_eq!(
+                                    cross.vertex(x, y, z, d) as usize,
+                                    k,
+                                    "{n:?} ({x}, {y}, {z}) dir {d}"
+                                );
+                                assert_eq!(
+                                    ends[k],
+                                    (grid.pos(x, y, z), grid.pos(x + o[0], y + o[1], z + o[2]))
+                                );
+                                k += 1;
+                            }
+                        }
+                    }
+                }
+                let first = if z == 0 { 0 } else { (0..z).map(|s| cross.in_slice(s)).sum() };
+                assert!(cross.in_slice(z) <= k - first);
+            }
+            assert_eq!(ends.len(), k, "{n:?}");
         }
     }
 

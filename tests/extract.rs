@@ -12,7 +12,8 @@ use sdfmesh::mesh::{TriangleMesh, is_degenerate};
 use sdfmesh::shape::{CsgOp, Object, ObjectKind, Primitive};
 use sdfmesh::transform::TransformDesc;
 
-const METHODS: [ExtractMethod; 2] = [ExtractMethod::MarchingCubes, ExtractMethod::DualContouring];
+const METHODS: [ExtractMethod; 3] =
+    [ExtractMethod::MarchingCubes, ExtractMethod::MarchingTetrahedra, ExtractMethod::DualContouring];
 
 fn cube(r: f32) -> Aabb {
     Aabb::new(Vec3A::splat(-r), Vec3A::splat(r))

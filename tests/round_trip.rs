@@ -51,7 +51,7 @@ fn sphere_round_trip_error_shrinks_with_resolution() {
         let h = 2.4 / res as f64;
         let (worst, wrong) = round_trip(&sphere, res, ExtractMethod::MarchingCubes, 0.3);
         eprintln!("sphere res {res}: max error {worst:.2e} ({:.3} cells), {wrong} wrong signs", worst / h);
-        // Marching tetrahedra places vertices on the surface (refined crossings), so the
+        // Marching cubes places vertices on the surface (refined crossings), so the
         // chord error is O(h^2): well under a tenth of a cell at these sizes.
         assert!(worst < 0.1 * h, "res {res}: error {worst} vs cell {h}");
         assert!(worst < last, "res {res}: error {worst} did not shrink from {last}");
@@ -70,11 +70,16 @@ fn box_round_trip_keeps_sharp_edges_with_dual_contouring() {
     let res = 24;
     let h = 2.4 / res as f64;
     let (dc, wrong_dc) = round_trip(&boxf, res, ExtractMethod::DualContouring, 0.3);
+    let (mt, wrong_mt) = round_trip(&boxf, res, ExtractMethod::MarchingTetrahedra, 0.3);
     let (mc, wrong_mc) = round_trip(&boxf, res, ExtractMethod::MarchingCubes, 0.3);
-    eprintln!("box res {res}: dual contouring {dc:.2e}, marching tetrahedra {mc:.2e}, cell {h:.3}");
-    assert_eq!((wrong_dc, wrong_mc), (0, 0));
-    // Dual contouring reproduces the edges and corners; marching tetrahedra cuts them off
-    // (by up to about a cell's diagonal).
+    eprintln!(
+        "box res {res}: dual contouring {dc:.2e}, marching tetrahedra {mt:.2e}, marching cubes {mc:.2e}, cell {h:.3}"
+    );
+    assert_eq!((wrong_dc, wrong_mt, wrong_mc), (0, 0, 0));
+    // Dual contouring reproduces the edges and corners; marching tetrahedra and cubes cut
+    // them off (by up to about a cell's diagonal; marching cubes, without the face and
+    // body diagonals' vertices, cuts deeper).
     assert!(dc < 0.05 * h, "dual contouring: {dc} vs cell {h}");
-    assert!(mc > 2.0 * dc && mc < 1.0 * h, "marching tetrahedra: {mc}, dual: {dc}, cell {h}");
+    assert!(mt > 2.0 * dc && mt < 1.0 * h, "marching tetrahedra: {mt}, dual: {dc}, cell {h}");
+    assert!(mc > 2.0 * dc && mc < 3f64.sqrt() * h, "marching cubes: {mc}, dual: {dc}, cell {h}");
 }
