@@ -66,7 +66,8 @@ enum Command {
         /// Grid padding around the mesh's bounding box, in cells (--to grid).
         #[arg(long, default_value_t = 2)]
         margin: u32,
-        /// Extraction method (--to mesh): marching tetrahedra (watertight) or dual contouring.
+        /// Extraction method (--to mesh): marching cubes, marching tetrahedra (both watertight)
+        /// or dual contouring.
         #[arg(long, value_enum, default_value_t = Method::Mc)]
         method: Method,
         /// How the grid is filled (--to grid).

@@ -37,7 +37,7 @@ pub enum Representation {
     /// Primitives tessellated parametrically at `resolution` (segments around the largest
     /// circle) and ray traced as triangle meshes through a BVH; infinite planes become a
     /// disc around the camera out to the scene's `max_distance`; bounded CSG and repetition
-    /// are extracted from their SDF (marching tetrahedra, `resolution` cells along the
+    /// are extracted from their SDF (marching cubes, `resolution` cells along the
     /// longest axis, at most 512); unbounded ones are sphere traced with `march` (the
     /// render says so).
     Mesh { resolution: u32, shading: Shading, method: MeshMethod, march: MarchParams },

@@ -228,7 +228,7 @@ enum Build {
     /// `build_scene` in a representation.
     Scene(Representation),
     /// The input mesh sampled or voxelized into a grid at a resolution and re-extracted
-    /// with marching tetrahedra.
+    /// with marching cubes.
     Reextract { fill: GridFill, resolution: u32 },
 }
 

@@ -17,8 +17,10 @@ REPO = Path(__file__).resolve().parents[2]
 SCENES = sorted((REPO / "data" / "scenes").glob("*.toml"))
 SEGMENTS = 512  # manifold3d's polygonal spheres and cylinders: volume error ~ 1e-4
 
-# Relative volume and area errors allowed at each resolution of marching tetrahedra.
-# Measured worst cases over the CSG and primitive cases below (volume; area):
+# Relative volume and area errors allowed at each resolution of the extraction. Measured
+# worst cases with marching tetrahedra (the default method until marching cubes replaced it;
+# marching cubes stays within the same limits) over the CSG and primitive cases below
+# (volume; area):
 #   16: 0.018; 0.057 (the area of a box, whose edges and corners are cut off)
 #   32: 0.0049; 0.026
 #   64: 0.0012; 0.013
