@@ -35,10 +35,10 @@ pub struct MeshGeometry {
 impl MeshGeometry {
     /// The BVH build parameters used by [`MeshGeometry::new`], chosen by measurement
     /// (benches/primary_rays.rs, reports/bench/primary_rays.txt): obvhs's fast PLOC preset
-    /// with at most four triangles per leaf, so each leaf fills one packet of the 4-wide
+    /// with at most four triangles per leaf, so each leaf fills one packet of the 8-wide
     /// BVH it is collapsed into. On the armadillo it traced as fast as the medium and slow
-    /// presets (within the noise, about 10.7 Mrays per CPU-second) and 12% faster than one
-    /// triangle per leaf, and built in two thirds of the medium preset's time.
+    /// presets (within the noise, about 12 Mrays per CPU-second), 11% faster than one
+    /// triangle per leaf, and built in three quarters of the medium preset's time.
     pub const BUILD_PARAMS: BvhBuildParams =
         BvhBuildParams { max_prims_per_leaf: 4, ..BvhBuildParams::fast_build() };
 
