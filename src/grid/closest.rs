@@ -17,8 +17,11 @@
 //! that must be tested grows with `d`; the cylinder follows the surface, and the count
 //! stays about constant. [`TriangleBvh::nearest`] walks the wide nodes depth first, nearer
 //! children first, pruning every node or triangle whose bound (squared distance) is
-//! farther than the best triangle so far or than a caller-supplied upper bound. It
-//! allocates nothing: the caller passes a reusable [`NodeStack`].
+//! farther than the best triangle so far or than a caller-supplied upper bound.
+//! [`TriangleBvh::nearest_group`] answers up to [`GROUP_MAX`] nearby points in one walk
+//! (a node is opened when any of them needs it, each prunes by its own best), which shares
+//! the node loads and overlaps the points' independent arithmetic. Neither allocates: the
+//! caller passes a reusable [`NodeStack`] or [`GroupStack`].
 //! [`TriangleBvh::axis_segment_may_meet`] is a conservative segment test for signing by
 //! regions.
 
@@ -30,9 +33,10 @@ use crate::bvh;
 use crate::geometry::{Aabb, aabb};
 use crate::mesh::TriangleMesh;
 
-/// A reusable traversal stack of `(node index, squared distance to the node's box)`.
-/// Keep one per thread; it grows to the BVH's depth once and is then reused.
-pub type NodeStack = Vec<(u32, f32)>;
+/// A reusable traversal stack: per entry, the bits of the squared distance bound of a node
+/// (high 32 bits) and its index (low). Keep one per thread; it grows to the BVH's depth
+/// once and is then reused.
+pub type NodeStack = Vec<u64>;
 
 /// The closest point to `p` on the triangle `a, b, c` (Ericson's region-based method).
 ///
@@ -142,6 +146,21 @@ pub fn axis_segment_may_meet_triangle(
     (e0 >= -t0 && e1 >= -t1 && e2 >= -t2) || (e0 <= t0 && e1 <= t1 && e2 <= t2)
 }
 
+/// The most points [`TriangleBvh::nearest_group`] takes at once.
+pub const GROUP_MAX: usize = 8;
+
+/// A reusable traversal stack for [`TriangleBvh::nearest_group`]; keep one per thread.
+#[derive(Clone, Debug, Default)]
+pub struct GroupStack(Vec<GroupEntry>);
+
+/// A pending node of a group walk: the least bound of the points that need it, and which.
+#[derive(Clone, Copy, Debug)]
+struct GroupEntry {
+    bound: f32,
+    node: u32,
+    mask: u32,
+}
+
 /// The result of a nearest-triangle query.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Nearest {
@@ -209,8 +228,8 @@ impl Cyl4 {
     /// Lower bounds on the squared distances from `q` to the four cylinders (shrunk by
     /// [`CYL_SHRINK`] for rounding): the squared distance to the disc times the slab.
     #[inline(always)]
-    fn distances2(&self, q: Vec3A) -> Vec4 {
-        let v = [Vec4::splat(q.x) - self.c[0], Vec4::splat(q.y) - self.c[1], Vec4::splat(q.z) - self.c[2]];
+    fn distances2(&self, q: &[Vec4; 3]) -> Vec4 {
+        let v = [q[0] - self.c[0], q[1] - self.c[1], q[2] - self.c[2]];
         let h = self.n[0] * v[0] + self.n[1] * v[1] + self.n[2] * v[2];
         let w = [v[0] - h * self.n[0], v[1] - h * self.n[1], v[2] - h * self.n[2]];
         let rho = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
@@ -305,6 +324,8 @@ struct Node4 {
     hi: [Vec4; 3],
     cyl: Cyl4,
     child: [u32; 4],
+    /// Bit `i` set: child `i` is a leaf.
+    leaves: u32,
 }
 
 /// A leaf packet: up to four triangles' boxes and cylinders as structure of arrays (an
@@ -320,13 +341,18 @@ struct Packet {
     more: bool,
 }
 
-/// Squared distances from `q` to four boxes in structure-of-arrays layout.
+/// `q`'s coordinates, each in all four lanes.
 #[inline(always)]
-fn box_distances2(lo: &[Vec4; 3], hi: &[Vec4; 3], q: Vec3A) -> Vec4 {
+fn splat3(q: Vec3A) -> [Vec4; 3] {
+    [Vec4::splat(q.x), Vec4::splat(q.y), Vec4::splat(q.z)]
+}
+
+/// Squared distances from `q` (splatted) to four boxes in structure-of-arrays layout.
+#[inline(always)]
+fn box_distances2(lo: &[Vec4; 3], hi: &[Vec4; 3], q: &[Vec4; 3]) -> Vec4 {
     let mut d2 = Vec4::ZERO;
     for a in 0..3 {
-        let x = Vec4::splat(q[a]);
-        let d = (lo[a] - x).max(x - hi[a]).max(Vec4::ZERO);
+        let d = (lo[a] - q[a]).max(q[a] - hi[a]).max(Vec4::ZERO);
         d2 += d * d;
     }
     d2
@@ -343,11 +369,12 @@ impl Node4 {
         hi: [Vec4::splat(f32::NEG_INFINITY); 3],
         cyl: Cyl4::NONE,
         child: [Node4::LEAF; 4],
+        leaves: 0,
     };
 
     /// Lower bounds on the squared distances from `q` to the four children.
     #[inline(always)]
-    fn distances2(&self, q: Vec3A) -> Vec4 {
+    fn distances2(&self, q: &[Vec4; 3]) -> Vec4 {
         box_distances2(&self.lo, &self.hi, q).max(self.cyl.distances2(q))
     }
 }
@@ -355,7 +382,7 @@ impl Node4 {
 impl Packet {
     /// Lower bounds on the squared distances from `q` to the four triangles.
     #[inline(always)]
-    fn distances2(&self, q: Vec3A) -> Vec4 {
+    fn distances2(&self, q: &[Vec4; 3]) -> Vec4 {
         box_distances2(&self.lo, &self.hi, q).max(self.cyl.distances2(q))
     }
 }
@@ -454,6 +481,7 @@ fn collapse(bvh: &Bvh2, corners: &[[Vec3A; 3]]) -> (Vec<Node4>, Vec<Packet>) {
             out[0].hi[a].x = b.max[a];
         }
         out[0].child[0] = leaf(0, &mut packets);
+        out[0].leaves = 1;
         return (out, packets);
     }
     todo.push((0, 0));
@@ -485,6 +513,7 @@ fn collapse(bvh: &Bvh2, corners: &[[Vec3A; 3]]) -> (Vec<Node4>, Vec<Packet>) {
             }
             out[slot as usize].cyl.set(c, &cylinder(k));
             out[slot as usize].child[c] = if nodes[k as usize].is_leaf() {
+                out[slot as usize].leaves |= 1 << c;
                 leaf(k, &mut packets)
             } else {
                 let new = out.len() as u32;
@@ -571,7 +600,9 @@ impl TriangleBvh {
             return None;
         }
         let q = Vec3A::from(p);
-        let mut best2 = if max_dist.is_finite() { max_dist * max_dist } else { f32::INFINITY };
+        let qs = splat3(q);
+        // At most `f32::MAX`, so that empty (infinitely far) slots are never entered.
+        let mut best2 = (max_dist * max_dist).min(f32::MAX);
         let mut best: Option<(u32, Vec3A)> = None;
         if let Some(slot) = hint.filter(|&s| (s as usize) < self.corners.len()) {
             let [a, b, c] = self.corners[slot as usize];
@@ -586,7 +617,7 @@ impl TriangleBvh {
             let mut at = (r & !Node4::LEAF) as usize;
             loop {
                 let packet = &self.packets[at];
-                let bound = packet.distances2(q).to_array();
+                let bound = packet.distances2(&qs).to_array();
                 for (&b2, &slot) in bound.iter().zip(&packet.slot) {
                     if b2 > *best2 {
                         continue;
@@ -607,37 +638,42 @@ impl TriangleBvh {
         };
         let wide = &self.wide;
         stack.clear();
-        stack.push((0, 0.0));
-        while let Some((node, d)) = stack.pop() {
-            if d > best2 {
+        stack.push(0); // the root, bound 0
+        while let Some(key) = stack.pop() {
+            if f32::from_bits((key >> 32) as u32) > best2 {
                 continue;
             }
-            let n = &wide[node as usize];
+            let n = &wide[key as u32 as usize];
             *visited += 4;
-            let d2 = n.distances2(q).to_array();
-            // The children within the bound, nearest first.
-            let mut order = [(0.0f32, 0u32); 4];
-            let mut count = 0;
-            for (&dc, &child) in d2.iter().zip(&n.child) {
-                if dc <= best2 {
-                    let mut at = count;
-                    while at > 0 && order[at - 1].0 > dc {
-                        order[at] = order[at - 1];
-                        at -= 1;
+            let d2 = n.distances2(&qs);
+            let within = d2.cmple(Vec4::splat(best2)).bitmask();
+            // Leaves at once (tightening the bound).
+            let mut leaves = within & n.leaves;
+            while leaves != 0 {
+                let k = leaves.trailing_zeros() as usize;
+                leaves &= leaves - 1;
+                test_leaf(n.child[k], &mut best2, &mut best);
+            }
+            // Inner nodes onto the stack, farthest first: keys (bound bits, reference) sorted
+            // without branches (non-negative floats order as their bits).
+            let inner = within & !n.leaves;
+            if inner != 0 {
+                let d = d2.to_array();
+                let key = |k: usize| {
+                    if inner >> k & 1 != 0 {
+                        (d[k].to_bits() as u64) << 32 | n.child[k] as u64
+                    } else {
+                        u64::MAX
                     }
-                    order[at] = (dc, child);
-                    count += 1;
+                };
+                let mut keys = [key(0), key(1), key(2), key(3)];
+                for (x, y) in [(0, 1), (2, 3), (0, 2), (1, 3), (1, 2)] {
+                    let (lo, hi) = (keys[x].min(keys[y]), keys[x].max(keys[y]));
+                    keys[x] = lo;
+                    keys[y] = hi;
                 }
-            }
-            // Leaves at once (tightening the bound), inner nodes onto the stack farthest first.
-            for &(dc, r) in &order[..count] {
-                if r & Node4::LEAF != 0 && dc <= best2 {
-                    test_leaf(r, &mut best2, &mut best);
-                }
-            }
-            for &(dc, r) in order[..count].iter().rev() {
-                if r & Node4::LEAF == 0 && dc <= best2 {
-                    stack.push((r, dc));
+                for &k in keys[..inner.count_ones() as usize].iter().rev() {
+                    stack.push(k);
                 }
             }
         }
@@ -647,6 +683,140 @@ impl TriangleBvh {
             slot,
             point: Vec3::from(x),
         })
+    }
+
+    /// [`TriangleBvh::nearest_with_hint`] for up to [`GROUP_MAX`] nearby points at once
+    /// (e.g. a 2x2 block of grid samples): one walk whose nodes are opened when any of the
+    /// points needs them, each point pruning by its own best distance, so that the nodes'
+    /// bounds are loaded once for all and the points' independent arithmetic overlaps.
+    /// `hints[i]` (a slot, see [`Nearest::slot`]) bounds point `i`'s search from the start.
+    /// Writes point `i`'s answer to `out[i]` (`None` only for an empty BVH). Adds the child
+    /// bounds evaluated (four per node and point) to `visited`.
+    ///
+    /// # Panics
+    /// When `points`, `hints` and `out` differ in length or are longer than [`GROUP_MAX`].
+    pub fn nearest_group(
+        &self,
+        points: &[Vec3],
+        hints: &[Option<u32>],
+        out: &mut [Option<Nearest>],
+        stack: &mut GroupStack,
+        visited: &mut u64,
+    ) {
+        let g = points.len();
+        assert!(g <= GROUP_MAX && hints.len() == g && out.len() == g, "a group of up to {GROUP_MAX} points");
+        if self.wide.is_empty() {
+            out.fill(None);
+            return;
+        }
+        let mut qs = [[Vec4::ZERO; 3]; GROUP_MAX];
+        let mut qa = [Vec3A::ZERO; GROUP_MAX];
+        let mut best2 = [f32::MAX; GROUP_MAX];
+        let mut best: [(u32, Vec3A); GROUP_MAX] = [(u32::MAX, Vec3A::ZERO); GROUP_MAX];
+        for s in 0..g {
+            qa[s] = Vec3A::from(points[s]);
+            qs[s] = splat3(qa[s]);
+            if let Some(slot) = hints[s].filter(|&h| (h as usize) < self.corners.len()) {
+                let [a, b, c] = self.corners[slot as usize];
+                let x = closest_point_on_triangle(qa[s], a, b, c);
+                best2[s] = (x - qa[s]).length_squared().min(f32::MAX);
+                best[s] = (slot, x);
+            }
+        }
+        let test_leaf =
+            |r: u32, mask: u32, best2: &mut [f32; GROUP_MAX], best: &mut [(u32, Vec3A); GROUP_MAX]| {
+                let mut at = (r & !Node4::LEAF) as usize;
+                loop {
+                    let packet = &self.packets[at];
+                    let mut m = mask;
+                    while m != 0 {
+                        let s = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        let mut lanes = packet.distances2(&qs[s]).cmple(Vec4::splat(best2[s])).bitmask();
+                        while lanes != 0 {
+                            let slot = packet.slot[lanes.trailing_zeros() as usize];
+                            lanes &= lanes - 1;
+                            let [a, b, c] = self.corners[slot as usize];
+                            let x = closest_point_on_triangle(qa[s], a, b, c);
+                            let d2 = (x - qa[s]).length_squared();
+                            if d2 <= best2[s] {
+                                best2[s] = d2;
+                                best[s] = (slot, x);
+                            }
+                        }
+                    }
+                    if !packet.more {
+                        break;
+                    }
+                    at += 1;
+                }
+            };
+        let wide = &self.wide;
+        stack.0.clear();
+        stack.0.push(GroupEntry { bound: 0.0, node: 0, mask: (1 << g) - 1 });
+        while let Some(e) = stack.0.pop() {
+            // The points that may still find something below (`bound` is the least of
+            // theirs, so a point whose best is nearer is done with this node).
+            let mut mask = 0;
+            let mut m = e.mask;
+            while m != 0 {
+                let s = m.trailing_zeros() as usize;
+                m &= m - 1;
+                mask |= ((e.bound <= best2[s]) as u32) << s;
+            }
+            if mask == 0 {
+                continue;
+            }
+            let n = &wide[e.node as usize];
+            let mut children = [0u32; 4];
+            let mut nearest = Vec4::splat(f32::INFINITY);
+            let mut m = mask;
+            while m != 0 {
+                let s = m.trailing_zeros() as usize;
+                m &= m - 1;
+                *visited += 4;
+                let d2 = n.distances2(&qs[s]);
+                let within = d2.cmple(Vec4::splat(best2[s]));
+                nearest = nearest.min(Vec4::select(within, d2, Vec4::splat(f32::INFINITY)));
+                let bits = within.bitmask();
+                for (k, c) in children.iter_mut().enumerate() {
+                    *c |= (bits >> k & 1) << s;
+                }
+            }
+            for k in 0..4 {
+                if n.leaves >> k & 1 != 0 && children[k] != 0 {
+                    test_leaf(n.child[k], children[k], &mut best2, &mut best);
+                }
+            }
+            // Inner nodes onto the stack, farthest first (keys: bound bits, child number).
+            let d = nearest.to_array();
+            let mut keys = [u64::MAX; 4];
+            let mut count = 0;
+            for k in 0..4 {
+                if n.leaves >> k & 1 == 0 && children[k] != 0 {
+                    keys[count] = (d[k].to_bits() as u64) << 32 | k as u64;
+                    count += 1;
+                }
+            }
+            for (x, y) in [(0, 1), (2, 3), (0, 2), (1, 3), (1, 2)] {
+                let (lo, hi) = (keys[x].min(keys[y]), keys[x].max(keys[y]));
+                keys[x] = lo;
+                keys[y] = hi;
+            }
+            for &key in keys[..count].iter().rev() {
+                let k = key as u32 as usize;
+                stack.0.push(GroupEntry { bound: d[k], node: n.child[k], mask: children[k] });
+            }
+        }
+        for s in 0..g {
+            let (slot, x) = best[s];
+            out[s] = (slot != u32::MAX).then(|| Nearest {
+                dist2: best2[s],
+                triangle: self.original[slot as usize],
+                slot,
+                point: Vec3::from(x),
+            });
+        }
     }
 
     /// Whether the axis-parallel segment from `p` to the point whose `axis` coordinate is
