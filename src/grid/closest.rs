@@ -783,18 +783,18 @@ impl TriangleBvh {
                     *c |= (bits >> k & 1) << s;
                 }
             }
-            for k in 0..4 {
-                if n.leaves >> k & 1 != 0 && children[k] != 0 {
-                    test_leaf(n.child[k], children[k], &mut best2, &mut best);
+            for (k, (&c, &r)) in children.iter().zip(&n.child).enumerate() {
+                if n.leaves >> k & 1 != 0 && c != 0 {
+                    test_leaf(r, c, &mut best2, &mut best);
                 }
             }
             // Inner nodes onto the stack, farthest first (keys: bound bits, child number).
             let d = nearest.to_array();
             let mut keys = [u64::MAX; 4];
             let mut count = 0;
-            for k in 0..4 {
-                if n.leaves >> k & 1 == 0 && children[k] != 0 {
-                    keys[count] = (d[k].to_bits() as u64) << 32 | k as u64;
+            for (k, (&c, &dk)) in children.iter().zip(&d).enumerate() {
+                if n.leaves >> k & 1 == 0 && c != 0 {
+                    keys[count] = (dk.to_bits() as u64) << 32 | k as u64;
                     count += 1;
                 }
             }

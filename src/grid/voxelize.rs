@@ -229,9 +229,9 @@ fn hole_caps(mesh: &TriangleMesh, boundary: &[(u32, u32)]) -> Vec<[Vec3; 3]> {
         parent[ra.max(rb)] = ra.min(rb);
     }
     let mut sum = vec![(glam::DVec3::ZERO, 0u32); verts.len()];
-    for v in 0..verts.len() {
+    for (v, &vertex) in verts.iter().enumerate() {
         let r = find(&mut parent, v);
-        sum[r].0 += mesh.positions[verts[v] as usize].as_dvec3();
+        sum[r].0 += mesh.positions[vertex as usize].as_dvec3();
         sum[r].1 += 1;
     }
     boundary
