@@ -7,15 +7,25 @@
 //! form when the point is far from a small triangle).
 //!
 //! [`TriangleBvh`] holds an obvhs [`Bvh2`] over a mesh's triangles with the corners stored
-//! in leaf order, and the same hierarchy collapsed to 4-wide nodes whose children's boxes
-//! are tested together with SIMD; [`TriangleBvh::nearest`] walks the wide nodes depth
-//! first, nearer children first, pruning every node whose box is farther (squared
-//! distance) than the best triangle so far or than a caller-supplied upper bound, and
-//! every triangle whose box or plane is. It allocates nothing: the caller passes a
-//! reusable [`NodeStack`]. [`TriangleBvh::axis_segment_may_meet`] is a conservative
-//! segment test for signing by regions.
+//! in leaf order, and the same hierarchy collapsed to 4-wide nodes whose children's bounds
+//! are tested together with SIMD, its leaves gathered into packets of four triangles.
+//! Every child (and every triangle of a packet) has two bounds: its box and a bounding
+//! cylinder (a disc around the cluster's mean normal times a slab along it; for a triangle,
+//! its smallest enclosing circle in its plane). The box alone is loose by about its size
+//! for a tilted patch, and from a point `d` away a patch at lateral offset `r` from the
+//! nearest point is only about `r²/2d` farther, so with boxes alone the number of triangles
+//! that must be tested grows with `d`; the cylinder follows the surface, and the count
+//! stays about constant. [`TriangleBvh::nearest`] walks the wide nodes depth first, nearer
+//! children first, pruning every node or triangle whose bound (squared distance) is
+//! farther than the best triangle so far or than a caller-supplied upper bound.
+//! [`TriangleBvh::nearest_group`] answers up to [`GROUP_MAX`] nearby points in one walk
+//! (a node is opened when any of them needs it, each prunes by its own best), which shares
+//! the node loads and overlaps the points' independent arithmetic. Neither allocates: the
+//! caller passes a reusable [`NodeStack`] or [`GroupStack`].
+//! [`TriangleBvh::axis_segment_may_meet`] is a conservative segment test for signing by
+//! regions.
 
-use glam::{Vec3, Vec3A, Vec4};
+use glam::{DVec3, Vec3, Vec3A, Vec4};
 use obvhs::BvhBuildParams;
 use obvhs::bvh2::Bvh2;
 
@@ -23,9 +33,10 @@ use crate::bvh;
 use crate::geometry::{Aabb, aabb};
 use crate::mesh::TriangleMesh;
 
-/// A reusable traversal stack of `(node index, squared distance to the node's box)`.
-/// Keep one per thread; it grows to the BVH's depth once and is then reused.
-pub type NodeStack = Vec<(u32, f32)>;
+/// A reusable traversal stack: per entry, the bits of the squared distance bound of a node
+/// (high 32 bits) and its index (low). Keep one per thread; it grows to the BVH's depth
+/// once and is then reused.
+pub type NodeStack = Vec<u64>;
 
 /// The closest point to `p` on the triangle `a, b, c` (Ericson's region-based method).
 ///
@@ -135,6 +146,21 @@ pub fn axis_segment_may_meet_triangle(
     (e0 >= -t0 && e1 >= -t1 && e2 >= -t2) || (e0 <= t0 && e1 <= t1 && e2 <= t2)
 }
 
+/// The most points [`TriangleBvh::nearest_group`] takes at once.
+pub const GROUP_MAX: usize = 8;
+
+/// A reusable traversal stack for [`TriangleBvh::nearest_group`]; keep one per thread.
+#[derive(Clone, Debug, Default)]
+pub struct GroupStack(Vec<GroupEntry>);
+
+/// A pending node of a group walk: the least bound of the points that need it, and which.
+#[derive(Clone, Copy, Debug)]
+struct GroupEntry {
+    bound: f32,
+    node: u32,
+    mask: u32,
+}
+
 /// The result of a nearest-triangle query.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Nearest {
@@ -159,78 +185,304 @@ pub struct TriangleBvh {
     pub corners: Vec<[Vec3A; 3]>,
     /// For each entry of `corners`, the index of the triangle in the mesh.
     pub original: Vec<u32>,
-    /// For each entry of `corners`, its plane as unit normal (xyz) and offset (w):
-    /// `|normal · p - offset|` is a lower bound on the distance from `p` to the triangle.
-    pub planes: Vec<Vec4>,
-    /// The same hierarchy collapsed to four children per node, boxes in SIMD layout, for
-    /// the nearest-triangle queries.
+    /// The same hierarchy collapsed to four children per node, boxes and bounding
+    /// cylinders in SIMD layout, for the nearest-triangle queries.
     wide: Vec<Node4>,
-    /// For each entry of `corners`, its box (`min`, `max`): with the plane, a lower bound on
-    /// the distance tested before the closest point.
-    boxes: Vec<[Vec3A; 2]>,
+    /// The leaves' triangles in packets of four (boxes and cylinders in SIMD layout).
+    packets: Vec<Packet>,
 }
 
-/// A node of the 4-wide hierarchy: its children's boxes as structure of arrays (an unused
-/// slot has an empty box, infinitely far) and their references (see [`Node4::LEAF`]).
+/// Bounding cylinders of four children, as structure of arrays: child `i` lies within
+/// `t[i]` of the plane through `c[i]` orthogonal to the unit axis `n[i]`, and within `r[i]`
+/// of the axis. For a flat cluster of triangles (a triangle, or a patch of a smooth
+/// surface) this is much tighter than its box: a point far above such a patch sees the
+/// patch's neighbours on the surface as barely farther than the patch itself, and only a
+/// bound that follows the surface tells them apart. An unused or unfitted slot has
+/// `r = t = inf` (no bound: distance 0).
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(16))]
+struct Cyl4 {
+    n: [Vec4; 3],
+    c: [Vec4; 3],
+    r: Vec4,
+    t: Vec4,
+}
+
+impl Cyl4 {
+    const NONE: Cyl4 = Cyl4 {
+        n: [Vec4::ZERO; 3],
+        c: [Vec4::ZERO; 3],
+        r: Vec4::splat(f32::INFINITY),
+        t: Vec4::splat(f32::INFINITY),
+    };
+
+    fn set(&mut self, lane: usize, cyl: &Cylinder) {
+        for a in 0..3 {
+            self.n[a][lane] = cyl.n[a];
+            self.c[a][lane] = cyl.c[a];
+        }
+        self.r[lane] = cyl.r;
+        self.t[lane] = cyl.t;
+    }
+
+    /// Lower bounds on the squared distances from `q` to the four cylinders (shrunk by
+    /// [`CYL_SHRINK`] for rounding): the squared distance to the disc times the slab.
+    #[inline(always)]
+    fn distances2(&self, q: &[Vec4; 3]) -> Vec4 {
+        let v = [q[0] - self.c[0], q[1] - self.c[1], q[2] - self.c[2]];
+        let h = self.n[0] * v[0] + self.n[1] * v[1] + self.n[2] * v[2];
+        let w = [v[0] - h * self.n[0], v[1] - h * self.n[1], v[2] - h * self.n[2]];
+        let rho = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
+        let dr = (rho - self.r).max(Vec4::ZERO);
+        let dh = (h.abs() - self.t).max(Vec4::ZERO);
+        (dr * dr + dh * dh) * CYL_SHRINK
+    }
+}
+
+/// The cylinder bounds are multiplied by this: it covers the rounding of their `f32`
+/// evaluation (relative errors of a few `1e-7`, including axes of length `1 ± 1e-7`).
+const CYL_SHRINK: f32 = 1.0 - 1.0 / (1 << 18) as f32;
+
+/// One bounding cylinder (see [`Cyl4`]).
+#[derive(Clone, Copy, Debug)]
+struct Cylinder {
+    n: Vec3,
+    c: Vec3,
+    r: f32,
+    t: f32,
+}
+
+impl Cylinder {
+    const NONE: Cylinder = Cylinder { n: Vec3::ZERO, c: Vec3::ZERO, r: f32::INFINITY, t: f32::INFINITY };
+
+    /// The cylinder around `points` with the axis `axis` (any non-zero direction) and,
+    /// when given, the centre `centre` (else the middle of the points' extents in the
+    /// axis' frame). Computed in `f64` from the rounded `f32` axis and centre that the
+    /// queries use, radius and half height rounded up.
+    fn fit(points: impl Iterator<Item = Vec3A> + Clone, axis: DVec3, centre: Option<DVec3>) -> Cylinder {
+        let n = if axis.length_squared() > 0.0 { axis.normalize() } else { DVec3::Z };
+        let nf = n.as_vec3();
+        let n = nf.as_dvec3();
+        let c = centre.unwrap_or_else(|| {
+            let (u, w) = n.any_orthonormal_pair();
+            let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+            for p in points.clone() {
+                let p = p.as_dvec3();
+                let x = DVec3::new(p.dot(u), p.dot(w), p.dot(n));
+                lo = lo.min(x);
+                hi = hi.max(x);
+            }
+            let m = (lo + hi) * 0.5;
+            u * m.x + w * m.y + n * m.z
+        });
+        let cf = c.as_vec3();
+        let c = cf.as_dvec3();
+        let (mut r, mut t) = (0.0f64, 0.0f64);
+        for p in points {
+            let v = p.as_dvec3() - c;
+            let h = v.dot(n);
+            r = r.max((v - n * h).length());
+            t = t.max(h.abs());
+        }
+        let up = |x: f64| {
+            let x = x * (1.0 + 1e-6);
+            let f = x as f32;
+            if (f as f64) < x { f.next_up() } else { f }
+        };
+        Cylinder { n: nf, c: cf, r: up(r), t: up(t) }
+    }
+
+    /// A triangle's cylinder: its plane and its smallest enclosing circle.
+    fn triangle([a, b, c]: [Vec3A; 3]) -> Cylinder {
+        let (da, db, dc) = (a.as_dvec3(), b.as_dvec3(), c.as_dvec3());
+        let n = (db - da).cross(dc - da);
+        // The longest edge's midpoint when the opposite angle is not acute, else the
+        // circumcentre.
+        let edges = [(da, db, dc), (db, dc, da), (dc, da, db)];
+        let centre = edges
+            .iter()
+            .find(|(x, y, z)| (x - z).dot(y - z) <= 0.0)
+            .map(|(x, y, _)| (x + y) * 0.5)
+            .or_else(|| {
+                let (ab, ac) = (db - da, dc - da);
+                let nn = n.length_squared();
+                (nn > 0.0).then(|| {
+                    da + (n.cross(ab) * ac.length_squared() + ac.cross(n) * ab.length_squared()) / (2.0 * nn)
+                })
+            });
+        Cylinder::fit([a, b, c].into_iter(), n, centre)
+    }
+}
+
+/// A node of the 4-wide hierarchy: its children's boxes and bounding cylinders as
+/// structure of arrays (an unused slot has an empty box, infinitely far) and their
+/// references (see [`Node4::LEAF`]).
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(16))]
 struct Node4 {
     lo: [Vec4; 3],
     hi: [Vec4; 3],
+    cyl: Cyl4,
     child: [u32; 4],
+    /// Bit `i` set: child `i` is a leaf.
+    leaves: u32,
+}
+
+/// A leaf packet: up to four triangles' boxes and cylinders as structure of arrays (an
+/// unused lane has an empty box) and their slots in [`TriangleBvh::corners`]. A leaf of
+/// more than four triangles continues in the next packet while `more` is set.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(16))]
+struct Packet {
+    lo: [Vec4; 3],
+    hi: [Vec4; 3],
+    cyl: Cyl4,
+    slot: [u32; 4],
+    more: bool,
+}
+
+/// `q`'s coordinates, each in all four lanes.
+#[inline(always)]
+fn splat3(q: Vec3A) -> [Vec4; 3] {
+    [Vec4::splat(q.x), Vec4::splat(q.y), Vec4::splat(q.z)]
+}
+
+/// Squared distances from `q` (splatted) to four boxes in structure-of-arrays layout.
+#[inline(always)]
+fn box_distances2(lo: &[Vec4; 3], hi: &[Vec4; 3], q: &[Vec4; 3]) -> Vec4 {
+    let mut d2 = Vec4::ZERO;
+    for a in 0..3 {
+        let d = (lo[a] - q[a]).max(q[a] - hi[a]).max(Vec4::ZERO);
+        d2 += d * d;
+    }
+    d2
 }
 
 impl Node4 {
-    /// Reference flag of a leaf: `LEAF | index of the leaf in the BVH2`; without the flag,
-    /// the index of a 4-wide node. (An unused slot refers to the BVH2's root, never
-    /// reached: its box is empty.)
+    /// Reference flag of a leaf: `LEAF | index of its first packet`; without the flag,
+    /// the index of a 4-wide node. (An unused slot refers to packet 0, never reached: its
+    /// box is empty.)
     const LEAF: u32 = 1 << 31;
-    /// With [`Node4::LEAF`]: the leaf's slots are packed into the reference instead, as
-    /// `LEAF | PACKED | first << 3 | count` (`count <= 7`, `first < 2^27`).
-    const PACKED: u32 = 1 << 30;
 
-    /// Squared distances from `q` to the four children's boxes.
+    const EMPTY: Node4 = Node4 {
+        lo: [Vec4::splat(f32::INFINITY); 3],
+        hi: [Vec4::splat(f32::NEG_INFINITY); 3],
+        cyl: Cyl4::NONE,
+        child: [Node4::LEAF; 4],
+        leaves: 0,
+    };
+
+    /// Lower bounds on the squared distances from `q` to the four children.
     #[inline(always)]
-    fn distances2(&self, q: Vec3A) -> Vec4 {
-        let mut d2 = Vec4::ZERO;
-        for a in 0..3 {
-            let x = Vec4::splat(q[a]);
-            let d = (self.lo[a] - x).max(x - self.hi[a]).max(Vec4::ZERO);
-            d2 += d * d;
-        }
-        d2
+    fn distances2(&self, q: &[Vec4; 3]) -> Vec4 {
+        box_distances2(&self.lo, &self.hi, q).max(self.cyl.distances2(q))
     }
 }
 
-/// Collapses `bvh` (a [`Bvh2`] with fewer than `2^31` nodes) into 4-wide nodes,
+impl Packet {
+    /// Lower bounds on the squared distances from `q` to the four triangles.
+    #[inline(always)]
+    fn distances2(&self, q: &[Vec4; 3]) -> Vec4 {
+        box_distances2(&self.lo, &self.hi, q).max(self.cyl.distances2(q))
+    }
+}
+
+/// Subtrees of more triangles than this get no bounding cylinder (near the root a box is
+/// as good, and fitting would cost a pass over the subtree per level).
+const MAX_CYLINDER_TRIANGLES: u32 = 1 << 12;
+
+/// The 4-wide hierarchy and leaf packets of `bvh` (a [`Bvh2`] with fewer than `2^31`
+/// nodes and packets, whose `primitive_indices` are the identity into `corners`),
 /// parents before children.
-fn collapse(bvh: &Bvh2) -> Vec<Node4> {
+fn collapse(bvh: &Bvh2, corners: &[[Vec3A; 3]]) -> (Vec<Node4>, Vec<Packet>) {
     let nodes = &bvh.nodes;
     let mut out: Vec<Node4> = Vec::with_capacity(nodes.len() / 2 + 1);
-    let empty = Node4 {
-        lo: [Vec4::splat(f32::INFINITY); 3],
-        hi: [Vec4::splat(f32::NEG_INFINITY); 3],
-        child: [Node4::LEAF; 4],
-    };
-    let reference = |i: u32| {
+    let mut packets: Vec<Packet> = Vec::with_capacity(corners.len() / 3 + 1);
+    // Per BVH2 node: the area-weighted normal sum and the triangle count of its subtree,
+    // children before parents (the reverse of a depth-first pre-order).
+    let mut normal = vec![DVec3::ZERO; nodes.len()];
+    let mut count = vec![0u32; nodes.len()];
+    let mut order = Vec::with_capacity(nodes.len());
+    let mut todo = vec![0u32];
+    while let Some(i) = todo.pop() {
+        order.push(i);
         let n = &nodes[i as usize];
-        n.is_leaf().then_some(if n.prim_count <= 7 && n.first_index < 1 << 27 {
-            Node4::LEAF | Node4::PACKED | n.first_index << 3 | n.prim_count
+        if !n.is_leaf() {
+            todo.extend([n.first_index, n.first_index + 1]);
+        }
+    }
+    for &i in order.iter().rev() {
+        let (i, n) = (i as usize, &nodes[i as usize]);
+        if n.is_leaf() {
+            for s in n.first_index..n.first_index + n.prim_count {
+                let [a, b, c] = corners[s as usize].map(|x| x.as_dvec3());
+                normal[i] += (b - a).cross(c - a);
+            }
+            count[i] = n.prim_count;
         } else {
-            Node4::LEAF | i
-        })
+            let (l, r) = (n.first_index as usize, n.first_index as usize + 1);
+            normal[i] = normal[l] + normal[r];
+            count[i] = count[l] + count[r];
+        }
+    }
+    let mut slots: Vec<u32> = Vec::new();
+    let mut walk: Vec<u32> = Vec::new();
+    let mut cylinder = |i: u32| {
+        if count[i as usize] > MAX_CYLINDER_TRIANGLES {
+            return Cylinder::NONE;
+        }
+        slots.clear();
+        walk.clear();
+        walk.push(i);
+        while let Some(k) = walk.pop() {
+            let n = &nodes[k as usize];
+            if n.is_leaf() {
+                slots.extend(n.first_index..n.first_index + n.prim_count);
+            } else {
+                walk.extend([n.first_index, n.first_index + 1]);
+            }
+        }
+        let points = slots.iter().flat_map(|&s| corners[s as usize]);
+        Cylinder::fit(points, normal[i as usize], None)
+    };
+    let leaf = |i: u32, packets: &mut Vec<Packet>| {
+        let n = &nodes[i as usize];
+        let first = packets.len() as u32;
+        let slots: Vec<u32> = (n.first_index..n.first_index + n.prim_count).collect();
+        for (k, chunk) in slots.chunks(4).enumerate() {
+            let mut p = Packet {
+                lo: [Vec4::splat(f32::INFINITY); 3],
+                hi: [Vec4::splat(f32::NEG_INFINITY); 3],
+                cyl: Cyl4::NONE,
+                slot: [0; 4],
+                more: (k + 1) * 4 < slots.len(),
+            };
+            for (lane, &s) in chunk.iter().enumerate() {
+                let [a, b, c] = corners[s as usize];
+                let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+                for ax in 0..3 {
+                    p.lo[ax][lane] = lo[ax];
+                    p.hi[ax][lane] = hi[ax];
+                }
+                p.cyl.set(lane, &Cylinder::triangle(corners[s as usize]));
+                p.slot[lane] = s;
+            }
+            packets.push(p);
+        }
+        Node4::LEAF | first
     };
     // (BVH2 node whose children the new node holds, index of the new node)
     let mut todo: Vec<(u32, u32)> = Vec::new();
-    out.push(empty);
+    out.push(Node4::EMPTY);
     if nodes[0].is_leaf() {
         let b = nodes[0].aabb();
         for a in 0..3 {
             out[0].lo[a].x = b.min[a];
             out[0].hi[a].x = b.max[a];
         }
-        out[0].child[0] = Node4::LEAF;
-        return out;
+        out[0].child[0] = leaf(0, &mut packets);
+        out[0].leaves = 1;
+        return (out, packets);
     }
     todo.push((0, 0));
     while let Some((i, slot)) = todo.pop() {
@@ -259,18 +511,19 @@ fn collapse(bvh: &Bvh2) -> Vec<Node4> {
                 out[slot as usize].lo[a][c] = b.min[a];
                 out[slot as usize].hi[a][c] = b.max[a];
             }
-            out[slot as usize].child[c] = match reference(k) {
-                Some(leaf) => leaf,
-                None => {
-                    let new = out.len() as u32;
-                    out.push(empty);
-                    todo.push((k, new));
-                    new
-                }
+            out[slot as usize].cyl.set(c, &cylinder(k));
+            out[slot as usize].child[c] = if nodes[k as usize].is_leaf() {
+                out[slot as usize].leaves |= 1 << c;
+                leaf(k, &mut packets)
+            } else {
+                let new = out.len() as u32;
+                out.push(Node4::EMPTY);
+                todo.push((k, new));
+                new
             };
         }
     }
-    out
+    (out, packets)
 }
 
 impl TriangleBvh {
@@ -302,26 +555,16 @@ impl TriangleBvh {
                 bvh: Bvh2::default(),
                 corners: Vec::new(),
                 original: Vec::new(),
-                planes: Vec::new(),
                 wide: Vec::new(),
-                boxes: Vec::new(),
+                packets: Vec::new(),
             };
         }
         let mut bvh = bvh::build(&boxes, params);
         let original = std::mem::take(&mut bvh.primitive_indices);
         let corners: Vec<[Vec3A; 3]> = original.iter().map(|&i| tri(&mesh.triangles[i as usize])).collect();
-        let planes = corners
-            .iter()
-            .map(|&[a, b, c]| {
-                let n = (b - a).cross(c - a).normalize_or_zero();
-                // A zero normal (impossible for valid meshes) gives the bound 0: no pruning.
-                n.extend(n.dot(a))
-            })
-            .collect();
         bvh.primitive_indices = (0..original.len() as u32).collect();
-        let wide = collapse(&bvh);
-        let boxes = corners.iter().map(|&[a, b, c]| [a.min(b).min(c), a.max(b).max(c)]).collect();
-        TriangleBvh { bvh, corners, original, planes, wide, boxes }
+        let (wide, packets) = collapse(&bvh, &corners);
+        TriangleBvh { bvh, corners, original, wide, packets }
     }
 
     /// The nearest triangle to `p` among those closer than `max_dist` (pass
@@ -357,7 +600,9 @@ impl TriangleBvh {
             return None;
         }
         let q = Vec3A::from(p);
-        let mut best2 = if max_dist.is_finite() { max_dist * max_dist } else { f32::INFINITY };
+        let qs = splat3(q);
+        // At most `f32::MAX`, so that empty (infinitely far) slots are never entered.
+        let mut best2 = (max_dist * max_dist).min(f32::MAX);
         let mut best: Option<(u32, Vec3A)> = None;
         if let Some(slot) = hint.filter(|&s| (s as usize) < self.corners.len()) {
             let [a, b, c] = self.corners[slot as usize];
@@ -369,64 +614,66 @@ impl TriangleBvh {
             }
         }
         let test_leaf = |r: u32, best2: &mut f32, best: &mut Option<(u32, Vec3A)>| {
-            let (first, count) = if r & Node4::PACKED != 0 {
-                ((r & !(Node4::LEAF | Node4::PACKED)) >> 3, r & 7)
-            } else {
-                let leaf = &nodes[(r & !Node4::LEAF) as usize];
-                (leaf.first_index, leaf.prim_count)
-            };
-            for slot in first..first + count {
-                let [lo, hi] = self.boxes[slot as usize];
-                if box_distance2(q, lo, hi) > *best2 {
-                    continue;
+            let mut at = (r & !Node4::LEAF) as usize;
+            loop {
+                let packet = &self.packets[at];
+                let bound = packet.distances2(&qs).to_array();
+                for (&b2, &slot) in bound.iter().zip(&packet.slot) {
+                    if b2 > *best2 {
+                        continue;
+                    }
+                    let [a, b, c] = self.corners[slot as usize];
+                    let x = closest_point_on_triangle(q, a, b, c);
+                    let d2 = (x - q).length_squared();
+                    if d2 <= *best2 {
+                        *best2 = d2;
+                        *best = Some((slot, x));
+                    }
                 }
-                let plane = self.planes[slot as usize];
-                let s = Vec3A::from(plane.truncate()).dot(q) - plane.w;
-                if s * s > *best2 {
-                    continue;
+                if !packet.more {
+                    break;
                 }
-                let [a, b, c] = self.corners[slot as usize];
-                let x = closest_point_on_triangle(q, a, b, c);
-                let d2 = (x - q).length_squared();
-                if d2 <= *best2 {
-                    *best2 = d2;
-                    *best = Some((slot, x));
-                }
+                at += 1;
             }
         };
         let wide = &self.wide;
         stack.clear();
-        stack.push((0, 0.0));
-        while let Some((node, d)) = stack.pop() {
-            if d > best2 {
+        stack.push(0); // the root, bound 0
+        while let Some(key) = stack.pop() {
+            if f32::from_bits((key >> 32) as u32) > best2 {
                 continue;
             }
-            let n = &wide[node as usize];
+            let n = &wide[key as u32 as usize];
             *visited += 4;
-            let d2 = n.distances2(q).to_array();
-            // The children within the bound, nearest first.
-            let mut order = [(0.0f32, 0u32); 4];
-            let mut count = 0;
-            for (&dc, &child) in d2.iter().zip(&n.child) {
-                if dc <= best2 {
-                    let mut at = count;
-                    while at > 0 && order[at - 1].0 > dc {
-                        order[at] = order[at - 1];
-                        at -= 1;
+            let d2 = n.distances2(&qs);
+            let within = d2.cmple(Vec4::splat(best2)).bitmask();
+            // Leaves at once (tightening the bound).
+            let mut leaves = within & n.leaves;
+            while leaves != 0 {
+                let k = leaves.trailing_zeros() as usize;
+                leaves &= leaves - 1;
+                test_leaf(n.child[k], &mut best2, &mut best);
+            }
+            // Inner nodes onto the stack, farthest first: keys (bound bits, reference) sorted
+            // without branches (non-negative floats order as their bits).
+            let inner = within & !n.leaves;
+            if inner != 0 {
+                let d = d2.to_array();
+                let key = |k: usize| {
+                    if inner >> k & 1 != 0 {
+                        (d[k].to_bits() as u64) << 32 | n.child[k] as u64
+                    } else {
+                        u64::MAX
                     }
-                    order[at] = (dc, child);
-                    count += 1;
+                };
+                let mut keys = [key(0), key(1), key(2), key(3)];
+                for (x, y) in [(0, 1), (2, 3), (0, 2), (1, 3), (1, 2)] {
+                    let (lo, hi) = (keys[x].min(keys[y]), keys[x].max(keys[y]));
+                    keys[x] = lo;
+                    keys[y] = hi;
                 }
-            }
-            // Leaves at once (tightening the bound), inner nodes onto the stack farthest first.
-            for &(dc, r) in &order[..count] {
-                if r & Node4::LEAF != 0 && dc <= best2 {
-                    test_leaf(r, &mut best2, &mut best);
-                }
-            }
-            for &(dc, r) in order[..count].iter().rev() {
-                if r & Node4::LEAF == 0 && dc <= best2 {
-                    stack.push((r, dc));
+                for &k in keys[..inner.count_ones() as usize].iter().rev() {
+                    stack.push(k);
                 }
             }
         }
@@ -436,6 +683,140 @@ impl TriangleBvh {
             slot,
             point: Vec3::from(x),
         })
+    }
+
+    /// [`TriangleBvh::nearest_with_hint`] for up to [`GROUP_MAX`] nearby points at once
+    /// (e.g. a 2x2 block of grid samples): one walk whose nodes are opened when any of the
+    /// points needs them, each point pruning by its own best distance, so that the nodes'
+    /// bounds are loaded once for all and the points' independent arithmetic overlaps.
+    /// `hints[i]` (a slot, see [`Nearest::slot`]) bounds point `i`'s search from the start.
+    /// Writes point `i`'s answer to `out[i]` (`None` only for an empty BVH). Adds the child
+    /// bounds evaluated (four per node and point) to `visited`.
+    ///
+    /// # Panics
+    /// When `points`, `hints` and `out` differ in length or are longer than [`GROUP_MAX`].
+    pub fn nearest_group(
+        &self,
+        points: &[Vec3],
+        hints: &[Option<u32>],
+        out: &mut [Option<Nearest>],
+        stack: &mut GroupStack,
+        visited: &mut u64,
+    ) {
+        let g = points.len();
+        assert!(g <= GROUP_MAX && hints.len() == g && out.len() == g, "a group of up to {GROUP_MAX} points");
+        if self.wide.is_empty() {
+            out.fill(None);
+            return;
+        }
+        let mut qs = [[Vec4::ZERO; 3]; GROUP_MAX];
+        let mut qa = [Vec3A::ZERO; GROUP_MAX];
+        let mut best2 = [f32::MAX; GROUP_MAX];
+        let mut best: [(u32, Vec3A); GROUP_MAX] = [(u32::MAX, Vec3A::ZERO); GROUP_MAX];
+        for s in 0..g {
+            qa[s] = Vec3A::from(points[s]);
+            qs[s] = splat3(qa[s]);
+            if let Some(slot) = hints[s].filter(|&h| (h as usize) < self.corners.len()) {
+                let [a, b, c] = self.corners[slot as usize];
+                let x = closest_point_on_triangle(qa[s], a, b, c);
+                best2[s] = (x - qa[s]).length_squared().min(f32::MAX);
+                best[s] = (slot, x);
+            }
+        }
+        let test_leaf =
+            |r: u32, mask: u32, best2: &mut [f32; GROUP_MAX], best: &mut [(u32, Vec3A); GROUP_MAX]| {
+                let mut at = (r & !Node4::LEAF) as usize;
+                loop {
+                    let packet = &self.packets[at];
+                    let mut m = mask;
+                    while m != 0 {
+                        let s = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        let mut lanes = packet.distances2(&qs[s]).cmple(Vec4::splat(best2[s])).bitmask();
+                        while lanes != 0 {
+                            let slot = packet.slot[lanes.trailing_zeros() as usize];
+                            lanes &= lanes - 1;
+                            let [a, b, c] = self.corners[slot as usize];
+                            let x = closest_point_on_triangle(qa[s], a, b, c);
+                            let d2 = (x - qa[s]).length_squared();
+                            if d2 <= best2[s] {
+                                best2[s] = d2;
+                                best[s] = (slot, x);
+                            }
+                        }
+                    }
+                    if !packet.more {
+                        break;
+                    }
+                    at += 1;
+                }
+            };
+        let wide = &self.wide;
+        stack.0.clear();
+        stack.0.push(GroupEntry { bound: 0.0, node: 0, mask: (1 << g) - 1 });
+        while let Some(e) = stack.0.pop() {
+            // The points that may still find something below (`bound` is the least of
+            // theirs, so a point whose best is nearer is done with this node).
+            let mut mask = 0;
+            let mut m = e.mask;
+            while m != 0 {
+                let s = m.trailing_zeros() as usize;
+                m &= m - 1;
+                mask |= ((e.bound <= best2[s]) as u32) << s;
+            }
+            if mask == 0 {
+                continue;
+            }
+            let n = &wide[e.node as usize];
+            let mut children = [0u32; 4];
+            let mut nearest = Vec4::splat(f32::INFINITY);
+            let mut m = mask;
+            while m != 0 {
+                let s = m.trailing_zeros() as usize;
+                m &= m - 1;
+                *visited += 4;
+                let d2 = n.distances2(&qs[s]);
+                let within = d2.cmple(Vec4::splat(best2[s]));
+                nearest = nearest.min(Vec4::select(within, d2, Vec4::splat(f32::INFINITY)));
+                let bits = within.bitmask();
+                for (k, c) in children.iter_mut().enumerate() {
+                    *c |= (bits >> k & 1) << s;
+                }
+            }
+            for (k, (&c, &r)) in children.iter().zip(&n.child).enumerate() {
+                if n.leaves >> k & 1 != 0 && c != 0 {
+                    test_leaf(r, c, &mut best2, &mut best);
+                }
+            }
+            // Inner nodes onto the stack, farthest first (keys: bound bits, child number).
+            let d = nearest.to_array();
+            let mut keys = [u64::MAX; 4];
+            let mut count = 0;
+            for (k, (&c, &dk)) in children.iter().zip(&d).enumerate() {
+                if n.leaves >> k & 1 == 0 && c != 0 {
+                    keys[count] = (dk.to_bits() as u64) << 32 | k as u64;
+                    count += 1;
+                }
+            }
+            for (x, y) in [(0, 1), (2, 3), (0, 2), (1, 3), (1, 2)] {
+                let (lo, hi) = (keys[x].min(keys[y]), keys[x].max(keys[y]));
+                keys[x] = lo;
+                keys[y] = hi;
+            }
+            for &key in keys[..count].iter().rev() {
+                let k = key as u32 as usize;
+                stack.0.push(GroupEntry { bound: d[k], node: n.child[k], mask: children[k] });
+            }
+        }
+        for s in 0..g {
+            let (slot, x) = best[s];
+            out[s] = (slot != u32::MAX).then(|| Nearest {
+                dist2: best2[s],
+                triangle: self.original[slot as usize],
+                slot,
+                point: Vec3::from(x),
+            });
+        }
     }
 
     /// Whether the axis-parallel segment from `p` to the point whose `axis` coordinate is
@@ -483,9 +864,8 @@ impl TriangleBvh {
         bvh::bytes_used(&self.bvh)
             + self.corners.capacity() * std::mem::size_of::<[Vec3A; 3]>()
             + self.original.capacity() * 4
-            + self.planes.capacity() * std::mem::size_of::<Vec4>()
             + self.wide.capacity() * std::mem::size_of::<Node4>()
-            + self.boxes.capacity() * std::mem::size_of::<[Vec3A; 2]>()
+            + self.packets.capacity() * std::mem::size_of::<Packet>()
     }
 }
 

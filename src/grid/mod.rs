@@ -19,7 +19,9 @@
 //! mesh is evaluated once per linked component; each sample's winding number is that
 //! integer minus the caps' exact winding number. Meshes with very many holes (soups) reuse
 //! winding numbers along the scan instead (`fill`). Z-slices are filled in parallel with
-//! rayon, each in serpentine order.
+//! rayon, each in serpentine order; when signing by regions, the distances of each 2x2
+//! block of a slice come from one group walk ([`TriangleBvh::nearest_group`]), each
+//! sample hinted by its counterpart in the previous block.
 
 pub mod band;
 pub mod closest;
@@ -35,7 +37,7 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::mesh::TriangleMesh;
 
-use closest::{NodeStack, TriangleBvh};
+use closest::{GroupStack, NodeStack, TriangleBvh};
 use winding::{Caps, FastWinding};
 
 /// The default limit on a grid's sample memory (8 GiB) used by [`SdfGrid::for_bounds`]
@@ -386,22 +388,16 @@ fn fill_by_regions(grid: &mut SdfGrid, tree: &TriangleBvh, wind: &FastWinding, c
     let position =
         move |i: usize, j: usize, k: usize| origin + voxel * Vec3::new(i as f32, j as f32, k as f32);
 
-    // 1. Unsigned distances.
+    // 1. Unsigned distances, 2x2 blocks of samples at once (see `unsigned_slice`).
     let mut stats = grid
         .values
         .par_chunks_mut(slice)
         .enumerate()
-        .map(|(k, out)| {
-            let mut sampler = MeshSampler::new(tree, wind, false);
-            for j in 0..ny {
-                for step in 0..nx {
-                    let i = if j % 2 == 0 { step } else { nx - 1 - step };
-                    out[i + nx * j] = sampler.unsigned(position(i, j, k));
-                }
-            }
+        .map_init(GroupStack::default, |stack, (k, out)| {
+            let mut stats = unsigned_slice(tree, out, nx, ny, |i, j| position(i, j, k), stack);
             crate::progress::advance(1);
-            sampler.stats.samples = slice as u64;
-            sampler.stats
+            stats.samples = slice as u64;
+            stats
         })
         .reduce(SampleStats::default, add_stats);
 
@@ -554,6 +550,50 @@ fn fill_by_regions(grid: &mut SdfGrid, tree: &TriangleBvh, wind: &FastWinding, c
         .reduce(SampleStats::default, add_stats);
     stats.winding_nodes += extra.winding_nodes;
     stats.winding_evaluations += extra.winding_evaluations;
+    stats
+}
+
+/// Fills `out` (an `nx` by `ny` slice of samples, x fastest, at `position(i, j)`) with the
+/// unsigned distances to `tree`'s triangles: 2x2 blocks of samples go to
+/// [`TriangleBvh::nearest_group`] together, in serpentine order over the pairs of rows, each
+/// sample hinted by the nearest triangle of the sample at the same place in the previous
+/// block (two samples back). Returns the work counters.
+fn unsigned_slice(
+    tree: &TriangleBvh,
+    out: &mut [f32],
+    nx: usize,
+    ny: usize,
+    position: impl Fn(usize, usize) -> Vec3,
+    stack: &mut GroupStack,
+) -> SampleStats {
+    let mut stats = SampleStats::default();
+    let mut hints = [None; 4];
+    let mut near = [None; 4];
+    let (cols, rows) = (nx.div_ceil(2), ny.div_ceil(2));
+    for row in 0..rows {
+        for step in 0..cols {
+            let col = if row % 2 == 0 { step } else { cols - 1 - step };
+            // The block's samples (the last row or column may have only one).
+            let mut at = [(0, 0); 4];
+            let mut points = [Vec3::ZERO; 4];
+            let mut g = 0;
+            for (di, dj) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                let (i, j) = (2 * col + di, 2 * row + dj);
+                if i < nx && j < ny {
+                    at[g] = (i, j);
+                    points[g] = position(i, j);
+                    g += 1;
+                }
+            }
+            tree.nearest_group(&points[..g], &hints[..g], &mut near[..g], stack, &mut stats.closest_nodes);
+            for ((&(i, j), n), hint) in at[..g].iter().zip(&near[..g]).zip(&mut hints) {
+                out[i + nx * j] = n.map_or(f32::INFINITY, |n| {
+                    *hint = Some(n.slot);
+                    n.dist2.sqrt()
+                });
+            }
+        }
+    }
     stats
 }
 

@@ -27,10 +27,16 @@
 //! no winding numbers and no BVH, and its cost is linear in the voxel count.
 //!
 //! **Open meshes**: a hole wider than a voxel lets the flood fill leak into the inside,
-//! which then comes out empty (everything would be outside: an unsigned field).
-//! [`voxelize_mesh`] detects that (no interior voxel at all) and returns an error that
-//! says so and suggests exact sampling; a mesh with several components of which only some
-//! leak is not detected (the leaking ones come out unsigned).
+//! which then comes out (partly) outside: wrong signs, errors of many voxels. A mesh whose
+//! every edge is shared by an even number of triangles has no hole (it separates space);
+//! for any other mesh, [`voxelize_mesh`] also rasterizes caps over its holes (a fan from
+//! the centroid of each loop of boundary edges, which makes the mesh closed) into a second
+//! label grid and floods that too. The caps block every path through a hole, so a voxel
+//! that the plain fill reaches and the capped one does not (and that no triangle or cap
+//! touches) was reached through a hole: the fill leaked, and voxelizing refuses with an
+//! error that says so and suggests exact sampling. Holes that the rasterized shell closes
+//! anyway (narrower than a voxel) leak nothing and pass. A mesh with no inside at all at
+//! this resolution (thinner than a voxel) is refused too.
 
 use std::sync::atomic::{AtomicU8, Ordering};
 
@@ -58,6 +64,9 @@ pub struct VoxelizeStats {
     pub exterior: u64,
     /// Interior voxels (the rest).
     pub interior: u64,
+    /// Voxels that the flood fill reached through a hole (0: it did not leak; then the
+    /// mesh is voxelized).
+    pub leaked: u64,
     /// Seconds spent rasterizing the triangles.
     pub raster_s: f64,
     /// Seconds spent in the flood fill.
@@ -94,11 +103,33 @@ pub fn voxelize_mesh_with_stats(
     let mut grid = SdfGrid::for_bounds_with_limit(lo, hi, res, margin_cells, MAX_VOXELIZE_GRID_BYTES)?;
     let mut stats = VoxelizeStats::default();
     let t = std::time::Instant::now();
-    let mut state = rasterize(mesh, &grid);
+    let mut state =
+        rasterize(&grid, mesh.triangles.len(), |t| mesh.triangles[t].map(|i| mesh.positions[i as usize]));
+    // The holes' caps, rasterized into a copy of the labels (none for a mesh without holes).
+    let boundary = boundary_edges(mesh);
+    let mut capped = (!boundary.is_empty()).then(|| {
+        let caps = hole_caps(mesh, &boundary);
+        let marks = rasterize(&grid, caps.len(), |t| caps[t]);
+        state.iter().zip(marks).map(|(&a, b)| a | b).collect::<Vec<u8>>()
+    });
     stats.raster_s = t.elapsed().as_secs_f64();
     let t = std::time::Instant::now();
     flood_exterior(&mut state, grid.dims);
+    if let Some(capped) = capped.as_mut() {
+        flood_exterior(capped, grid.dims);
+        stats.leaked =
+            state.iter().zip(capped.iter()).filter(|&(&a, &b)| a == EXTERIOR && b == 0).count() as u64;
+    }
     stats.flood_s = t.elapsed().as_secs_f64();
+    if stats.leaked > 0 {
+        return Err(Error::Usage(format!(
+            "voxelizing at resolution {res} leaks: the mesh is open ({} boundary edges) and the flood fill \
+             from outside reached {} voxels inside through a hole wider than a voxel; use exact sampling \
+             (--fill sample), which signs open meshes by their winding number",
+            boundary.len(),
+            stats.leaked
+        )));
+    }
     for &s in &state {
         match s {
             SURFACE => stats.surface += 1,
@@ -119,8 +150,9 @@ pub fn voxelize_mesh_with_stats(
     Ok((grid, stats))
 }
 
-/// Marks the voxel of every sample that a triangle overlaps with [`SURFACE`].
-fn rasterize(mesh: &TriangleMesh, grid: &SdfGrid) -> Vec<u8> {
+/// Marks with [`SURFACE`] the voxel of every sample that one of the `count` triangles
+/// `triangle(0..count)` overlaps.
+fn rasterize(grid: &SdfGrid, count: usize, triangle: impl Fn(usize) -> [Vec3; 3] + Sync) -> Vec<u8> {
     let dims = grid.dims;
     let n = dims.x as usize * dims.y as usize * dims.z as usize;
     let marks: Vec<AtomicU8> = (0..n).map(|_| AtomicU8::new(0)).collect();
@@ -129,8 +161,8 @@ fn rasterize(mesh: &TriangleMesh, grid: &SdfGrid) -> Vec<u8> {
     let half = Vec3::splat(0.5 * voxel * (1.0 + 1e-4));
     let max = (dims - UVec3::ONE).as_vec3();
     let (sx, sy) = (dims.x as usize, dims.x as usize * dims.y as usize);
-    mesh.triangles.par_iter().for_each(|t| {
-        let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+    (0..count).into_par_iter().for_each(|t| {
+        let [a, b, c] = triangle(t);
         // Samples whose voxel [i - 0.5, i + 0.5] (grid units) meets the triangle's box.
         let g = |p: Vec3| (p - origin) * inv;
         let (ga, gb, gc) = (g(a), g(b), g(c));
@@ -150,6 +182,66 @@ fn rasterize(mesh: &TriangleMesh, grid: &SdfGrid) -> Vec<u8> {
         }
     });
     marks.into_iter().map(AtomicU8::into_inner).collect()
+}
+
+/// The edges of `mesh` (as vertex index pairs, smaller first) shared by an odd number of
+/// triangles: empty when the mesh has no hole (whatever its orientation).
+fn boundary_edges(mesh: &TriangleMesh) -> Vec<(u32, u32)> {
+    let mut edges: Vec<(u32, u32)> = mesh
+        .triangles
+        .iter()
+        .flat_map(|&[a, b, c]| [(a, b), (b, c), (c, a)])
+        .map(|(a, b)| (a.min(b), a.max(b)))
+        .collect();
+    edges.par_sort_unstable();
+    let mut odd = Vec::new();
+    let mut i = 0;
+    while i < edges.len() {
+        let start = i;
+        while i < edges.len() && edges[i] == edges[start] {
+            i += 1;
+        }
+        if (i - start) % 2 == 1 {
+            odd.push(edges[start]);
+        }
+    }
+    odd
+}
+
+/// Triangles that cap the holes bounded by `boundary` (see [`boundary_edges`]): per
+/// connected set of boundary edges (a loop), a fan from the centroid of its vertices
+/// over each of its edges. With them every edge is shared by an even number of triangles.
+fn hole_caps(mesh: &TriangleMesh, boundary: &[(u32, u32)]) -> Vec<[Vec3; 3]> {
+    let mut verts: Vec<u32> = boundary.iter().flat_map(|&(a, b)| [a, b]).collect();
+    verts.sort_unstable();
+    verts.dedup();
+    let id = |v: u32| verts.binary_search(&v).expect("a boundary vertex");
+    let mut parent: Vec<usize> = (0..verts.len()).collect();
+    fn find(parent: &mut [usize], mut x: usize) -> usize {
+        while parent[x] != x {
+            parent[x] = parent[parent[x]];
+            x = parent[x];
+        }
+        x
+    }
+    for &(a, b) in boundary {
+        let (ra, rb) = (find(&mut parent, id(a)), find(&mut parent, id(b)));
+        parent[ra.max(rb)] = ra.min(rb);
+    }
+    let mut sum = vec![(glam::DVec3::ZERO, 0u32); verts.len()];
+    for (v, &vertex) in verts.iter().enumerate() {
+        let r = find(&mut parent, v);
+        sum[r].0 += mesh.positions[vertex as usize].as_dvec3();
+        sum[r].1 += 1;
+    }
+    boundary
+        .iter()
+        .map(|&(a, b)| {
+            let (s, count) = sum[find(&mut parent, id(a))];
+            let centre = (s / count as f64).as_vec3();
+            [centre, mesh.positions[a as usize], mesh.positions[b as usize]]
+        })
+        .collect()
 }
 
 /// Whether the triangle `a, b, c` (relative to the box centre) overlaps the box of
