@@ -11,9 +11,9 @@
 //!   by measurement. Nodes per ray count 8-wide nodes visited, tests per ray triangles.
 //! * With `--features embree` (Debian's `libembree-dev`, Embree 3), the same frames
 //!   traced by Embree one ray at a time (`rtcIntersect1`), in packets of 8
-//!   (`rtcIntersect8`) and as a coherent stream of one tile (`rtcIntersect1M`), the
-//!   ratio of our throughput to Embree's, and a per-ray check that both tracers agree
-//!   on hit/miss and on `t`.
+//!   (`rtcIntersect8`), as a coherent stream of one tile (`rtcIntersect1M`) and one ray
+//!   at a time in its robust mode (watertight, like ours), the ratio of our throughput to
+//!   Embree's, and a per-ray check that both tracers agree on hit/miss and on `t`.
 //!
 //! Frames of the tracers being compared are interleaved round by round, so background
 //! load affects all of them alike; besides wall-clock throughput, each frame's process
@@ -1207,8 +1207,10 @@ mod embree {
                 Contender::new(ONE_RAY, tile_1(&self.scene)),
                 Contender::new("embree rtcIntersect8", tile_8(&self.scene)),
                 Contender::new("embree rtcIntersect1M", tile_1m(&self.scene)),
+                // Watertight like ours (RTC_SCENE_FLAG_ROBUST), one ray at a time.
+                Contender::new("embree robust Isect1", tile_1(&self.robust)),
             ];
-            for c in &mut v {
+            for c in &mut v[..3] {
                 c.build_ms = Some(self.build_ms);
                 c.bytes = self.bytes.clone();
             }
