@@ -630,8 +630,23 @@ fn stack_needed(bvh: &WideBvh) -> usize {
     bvh.depth * (WIDTH - 1) + 1
 }
 
-/// [`WideBvh::closest_hit`] with the box test `B`: with a traversal stack on the call stack
-/// where [`STACK`] entries suffice, else (a pathological BVH) on the heap.
+/// Evaluates `$walk` with `$stack` bound to a traversal stack for `$bvh`: on the call stack
+/// where [`STACK`] entries suffice, else (a pathological BVH) on the heap. A macro rather
+/// than a function taking a closure, as a closure would not inherit the AVX2 target
+/// feature of the walk it is called from.
+macro_rules! with_stack {
+    ($bvh:expr, $stack:ident => $walk:expr) => {
+        if stack_needed($bvh) <= STACK {
+            let $stack = &mut [const { MaybeUninit::<Entry>::uninit() }; STACK][..];
+            $walk
+        } else {
+            let $stack = &mut vec![MaybeUninit::<Entry>::uninit(); stack_needed($bvh)][..];
+            $walk
+        }
+    };
+}
+
+/// [`WideBvh::closest_hit`] with the box test `B` and a stack from [`with_stack`].
 #[inline(always)]
 fn closest_walk<B: BoxTest>(
     bvh: &WideBvh,
@@ -641,13 +656,7 @@ fn closest_walk<B: BoxTest>(
     t_max: f32,
     stats: &mut RayStats,
 ) -> Option<LeafHit> {
-    if stack_needed(bvh) <= STACK {
-        let mut stack = [const { MaybeUninit::<Entry>::uninit() }; STACK];
-        closest_walk_in::<B>(bvh, &mut stack, origin, dir, t_min, t_max, stats)
-    } else {
-        let mut stack = vec![MaybeUninit::<Entry>::uninit(); stack_needed(bvh)];
-        closest_walk_in::<B>(bvh, &mut stack, origin, dir, t_min, t_max, stats)
-    }
+    with_stack!(bvh, stack => closest_walk_in::<B>(bvh, stack, origin, dir, t_min, t_max, stats))
 }
 
 /// [`closest_walk`] on `stack` (at least [`stack_needed`] entries).
@@ -757,7 +766,7 @@ fn closest_walk_in<B: BoxTest>(
     })
 }
 
-/// [`WideBvh::any_hit`] with the box test `B`, its stack placed as in [`closest_walk`].
+/// [`WideBvh::any_hit`] with the box test `B` and a stack from [`with_stack`].
 #[inline(always)]
 fn any_walk<B: BoxTest>(
     bvh: &WideBvh,
@@ -767,13 +776,7 @@ fn any_walk<B: BoxTest>(
     t_max: f32,
     stats: &mut RayStats,
 ) -> bool {
-    if stack_needed(bvh) <= STACK {
-        let mut stack = [const { MaybeUninit::<Entry>::uninit() }; STACK];
-        any_walk_in::<B>(bvh, &mut stack, origin, dir, t_min, t_max, stats)
-    } else {
-        let mut stack = vec![MaybeUninit::<Entry>::uninit(); stack_needed(bvh)];
-        any_walk_in::<B>(bvh, &mut stack, origin, dir, t_min, t_max, stats)
-    }
+    with_stack!(bvh, stack => any_walk_in::<B>(bvh, stack, origin, dir, t_min, t_max, stats))
 }
 
 /// [`any_walk`] on `stack` (at least [`stack_needed`] entries).
