@@ -14,7 +14,8 @@
 //!   extract time includes turning their output into a world-space `TriangleMesh`.
 //! * Geometric error of each mesh: distance to the true surface from every vertex and
 //!   from 7 points on every triangle (centroid, three points at barycentric (4, 1, 1) / 6
-//!   and the edge midpoints); max and mean. Where the object's SDF is exact (the sphere,
+//!   and the edge midpoints); max and mean. Vertices at the same position count once
+//!   (mcubes does not share vertices between triangles). Where the object's SDF is exact (the sphere,
 //!   the boxes, the disjoint sphere/torus union) the distance is `|f|`. Where it is only a
 //!   Lipschitz bound (CSG subtraction and intersection), the exact distance lies between
 //!   `|f|` (a lower bound) and the distance to the surface point that Newton projection
@@ -405,9 +406,16 @@ const TRI_POINTS: [[f64; 3]; 7] = [
 ];
 
 fn mesh_error(part: &Part, mesh: &TriangleMesh) -> ErrStats {
-    let verts = mesh
-        .positions
+    // Each distinct vertex once: mcubes repeats a vertex in every triangle that uses it
+    // (about six times), which would weight its vertices (on the surface up to the
+    // interpolation error) six times as much as those of the meshes that share them.
+    let mut unique: Vec<[u32; 3]> =
+        mesh.positions.iter().map(|p| (*p + Vec3::ZERO).to_array().map(f32::to_bits)).collect();
+    unique.par_sort_unstable();
+    unique.dedup();
+    let verts = unique
         .par_iter()
+        .map(|b| Vec3::from_array(b.map(f32::from_bits)))
         .fold(ErrStats::default, |mut e, v| {
             let (d, gap, ok) = distance(part, v.as_dvec3());
             e.vert_max = e.vert_max.max(d);

@@ -14,7 +14,8 @@ use sdfmesh::geometry::Aabb;
 use sdfmesh::mesh::{TriangleMesh, is_degenerate};
 
 /// The methods that are closed and manifold by construction (dual contouring is only
-/// checked on smoother fields, in `tests/extract.rs`: on this noise it can leave a hole).
+/// checked on smoother fields, in `tests/extract.rs`: on this noise a dual edge between two
+/// cells can be used four times, see `src/extract.rs`).
 const PROVEN: [ExtractMethod; 2] = [ExtractMethod::MarchingCubes, ExtractMethod::MarchingTetrahedra];
 
 fn cube(r: f32) -> Aabb {
