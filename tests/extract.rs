@@ -1,6 +1,6 @@
 //! SDF -> triangle mesh extraction: accuracy, topology and orientation.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::HashSet;
 use std::f64::consts::PI;
 use std::time::Instant;
 
@@ -12,29 +12,12 @@ use sdfmesh::mesh::{TriangleMesh, is_degenerate};
 use sdfmesh::shape::{CsgOp, Object, ObjectKind, Primitive};
 use sdfmesh::transform::TransformDesc;
 
+#[path = "common/mesh_checks.rs"]
+mod mesh_checks;
+use mesh_checks::{cube, non_manifold_edges};
+
 const METHODS: [ExtractMethod; 3] =
     [ExtractMethod::MarchingCubes, ExtractMethod::MarchingTetrahedra, ExtractMethod::DualContouring];
-
-fn cube(r: f32) -> Aabb {
-    Aabb::new(Vec3A::splat(-r), Vec3A::splat(r))
-}
-
-/// Undirected edges not used by exactly two triangles, once in each direction.
-fn non_manifold_edges(m: &TriangleMesh) -> usize {
-    let mut uses: HashMap<(u32, u32), (u32, u32)> = HashMap::new();
-    for t in &m.triangles {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            let e = uses.entry((a.min(b), a.max(b))).or_default();
-            if a < b {
-                e.0 += 1;
-            } else {
-                e.1 += 1;
-            }
-        }
-    }
-    uses.values().filter(|&&u| u != (1, 1)).count()
-}
 
 /// Every undirected edge is used by exactly two triangles, once in each direction.
 fn is_edge_manifold(m: &TriangleMesh) -> bool {

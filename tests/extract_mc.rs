@@ -4,40 +4,23 @@
 //! vertex of a cycle that needs its own); about a third of marching tetrahedra's triangles for
 //! the same surface; `toolkit convert --method mt` still gives marching tetrahedra.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::HashSet;
 use std::process::Command;
 
-use glam::{DVec3, Vec3, Vec3A};
+use glam::{DVec3, Vec3};
 use proptest::prelude::*;
 use sdfmesh::extract::{ExtractMethod, extract, extract_sampled, sample_grid};
 use sdfmesh::geometry::Aabb;
 use sdfmesh::mesh::{TriangleMesh, is_degenerate};
 
+#[path = "common/mesh_checks.rs"]
+mod mesh_checks;
+use mesh_checks::{cube, non_manifold_edges};
+
 /// The methods that are closed and manifold by construction (dual contouring is only
 /// checked on smoother fields, in `tests/extract.rs`: on this noise a dual edge between two
 /// cells can be used four times, see `src/extract.rs`).
 const PROVEN: [ExtractMethod; 2] = [ExtractMethod::MarchingCubes, ExtractMethod::MarchingTetrahedra];
-
-fn cube(r: f32) -> Aabb {
-    Aabb::new(Vec3A::splat(-r), Vec3A::splat(r))
-}
-
-/// Undirected edges not used by exactly two triangles, once in each direction.
-fn non_manifold_edges(m: &TriangleMesh) -> usize {
-    let mut uses: HashMap<(u32, u32), (u32, u32)> = HashMap::new();
-    for t in &m.triangles {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            let e = uses.entry((a.min(b), a.max(b))).or_default();
-            if a < b {
-                e.0 += 1;
-            } else {
-                e.1 += 1;
-            }
-        }
-    }
-    uses.values().filter(|&&u| u != (1, 1)).count()
-}
 
 /// Closed, edge-manifold, valid, no duplicate positions, no degenerate triangles.
 fn assert_clean(m: &TriangleMesh, what: &str) {
