@@ -14,7 +14,7 @@ use sdfmesh::transform::TransformDesc;
 
 #[path = "common/mesh_checks.rs"]
 mod mesh_checks;
-use mesh_checks::{cube, non_manifold_edges};
+use mesh_checks::{cube, non_manifold_edges, signed_volume};
 
 const METHODS: [ExtractMethod; 3] =
     [ExtractMethod::MarchingCubes, ExtractMethod::MarchingTetrahedra, ExtractMethod::DualContouring];
@@ -27,16 +27,6 @@ fn is_edge_manifold(m: &TriangleMesh) -> bool {
 fn has_duplicate_positions(m: &TriangleMesh) -> bool {
     let mut seen = HashSet::new();
     !m.positions.iter().all(|p| seen.insert((*p + Vec3::ZERO).to_array().map(f32::to_bits)))
-}
-
-fn signed_volume(m: &TriangleMesh) -> f64 {
-    m.triangles
-        .iter()
-        .map(|t| {
-            let [a, b, c] = t.map(|i| m.positions[i as usize].as_dvec3());
-            a.dot(b.cross(c)) / 6.0
-        })
-        .sum()
 }
 
 /// Closed, edge-manifold, valid, no duplicate positions, no degenerate triangles.

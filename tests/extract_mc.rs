@@ -15,7 +15,7 @@ use sdfmesh::mesh::{TriangleMesh, is_degenerate};
 
 #[path = "common/mesh_checks.rs"]
 mod mesh_checks;
-use mesh_checks::{cube, non_manifold_edges};
+use mesh_checks::{cube, non_manifold_edges, signed_volume};
 
 /// The methods that are closed and manifold by construction (dual contouring is only
 /// checked on smoother fields, in `tests/extract.rs`: on this noise a dual edge between two
@@ -52,16 +52,6 @@ fn inward_fraction(m: &TriangleMesh, f: impl Fn(DVec3) -> f64, step: f64) -> f64
         })
         .count();
     wrong as f64 / m.triangles.len() as f64
-}
-
-fn signed_volume(m: &TriangleMesh) -> f64 {
-    m.triangles
-        .iter()
-        .map(|t| {
-            let [a, b, c] = t.map(|i| m.positions[i as usize].as_dvec3());
-            a.dot(b.cross(c)) / 6.0
-        })
-        .sum()
 }
 
 /// Value noise: random values in [-1, 1] on a lattice of spacing `s` (hashed from the

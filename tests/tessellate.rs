@@ -14,6 +14,10 @@ use sdfmesh::shape::{CsgOp, Object, ObjectKind, Primitive, Shading};
 use sdfmesh::tessellate::{tessellate, tessellate_object, tessellate_with};
 use sdfmesh::transform::TransformDesc;
 
+#[path = "common/mesh_checks.rs"]
+mod mesh_checks;
+use mesh_checks::signed_volume;
+
 const RESOLUTIONS: [u32; 5] = [8, 16, 32, 64, 128];
 
 /// A solid primitive with its closed-form volume and (where one exists) surface area.
@@ -525,16 +529,6 @@ fn objects_are_transformed() {
         let (lv, wv) = (signed_volume(&local), signed_volume(&world));
         assert!((wv / lv - 1.25).abs() < 1e-4, "{}: {wv} / {lv}", prim.kind_name());
     }
-}
-
-fn signed_volume(m: &TriangleMesh) -> f64 {
-    m.triangles
-        .iter()
-        .map(|t| {
-            let [a, b, c] = t.map(|i| m.positions[i as usize].as_dvec3());
-            a.dot(b.cross(c)) / 6.0
-        })
-        .sum()
 }
 
 #[test]

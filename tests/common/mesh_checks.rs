@@ -1,4 +1,5 @@
-//! Shared checks on extracted meshes: edge manifoldness and the cube they are extracted in.
+//! Shared checks on extracted and tessellated meshes: edge manifoldness, enclosed volume,
+//! and the cube meshes are extracted in.
 #![allow(dead_code)]
 
 use std::collections::HashMap;
@@ -27,4 +28,15 @@ pub fn non_manifold_edges(m: &TriangleMesh) -> usize {
         }
     }
     uses.values().filter(|&&u| u != (1, 1)).count()
+}
+
+/// Signed enclosed volume (positive for an outward-oriented closed mesh).
+pub fn signed_volume(m: &TriangleMesh) -> f64 {
+    m.triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| m.positions[i as usize].as_dvec3());
+            a.dot(b.cross(c)) / 6.0
+        })
+        .sum()
 }
