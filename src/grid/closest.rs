@@ -9,19 +9,23 @@
 //! [`TriangleBvh`] holds an obvhs [`Bvh2`] over a mesh's triangles with the corners stored
 //! in leaf order, and the same hierarchy collapsed to 4-wide nodes whose children's bounds
 //! are tested together with SIMD, its leaves gathered into packets of four triangles.
-//! Every child (and every triangle of a packet) has two bounds: its box and a bounding
-//! cylinder (a disc around the cluster's mean normal times a slab along it; for a triangle,
-//! its smallest enclosing circle in its plane). The box alone is loose by about its size
+//! Every child has two bounds: its box and a bounding cylinder (a disc around the
+//! cluster's mean normal times a slab along it). The box alone is loose by about its size
 //! for a tilted patch, and from a point `d` away a patch at lateral offset `r` from the
 //! nearest point is only about `r²/2d` farther, so with boxes alone the number of triangles
 //! that must be tested grows with `d`; the cylinder follows the surface, and the count
-//! stays about constant. [`TriangleBvh::nearest`] walks the wide nodes depth first, nearer
-//! children first, pruning every node or triangle whose bound (squared distance) is
-//! farther than the best triangle so far or than a caller-supplied upper bound.
+//! stays about constant. A packet's four triangles get a branch-free SIMD distance test
+//! (Ericson's regions with selects, `f32`, with a slack relative to the coordinates), and
+//! only the triangles it cannot rule out get the exact scalar test, so the answers are
+//! those of [`closest_point_on_triangle`]. [`TriangleBvh::nearest`] walks the wide nodes
+//! depth first, nearer children first, pruning every node whose bound (squared distance)
+//! is farther than the best triangle so far or than a caller-supplied upper bound.
 //! [`TriangleBvh::nearest_group`] answers up to [`GROUP_MAX`] nearby points in one walk
 //! (a node is opened when any of them needs it, each prunes by its own best), which shares
-//! the node loads and overlaps the points' independent arithmetic. Neither allocates: the
-//! caller passes a reusable [`NodeStack`] or [`GroupStack`].
+//! the node loads and overlaps the points' independent arithmetic; where the CPU has AVX2
+//! (detected at run time) its node test takes two points per instruction, with the same
+//! operations in the same order as the portable one (so the same results). Neither
+//! allocates: the caller passes a reusable [`NodeStack`] or [`GroupStack`].
 //! [`TriangleBvh::axis_segment_may_meet`] is a conservative segment test for signing by
 //! regions.
 
@@ -148,6 +152,7 @@ pub fn axis_segment_may_meet_triangle(
 
 /// The most points [`TriangleBvh::nearest_group`] takes at once.
 pub const GROUP_MAX: usize = 8;
+const _: () = assert!(GROUP_MAX <= 8, "the transpose in `nearest_group` handles up to 8 points");
 
 /// A reusable traversal stack for [`TriangleBvh::nearest_group`]; keep one per thread.
 #[derive(Clone, Debug, Default)]
@@ -188,8 +193,10 @@ pub struct TriangleBvh {
     /// The same hierarchy collapsed to four children per node, boxes and bounding
     /// cylinders in SIMD layout, for the nearest-triangle queries.
     wide: Vec<Node4>,
-    /// The leaves' triangles in packets of four (boxes and cylinders in SIMD layout).
+    /// The leaves' triangles in packets of four (in SIMD layout).
     packets: Vec<Packet>,
+    /// Whether the group walks use the AVX2 node test (set where the CPU has it).
+    avx2: bool,
 }
 
 /// Bounding cylinders of four children, as structure of arrays: child `i` lies within
@@ -291,27 +298,6 @@ impl Cylinder {
         };
         Cylinder { n: nf, c: cf, r: up(r), t: up(t) }
     }
-
-    /// A triangle's cylinder: its plane and its smallest enclosing circle.
-    fn triangle([a, b, c]: [Vec3A; 3]) -> Cylinder {
-        let (da, db, dc) = (a.as_dvec3(), b.as_dvec3(), c.as_dvec3());
-        let n = (db - da).cross(dc - da);
-        // The longest edge's midpoint when the opposite angle is not acute, else the
-        // circumcentre.
-        let edges = [(da, db, dc), (db, dc, da), (dc, da, db)];
-        let centre = edges
-            .iter()
-            .find(|(x, y, z)| (x - z).dot(y - z) <= 0.0)
-            .map(|(x, y, _)| (x + y) * 0.5)
-            .or_else(|| {
-                let (ab, ac) = (db - da, dc - da);
-                let nn = n.length_squared();
-                (nn > 0.0).then(|| {
-                    da + (n.cross(ab) * ac.length_squared() + ac.cross(n) * ab.length_squared()) / (2.0 * nn)
-                })
-            });
-        Cylinder::fit([a, b, c].into_iter(), n, centre)
-    }
 }
 
 /// A node of the 4-wide hierarchy: its children's boxes and bounding cylinders as
@@ -328,17 +314,140 @@ struct Node4 {
     leaves: u32,
 }
 
-/// A leaf packet: up to four triangles' boxes and cylinders as structure of arrays (an
-/// unused lane has an empty box) and their slots in [`TriangleBvh::corners`]. A leaf of
-/// more than four triangles continues in the next packet while `more` is set.
+/// A leaf packet: up to four triangles in SIMD layout (see [`Tri4`]) and their slots in
+/// [`TriangleBvh::corners`]. A leaf of more than four triangles continues in the next
+/// packet while `more` is set.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(16))]
 struct Packet {
-    lo: [Vec4; 3],
-    hi: [Vec4; 3],
-    cyl: Cyl4,
+    tri: Tri4,
     slot: [u32; 4],
     more: bool,
+}
+
+/// Four triangles of a leaf packet for the branch-free SIMD distance test
+/// ([`Tri4::candidates`]): corner `a`, edges `ab` and `ac`, the normal `n = ab x ac` and
+/// `1 / |n|^2`, and `scale` (the sum of the largest absolute coordinates of `a`, `ab` and
+/// `ac`), as structure of arrays. An unused lane sits at `1e18` with zero edges (not a
+/// candidate).
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(16))]
+struct Tri4 {
+    a: [Vec4; 3],
+    ab: [Vec4; 3],
+    ac: [Vec4; 3],
+    n: [Vec4; 3],
+    inv_nn: Vec4,
+    /// `1 / |ab|^2`, `1 / |ac|^2`, `1 / |bc|^2`.
+    inv_e: [Vec4; 3],
+    scale: Vec4,
+}
+
+/// The slack of [`Tri4::candidates`], relative to the coordinates' scale: the `f32`
+/// distances of the SIMD test and of [`closest_point_on_triangle`] each lie within a few
+/// ulps of the scale (a few hundred for slivers) of the exact one; this allows `2^12`.
+const TRI4_SLACK: f32 = 1.0 / (1 << 12) as f32;
+
+impl Tri4 {
+    fn new(corners: [Option<[Vec3A; 3]>; 4]) -> Tri4 {
+        let mut t = Tri4 {
+            a: [Vec4::splat(1e18); 3],
+            ab: [Vec4::ZERO; 3],
+            ac: [Vec4::ZERO; 3],
+            n: [Vec4::ZERO; 3],
+            inv_nn: Vec4::ZERO,
+            inv_e: [Vec4::ZERO; 3],
+            scale: Vec4::ZERO,
+        };
+        for (lane, tri) in corners.iter().enumerate() {
+            let Some([a, b, c]) = *tri else { continue };
+            let (ab, ac) = (b - a, c - a);
+            let n = ab.cross(ac);
+            for k in 0..3 {
+                t.a[k][lane] = a[k];
+                t.ab[k][lane] = ab[k];
+                t.ac[k][lane] = ac[k];
+                t.n[k][lane] = n[k];
+            }
+            t.inv_nn[lane] = 1.0 / n.length_squared();
+            t.inv_e[0][lane] = 1.0 / ab.length_squared();
+            t.inv_e[1][lane] = 1.0 / ac.length_squared();
+            t.inv_e[2][lane] = 1.0 / (c - b).length_squared();
+            t.scale[lane] = a.abs().max_element() + ab.abs().max_element() + ac.abs().max_element();
+        }
+        t
+    }
+
+    /// The lanes (bits) whose triangle may be within `best` (a distance, not squared) of
+    /// `q` (splatted), by a branch-free `f32` evaluation of Ericson's regions with slack
+    /// [`TRI4_SLACK`]: every triangle that [`closest_point_on_triangle`] puts within
+    /// `best` is among them (also a lane whose evaluation is NaN), so that the exact
+    /// answer comes from testing these alone.
+    #[inline(always)]
+    fn candidates(&self, q: &[Vec4; 3], best: f32) -> u32 {
+        let ap = [q[0] - self.a[0], q[1] - self.a[1], q[2] - self.a[2]];
+        let bp = [ap[0] - self.ab[0], ap[1] - self.ab[1], ap[2] - self.ab[2]];
+        let cp = [ap[0] - self.ac[0], ap[1] - self.ac[1], ap[2] - self.ac[2]];
+        let d1 = dot(&self.ab, &ap);
+        let d2 = dot(&self.ac, &ap);
+        let d3 = dot(&self.ab, &bp);
+        let d4 = dot(&self.ac, &bp);
+        let d5 = dot(&self.ab, &cp);
+        let d6 = dot(&self.ac, &cp);
+        let vc = d1 * d4 - d3 * d2;
+        let vb = d5 * d2 - d1 * d6;
+        let va = d3 * d6 - d5 * d4;
+        let zero = Vec4::ZERO;
+        let one = Vec4::ONE;
+        // Barycentric (v, w) of the closest point, regions in reverse order of precedence
+        // (each later select overrides); the face region is handled apart.
+        let e_bc = (d4 - d3) * self.inv_e[2];
+        let bc = va.cmple(zero) & (d4 - d3).cmpge(zero) & (d5 - d6).cmpge(zero);
+        let mut v = Vec4::select(bc, one - e_bc, zero);
+        let mut w = Vec4::select(bc, e_bc, zero);
+        let ac = vb.cmple(zero) & d2.cmpge(zero) & d6.cmple(zero);
+        v = Vec4::select(ac, zero, v);
+        w = Vec4::select(ac, d2 * self.inv_e[1], w);
+        let c = d6.cmpge(zero) & d5.cmple(d6);
+        v = Vec4::select(c, zero, v);
+        w = Vec4::select(c, one, w);
+        let ab = vc.cmple(zero) & d1.cmpge(zero) & d3.cmple(zero);
+        v = Vec4::select(ab, d1 * self.inv_e[0], v);
+        w = Vec4::select(ab, zero, w);
+        let b = d3.cmpge(zero) & d4.cmple(d3);
+        v = Vec4::select(b, one, v);
+        w = Vec4::select(b, zero, w);
+        let a = d1.cmple(zero) & d2.cmple(zero);
+        v = Vec4::select(a, zero, v);
+        w = Vec4::select(a, zero, w);
+        let off = [
+            ap[0] - self.ab[0] * v - self.ac[0] * w,
+            ap[1] - self.ab[1] * v - self.ac[1] * w,
+            ap[2] - self.ab[2] * v - self.ac[2] * w,
+        ];
+        let edge2 = dot(&off, &off);
+        let h = dot(&ap, &self.n);
+        let face2 = h * h * self.inv_nn;
+        let face = !(a | b | c | ab | ac | bc);
+        let dist2 = Vec4::select(face, face2, edge2);
+        let m = ap[0].abs().max(ap[1].abs()).max(ap[2].abs());
+        let reach = (self.scale + m) * TRI4_SLACK + Vec4::splat(best);
+        // Not `dist2 <= reach^2`: a NaN lane counts as a candidate.
+        !dist2.cmpgt(reach * reach).bitmask() & 0xf
+    }
+}
+
+/// Four dot products of 3-vectors in structure-of-arrays layout.
+#[inline(always)]
+fn dot(u: &[Vec4; 3], v: &[Vec4; 3]) -> Vec4 {
+    u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+}
+
+/// Bits 0, 4, 8 and 12 of `x` moved to bits 0 to 3: the product puts them at bits 12 to 15
+/// (its other terms land on distinct bits elsewhere, so nothing carries).
+#[inline(always)]
+fn gather_nibble_bits(x: u32) -> u32 {
+    (((x & 0x1111) * 0x1248) >> 12) & 0xf
 }
 
 /// `q`'s coordinates, each in all four lanes.
@@ -373,14 +482,6 @@ impl Node4 {
     };
 
     /// Lower bounds on the squared distances from `q` to the four children.
-    #[inline(always)]
-    fn distances2(&self, q: &[Vec4; 3]) -> Vec4 {
-        box_distances2(&self.lo, &self.hi, q).max(self.cyl.distances2(q))
-    }
-}
-
-impl Packet {
-    /// Lower bounds on the squared distances from `q` to the four triangles.
     #[inline(always)]
     fn distances2(&self, q: &[Vec4; 3]) -> Vec4 {
         box_distances2(&self.lo, &self.hi, q).max(self.cyl.distances2(q))
@@ -450,23 +551,13 @@ fn collapse(bvh: &Bvh2, corners: &[[Vec3A; 3]]) -> (Vec<Node4>, Vec<Packet>) {
         let first = packets.len() as u32;
         let slots: Vec<u32> = (n.first_index..n.first_index + n.prim_count).collect();
         for (k, chunk) in slots.chunks(4).enumerate() {
-            let mut p = Packet {
-                lo: [Vec4::splat(f32::INFINITY); 3],
-                hi: [Vec4::splat(f32::NEG_INFINITY); 3],
-                cyl: Cyl4::NONE,
-                slot: [0; 4],
-                more: (k + 1) * 4 < slots.len(),
-            };
+            let mut slot = [0; 4];
+            let mut tris = [None; 4];
             for (lane, &s) in chunk.iter().enumerate() {
-                let [a, b, c] = corners[s as usize];
-                let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
-                for ax in 0..3 {
-                    p.lo[ax][lane] = lo[ax];
-                    p.hi[ax][lane] = hi[ax];
-                }
-                p.cyl.set(lane, &Cylinder::triangle(corners[s as usize]));
-                p.slot[lane] = s;
+                slot[lane] = s;
+                tris[lane] = Some(corners[s as usize]);
             }
+            let p = Packet { tri: Tri4::new(tris), slot, more: (k + 1) * 4 < slots.len() };
             packets.push(p);
         }
         Node4::LEAF | first
@@ -526,6 +617,135 @@ fn collapse(bvh: &Bvh2, corners: &[[Vec3A; 3]]) -> (Vec<Node4>, Vec<Packet>) {
     (out, packets)
 }
 
+/// The portable node test of the group walks: bit `4 s + k` of the mask is set when child
+/// `k` of `n` is within `best2[s]` of point `s` (`qs[s]`, splatted), for the points in
+/// `mask`; and per child the least bound among the points it is within (else infinity).
+#[inline(always)]
+fn node_within(n: &Node4, qs: &[[Vec4; 3]; GROUP_MAX], best2: &[f32; GROUP_MAX], mask: u32) -> (u32, Vec4) {
+    let mut within_all = 0u32;
+    let mut nearest = Vec4::splat(f32::INFINITY);
+    let mut m = mask;
+    while m != 0 {
+        let s = m.trailing_zeros() as usize;
+        m &= m - 1;
+        let d2 = n.distances2(&qs[s]);
+        let within = d2.cmple(Vec4::splat(best2[s]));
+        nearest = nearest.min(Vec4::select(within, d2, Vec4::splat(f32::INFINITY)));
+        within_all |= within.bitmask() << (4 * s);
+    }
+    (within_all, nearest)
+}
+
+#[cfg(target_arch = "x86_64")]
+use core::arch::x86_64::{
+    __m256, _CMP_LE_OQ, _mm_min_ps, _mm256_add_ps, _mm256_andnot_ps, _mm256_blendv_ps, _mm256_broadcast_ps,
+    _mm256_castps256_ps128, _mm256_cmp_ps, _mm256_extractf128_ps, _mm256_max_ps, _mm256_min_ps,
+    _mm256_movemask_ps, _mm256_mul_ps, _mm256_set_m128, _mm256_set1_ps, _mm256_setzero_ps, _mm256_sqrt_ps,
+    _mm256_sub_ps,
+};
+
+/// The group's points in pairs for the AVX2 node test: entry `j` holds point `2 j` in the
+/// low four lanes and point `2 j + 1` in the high four, per coordinate.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn pair_coordinates(qa: &[Vec3A; GROUP_MAX]) -> [[__m256; 3]; GROUP_MAX / 2] {
+    core::array::from_fn(|j| {
+        core::array::from_fn(|a| {
+            let (lo, hi) = (Vec4::splat(qa[2 * j][a]), Vec4::splat(qa[2 * j + 1][a]));
+            // SAFETY: SSE and AVX loads of plain values; only called where AVX is present
+            // (the AVX2 walk), and `_mm256_set_m128` only moves data.
+            unsafe { _mm256_set_m128(hi.into(), lo.into()) }
+        })
+    })
+}
+
+/// `best2[t]` in all four lanes where point `t` is in `mask`, else -1.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn masked_best(best2: &[f32; GROUP_MAX], mask: u32, t: usize) -> Vec4 {
+    Vec4::splat(if mask >> t & 1 != 0 { best2[t] } else { -1.0 })
+}
+
+/// Both halves of a 256-bit register set to the four lanes of `v` (from memory).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn both(v: &Vec4) -> __m256 {
+    // SAFETY: `Vec4` is 16 bytes of four `f32` (`__m128` layout); the caller has AVX.
+    unsafe { _mm256_broadcast_ps(&*(v as *const Vec4 as *const core::arch::x86_64::__m128)) }
+}
+
+/// [`node_within`] with AVX2: two points per instruction, the same operations in the same
+/// order (so the same bits). Safety: only for code running with AVX2 enabled.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn avx2_node_within(
+    n: &Node4,
+    qs8: &[[__m256; 3]; GROUP_MAX / 2],
+    best2: &[f32; GROUP_MAX],
+    mask: u32,
+) -> (u32, Vec4) {
+    // SAFETY: AVX intrinsics; the caller runs with AVX2 enabled.
+    unsafe {
+        let inf = _mm256_set1_ps(f32::INFINITY);
+        let zero = _mm256_setzero_ps();
+        let sign = _mm256_set1_ps(-0.0);
+        let mut within_all = 0u32;
+        let mut nearest = inf;
+        let mut pairs = (mask | mask >> 1) & 0x55;
+        while pairs != 0 {
+            let s = pairs.trailing_zeros() as usize;
+            pairs &= pairs - 1;
+            let q = &qs8[s / 2];
+            // Box.
+            let mut box2 = zero;
+            for (a, &qa) in q.iter().enumerate() {
+                let d = _mm256_max_ps(
+                    _mm256_max_ps(_mm256_sub_ps(both(&n.lo[a]), qa), _mm256_sub_ps(qa, both(&n.hi[a]))),
+                    zero,
+                );
+                box2 = _mm256_add_ps(box2, _mm256_mul_ps(d, d));
+            }
+            // Cylinder (as `Cyl4::distances2`).
+            let c = &n.cyl;
+            let v = [
+                _mm256_sub_ps(q[0], both(&c.c[0])),
+                _mm256_sub_ps(q[1], both(&c.c[1])),
+                _mm256_sub_ps(q[2], both(&c.c[2])),
+            ];
+            let nn = [both(&c.n[0]), both(&c.n[1]), both(&c.n[2])];
+            let h = _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(nn[0], v[0]), _mm256_mul_ps(nn[1], v[1])),
+                _mm256_mul_ps(nn[2], v[2]),
+            );
+            let w = [
+                _mm256_sub_ps(v[0], _mm256_mul_ps(h, nn[0])),
+                _mm256_sub_ps(v[1], _mm256_mul_ps(h, nn[1])),
+                _mm256_sub_ps(v[2], _mm256_mul_ps(h, nn[2])),
+            ];
+            let rho = _mm256_sqrt_ps(_mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(w[0], w[0]), _mm256_mul_ps(w[1], w[1])),
+                _mm256_mul_ps(w[2], w[2]),
+            ));
+            let dr = _mm256_max_ps(_mm256_sub_ps(rho, both(&c.r)), zero);
+            let dh = _mm256_max_ps(_mm256_sub_ps(_mm256_andnot_ps(sign, h), both(&c.t)), zero);
+            let cyl2 = _mm256_mul_ps(
+                _mm256_add_ps(_mm256_mul_ps(dr, dr), _mm256_mul_ps(dh, dh)),
+                _mm256_set1_ps(CYL_SHRINK),
+            );
+            let d2 = _mm256_max_ps(box2, cyl2);
+            // Points outside `mask` (the second of a pair may be) get a negative best: no
+            // child is within it (the bounds are not NaN).
+            let (b0, b1) = (masked_best(best2, mask, s), masked_best(best2, mask, s + 1));
+            let within = _mm256_cmp_ps::<_CMP_LE_OQ>(d2, _mm256_set_m128(b1.into(), b0.into()));
+            within_all |= (_mm256_movemask_ps(within) as u32) << (4 * s);
+            nearest = _mm256_min_ps(nearest, _mm256_blendv_ps(inf, d2, within));
+        }
+        let lo = _mm256_castps256_ps128(nearest);
+        let hi = _mm256_extractf128_ps::<1>(nearest);
+        (within_all, Vec4::from(_mm_min_ps(lo, hi)))
+    }
+}
+
 impl TriangleBvh {
     /// BVH build parameters: PLOC, at most four triangles per leaf.
     pub const BUILD_PARAMS: BvhBuildParams =
@@ -557,6 +777,7 @@ impl TriangleBvh {
                 original: Vec::new(),
                 wide: Vec::new(),
                 packets: Vec::new(),
+                avx2: false,
             };
         }
         let mut bvh = bvh::build(&boxes, params);
@@ -564,7 +785,13 @@ impl TriangleBvh {
         let corners: Vec<[Vec3A; 3]> = original.iter().map(|&i| tri(&mesh.triangles[i as usize])).collect();
         bvh.primitive_indices = (0..original.len() as u32).collect();
         let (wide, packets) = collapse(&bvh, &corners);
-        TriangleBvh { bvh, corners, original, wide, packets }
+        #[cfg(target_arch = "x86_64")]
+        let avx2 = std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("popcnt")
+            && std::arch::is_x86_feature_detected!("bmi1");
+        #[cfg(not(target_arch = "x86_64"))]
+        let avx2 = false;
+        TriangleBvh { bvh, corners, original, wide, packets, avx2 }
     }
 
     /// The nearest triangle to `p` among those closer than `max_dist` (pass
@@ -617,11 +844,10 @@ impl TriangleBvh {
             let mut at = (r & !Node4::LEAF) as usize;
             loop {
                 let packet = &self.packets[at];
-                let bound = packet.distances2(&qs).to_array();
-                for (&b2, &slot) in bound.iter().zip(&packet.slot) {
-                    if b2 > *best2 {
-                        continue;
-                    }
+                let mut lanes = packet.tri.candidates(&qs, best2.sqrt());
+                while lanes != 0 {
+                    let slot = packet.slot[lanes.trailing_zeros() as usize];
+                    lanes &= lanes - 1;
                     let [a, b, c] = self.corners[slot as usize];
                     let x = closest_point_on_triangle(q, a, b, c);
                     let d2 = (x - q).length_squared();
@@ -703,6 +929,48 @@ impl TriangleBvh {
         stack: &mut GroupStack,
         visited: &mut u64,
     ) {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: `avx2` is only set where the CPU has AVX2.
+            return unsafe { self.nearest_group_avx2(points, hints, out, stack, visited) };
+        }
+        self.group_walk::<false>(points, hints, out, stack, visited)
+    }
+
+    /// [`TriangleBvh::nearest_group`] with the AVX2 node test (two points per instruction).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,popcnt,bmi1")]
+    fn nearest_group_avx2(
+        &self,
+        points: &[Vec3],
+        hints: &[Option<u32>],
+        out: &mut [Option<Nearest>],
+        stack: &mut GroupStack,
+        visited: &mut u64,
+    ) {
+        self.group_walk::<true>(points, hints, out, stack, visited)
+    }
+
+    /// Whether [`TriangleBvh::nearest_group`] uses the AVX2 node test.
+    pub fn uses_avx2(&self) -> bool {
+        self.avx2
+    }
+
+    /// Makes [`TriangleBvh::nearest_group`] use the portable node test even where the CPU
+    /// has AVX2 (for comparing the two; the results are bit-identical).
+    pub fn use_portable_node_test(&mut self) {
+        self.avx2 = false;
+    }
+
+    #[inline(always)]
+    fn group_walk<const AVX2: bool>(
+        &self,
+        points: &[Vec3],
+        hints: &[Option<u32>],
+        out: &mut [Option<Nearest>],
+        stack: &mut GroupStack,
+        visited: &mut u64,
+    ) {
         let g = points.len();
         assert!(g <= GROUP_MAX && hints.len() == g && out.len() == g, "a group of up to {GROUP_MAX} points");
         if self.wide.is_empty() {
@@ -723,6 +991,8 @@ impl TriangleBvh {
                 best[s] = (slot, x);
             }
         }
+        #[cfg(target_arch = "x86_64")]
+        let qs8 = pair_coordinates(&qa);
         let test_leaf =
             |r: u32, mask: u32, best2: &mut [f32; GROUP_MAX], best: &mut [(u32, Vec3A); GROUP_MAX]| {
                 let mut at = (r & !Node4::LEAF) as usize;
@@ -732,7 +1002,7 @@ impl TriangleBvh {
                     while m != 0 {
                         let s = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        let mut lanes = packet.distances2(&qs[s]).cmple(Vec4::splat(best2[s])).bitmask();
+                        let mut lanes = packet.tri.candidates(&qs[s], best2[s].sqrt());
                         while lanes != 0 {
                             let slot = packet.slot[lanes.trailing_zeros() as usize];
                             lanes &= lanes - 1;
@@ -768,20 +1038,22 @@ impl TriangleBvh {
                 continue;
             }
             let n = &wide[e.node as usize];
+            // Bit `4 s + k`: child `k` is within point `s`'s best; `nearest`: per child, the
+            // least bound among the points it is within.
+            *visited += 4 * mask.count_ones() as u64;
+            #[cfg(target_arch = "x86_64")]
+            let (within_all, nearest) = if AVX2 {
+                // SAFETY: `AVX2` walks only run under `nearest_group_avx2`.
+                unsafe { avx2_node_within(n, &qs8, &best2, mask) }
+            } else {
+                node_within(n, &qs, &best2, mask)
+            };
+            #[cfg(not(target_arch = "x86_64"))]
+            let (within_all, nearest) = node_within(n, &qs, &best2, mask);
+            // Transposed: bit `s` of `children[k]`, four points at a time (`GROUP_MAX` is 8).
             let mut children = [0u32; 4];
-            let mut nearest = Vec4::splat(f32::INFINITY);
-            let mut m = mask;
-            while m != 0 {
-                let s = m.trailing_zeros() as usize;
-                m &= m - 1;
-                *visited += 4;
-                let d2 = n.distances2(&qs[s]);
-                let within = d2.cmple(Vec4::splat(best2[s]));
-                nearest = nearest.min(Vec4::select(within, d2, Vec4::splat(f32::INFINITY)));
-                let bits = within.bitmask();
-                for (k, c) in children.iter_mut().enumerate() {
-                    *c |= (bits >> k & 1) << s;
-                }
+            for (k, c) in children.iter_mut().enumerate() {
+                *c = gather_nibble_bits(within_all >> k) | gather_nibble_bits(within_all >> (16 + k)) << 4;
             }
             for (k, (&c, &r)) in children.iter().zip(&n.child).enumerate() {
                 if n.leaves >> k & 1 != 0 && c != 0 {
@@ -884,6 +1156,58 @@ mod tests {
         assert!((cp(Vec3A::new(-3.0, 0.25, 0.0)) - Vec3A::new(0.0, 0.25, 0.0)).length() < 1e-6);
         assert!((cp(Vec3A::new(1.0, 1.0, 0.0)) - Vec3A::new(0.5, 0.5, 0.0)).length() < 1e-6);
         assert!((cp(Vec3A::new(0.2, 0.3, -4.0)) - Vec3A::new(0.2, 0.3, 0.0)).length() < 1e-6);
+    }
+
+    /// [`Tri4::candidates`] keeps every triangle within the bound by the scalar test (at
+    /// the bound equal to its own distance), and prunes one clearly beyond it; on random
+    /// triangles (some slivers, some far from the origin), in every region, with unused
+    /// lanes.
+    #[test]
+    fn simd_candidates_keep_the_scalar_answers() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut unit = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let (mut kept, mut pruned) = (0, 0);
+        for round in 0..4000 {
+            let offset = if round % 4 == 3 { Vec3A::new(1e3, -2e3, 5e2) } else { Vec3A::ZERO };
+            let mut v = || Vec3A::new(unit(), unit(), unit());
+            let mut tris = [None; 4];
+            let used = 1 + round % 4;
+            for (lane, t) in tris.iter_mut().enumerate().take(used) {
+                let (a, b) = (v(), v());
+                // Lane 1 of every other round: a sliver.
+                let c = if lane == 1 && round % 2 == 0 { a + (b - a) * 0.37 + v() * 1e-3 } else { v() };
+                *t = Some([a + offset, b + offset, c + offset]);
+            }
+            let t4 = Tri4::new(tris);
+            let q = offset + v() * 3.0;
+            let qs = splat3(q);
+            for (lane, t) in tris.iter().enumerate() {
+                let Some([a, b, c]) = *t else {
+                    assert_eq!(t4.candidates(&qs, 10.0) >> lane & 1, 0, "unused lane {lane}");
+                    continue;
+                };
+                let d = (closest_point_on_triangle(q, a, b, c) - q).length();
+                assert_eq!(
+                    t4.candidates(&qs, d) >> lane & 1,
+                    1,
+                    "round {round} lane {lane}: lost at its distance {d}"
+                );
+                kept += 1;
+                // (Far from the origin the slack, relative to the coordinates, is wider.)
+                if d > 0.1 && round % 4 != 3 {
+                    assert_eq!(
+                        t4.candidates(&qs, d * 0.9 - 0.05) >> lane & 1,
+                        0,
+                        "round {round} lane {lane}"
+                    );
+                    pruned += 1;
+                }
+            }
+        }
+        assert!(kept == 10000 && pruned > 5000, "{kept} {pruned}");
     }
 
     #[test]
