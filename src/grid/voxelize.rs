@@ -106,7 +106,7 @@ pub fn voxelize_mesh_with_stats(
     let mut state =
         rasterize(&grid, mesh.triangles.len(), |t| mesh.triangles[t].map(|i| mesh.positions[i as usize]));
     // The holes' caps, rasterized into a copy of the labels (none for a mesh without holes).
-    let boundary = boundary_edges(mesh);
+    let boundary = mesh.odd_edges();
     let mut capped = (!boundary.is_empty()).then(|| {
         let caps = hole_caps(mesh, &boundary);
         let marks = rasterize(&grid, caps.len(), |t| caps[t]);
@@ -184,31 +184,7 @@ fn rasterize(grid: &SdfGrid, count: usize, triangle: impl Fn(usize) -> [Vec3; 3]
     marks.into_iter().map(AtomicU8::into_inner).collect()
 }
 
-/// The edges of `mesh` (as vertex index pairs, smaller first) shared by an odd number of
-/// triangles: empty when the mesh has no hole (whatever its orientation).
-fn boundary_edges(mesh: &TriangleMesh) -> Vec<(u32, u32)> {
-    let mut edges: Vec<(u32, u32)> = mesh
-        .triangles
-        .iter()
-        .flat_map(|&[a, b, c]| [(a, b), (b, c), (c, a)])
-        .map(|(a, b)| (a.min(b), a.max(b)))
-        .collect();
-    edges.par_sort_unstable();
-    let mut odd = Vec::new();
-    let mut i = 0;
-    while i < edges.len() {
-        let start = i;
-        while i < edges.len() && edges[i] == edges[start] {
-            i += 1;
-        }
-        if (i - start) % 2 == 1 {
-            odd.push(edges[start]);
-        }
-    }
-    odd
-}
-
-/// Triangles that cap the holes bounded by `boundary` (see [`boundary_edges`]): per
+/// Triangles that cap the holes bounded by `boundary` (see [`TriangleMesh::odd_edges`]): per
 /// connected set of boundary edges (a loop), a fan from the centroid of its vertices
 /// over each of its edges. With them every edge is shared by an even number of triangles.
 fn hole_caps(mesh: &TriangleMesh, boundary: &[(u32, u32)]) -> Vec<[Vec3; 3]> {

@@ -409,6 +409,20 @@ impl TriangleMesh {
         bad
     }
 
+    /// The undirected edges (vertex index pairs, smaller first, sorted) shared by an odd
+    /// number of triangles: the borders of holes. Empty when the mesh separates space
+    /// (every edge shared by an even number of triangles, whatever their orientation).
+    pub fn odd_edges(&self) -> Vec<(u32, u32)> {
+        let mut edges: Vec<(u32, u32)> = self
+            .triangles
+            .iter()
+            .flat_map(|&[a, b, c]| [(a, b), (b, c), (c, a)])
+            .map(|(a, b)| (a.min(b), a.max(b)))
+            .collect();
+        edges.sort_unstable();
+        edges.chunk_by(|a, b| a == b).filter(|run| run.len() % 2 == 1).map(|run| run[0]).collect()
+    }
+
     /// Whether the mesh is a closed, consistently oriented 2-manifold in terms of edges:
     /// it has triangles and every undirected edge is used by exactly two triangles in
     /// opposite directions (see [`TriangleMesh::boundary_edge_count`]).
@@ -488,6 +502,17 @@ mod tests {
         let mut flipped = q.clone();
         flipped.triangles[1] = [0, 3, 2];
         assert_eq!(flipped.boundary_edge_count(), 5);
+        // Odd edges: the quad's border; the fin's three uses of the diagonal and its two
+        // new edges are odd too; orientation does not matter.
+        let border = q.odd_edges();
+        assert_eq!(border.len(), 4);
+        assert!(!border.contains(&(0, 2)));
+        assert_eq!(fin.odd_edges().len(), 4 + 1 + 2);
+        assert_eq!(flipped.odd_edges(), border);
+        // Doubling every triangle makes every edge even.
+        let mut doubled = q.clone();
+        doubled.triangles.extend(q.triangles.iter().map(|&[a, b, c]| [a, c, b]));
+        assert!(doubled.odd_edges().is_empty());
     }
 
     #[test]
