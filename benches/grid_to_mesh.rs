@@ -9,7 +9,10 @@
 //!   repetitions, contenders interleaved round by round), on rayon pools of 1 and 2
 //!   threads. Every contender samples the same lattice points (ours through
 //!   `sample_grid`, the peers into their own array, in parallel over z-slices the same
-//!   way); the peers' extraction is single-threaded, ours runs on the pool and also
+//!   way). Ours evaluates the SDF only in blocks of the lattice near the surface, as
+//!   `toolkit convert` does for scene objects (`Field::DistanceBound`: every SDF here is
+//!   exact or a Lipschitz-1 bound); the row "ours MC, every point sampled" evaluates every
+//!   point like the peers (same mesh). The peers' extraction is single-threaded, ours runs on the pool and also
 //!   evaluates the SDF while extracting (crossing refinement, gradients). The peers'
 //!   extract time includes turning their output into a world-space `TriangleMesh`.
 //! * Geometric error of each mesh: distance to the true surface from every vertex and
@@ -40,7 +43,7 @@ use std::time::Instant;
 use glam::{DVec3, Vec3};
 use rayon::ThreadPool;
 use rayon::prelude::*;
-use sdfmesh::extract::{ExtractMethod, SampleGrid, extract_sampled, sample_grid};
+use sdfmesh::extract::{ExtractMethod, Field, SampleGrid, extract_sampled, sample_grid};
 use sdfmesh::geometry::{Aabb, aabb};
 use sdfmesh::mesh::TriangleMesh;
 use sdfmesh::scene::load_scene;
@@ -125,6 +128,9 @@ fn off_grid(mut case: Case, frac: f32) -> Case {
 enum Method {
     /// Our marching cubes (`ExtractMethod::MarchingCubes`, the default `--method mc`).
     Mc,
+    /// The same, sampling every grid point (`Field::Arbitrary`) instead of only the blocks
+    /// near the surface: the same mesh, to show what the sparse sampling saves.
+    McDense,
     /// Our marching tetrahedra (`ExtractMethod::MarchingTetrahedra`).
     Mt,
     /// Our dual contouring.
@@ -140,7 +146,7 @@ enum Method {
 impl Method {
     fn all() -> Vec<Method> {
         #[allow(unused_mut)]
-        let mut v = vec![Method::Mc, Method::Mt, Method::Dc];
+        let mut v = vec![Method::Mc, Method::McDense, Method::Mt, Method::Dc];
         #[cfg(feature = "peers")]
         v.extend([Method::Fsn, Method::Mcubes]);
         v
@@ -149,6 +155,7 @@ impl Method {
     fn name(self) -> &'static str {
         match self {
             Method::Mc => "ours marching cubes",
+            Method::McDense => "ours MC, every point sampled",
             Method::Mt => "ours marching tetrahedra",
             Method::Dc => "ours dual contouring",
             #[cfg(feature = "peers")]
@@ -265,13 +272,15 @@ fn mcubes_extract(values: Vec<f32>, lattice: &SampleGrid) -> TriangleMesh {
 fn run(method: Method, part: &Part, lattice: &SampleGrid, res: u32) -> (TriangleMesh, Secs, Secs) {
     let f = &part.sdf;
     match method {
-        Method::Mc | Method::Mt | Method::Dc => {
+        Method::Mc | Method::McDense | Method::Mt | Method::Dc => {
             let how = match method {
-                Method::Mc => ExtractMethod::MarchingCubes,
+                Method::Mc | Method::McDense => ExtractMethod::MarchingCubes,
                 Method::Mt => ExtractMethod::MarchingTetrahedra,
                 _ => ExtractMethod::DualContouring,
             };
-            let (grid, s) = timed(|| sample_grid(f, &part.bounds, res).expect("bounded part"));
+            // Every part's SDF is exact or a Lipschitz-1 bound (`SdfTree::distance`).
+            let field = if method == Method::McDense { Field::Arbitrary } else { Field::DistanceBound };
+            let (grid, s) = timed(|| sample_grid(f, field, &part.bounds, res).expect("bounded part"));
             let (mesh, e) = timed(|| extract_sampled(f, &grid, how));
             (mesh, s, e)
         }
@@ -310,7 +319,10 @@ fn run_case(
 }
 
 fn lattices(case: &Case, res: u32) -> Vec<SampleGrid> {
-    case.parts.iter().map(|p| sample_grid(&p.sdf, &p.bounds, res).expect("bounded part")).collect()
+    case.parts
+        .iter()
+        .map(|p| sample_grid(&p.sdf, Field::Arbitrary, &p.bounds, res).expect("bounded part"))
+        .collect()
 }
 
 /// Distance from `p` to the zero set of `f` by Newton projection with central differences
@@ -539,8 +551,9 @@ fn speed(case: &Case, plan: &Plan) {
         }
         #[cfg(feature = "peers")]
         if let Some(&(_, pe, pt)) = totals.iter().find(|(m, _, _)| *m == Method::Fsn) {
-            for &(m, e, t) in
-                totals.iter().filter(|(m, _, _)| matches!(m, Method::Mc | Method::Mt | Method::Dc))
+            for &(m, e, t) in totals
+                .iter()
+                .filter(|(m, _, _)| matches!(m, Method::Mc | Method::McDense | Method::Mt | Method::Dc))
             {
                 println!(
                     "   {} / fast-surface-nets: extract {:.2}x, sample + extract {:.2}x (below 1: ours faster)",
@@ -600,7 +613,8 @@ fn loglog(pts: &[(f64, f64)], x: f64) -> Option<f64> {
 
 /// The equal-triangle-count comparison on one case.
 fn sweep(case: &Case, plan: &Plan) {
-    let methods = Method::all();
+    // The dense row gives the same meshes as `Mc`.
+    let methods: Vec<Method> = Method::all().into_iter().filter(|&m| m != Method::McDense).collect();
     println!("\n== error vs triangles: {} ({} object(s), each on its own grid)", case.name, case.parts.len());
     println!("{:<28} {:>5} {:>9} {:>10} {:>10}", "method", "res", "tris", "max", "mean");
     let mut curves: Vec<Vec<Point>> = Vec::new();

@@ -1,7 +1,10 @@
 //! Extraction of triangle meshes from signed distance functions (issue 4: SDF -> mesh).
 //!
 //! [`extract`] samples a function once per corner of a regular grid (in parallel over
-//! z-slices) and extracts its zero isosurface with one of three methods:
+//! z-slices) and extracts its zero isosurface with one of three methods. For a signed
+//! distance or a Lipschitz-1 bound of one ([`Field::DistanceBound`], every scene object's
+//! [`SdfTree`]) only blocks of the grid near the zero set are evaluated: a box of blocks
+//! whose centre value exceeds its half-diagonal holds no surface ([`Blocks`]).
 //!
 //! - [`ExtractMethod::MarchingCubes`] (the default): classic marching cubes, one vertex per
 //!   sign-changing cube edge, each cube's configuration triangulated from a case table
@@ -129,17 +132,20 @@ const DIRS: [[usize; 3]; 7] = [[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [1, 0
 /// Cells are cubes of side `longest extent / res`; the other axes get as many cells as
 /// cover them, centred. `res` 0 counts as 1. Bounds with a non-finite or zero longest
 /// extent give an empty mesh. The grid holds `(res + 3)^3` samples at most (f32, plus
-/// under 1 byte per sample of working memory, 9 for dual contouring).
+/// under 1 byte per sample of working memory, 9 for dual contouring). With
+/// [`Field::DistanceBound`], `f` is evaluated only in blocks of the grid near its zero set
+/// (the mesh is the same as with [`Field::Arbitrary`], which evaluates every point).
 ///
 /// # Panics
 /// When the grid has `u32::MAX` points or more (`res` above about 1600).
 pub fn extract(
     f: &(impl Fn(DVec3) -> f64 + Sync),
+    field: Field,
     bounds: &Aabb,
     res: u32,
     method: ExtractMethod,
 ) -> TriangleMesh {
-    match sample_grid(f, bounds, res) {
+    match sample_grid(f, field, bounds, res) {
         Some(grid) => extract_sampled(f, &grid, method),
         None => TriangleMesh::default(),
     }
@@ -150,8 +156,13 @@ pub fn extract(
 ///
 /// # Panics
 /// When the grid has `u32::MAX` points or more.
-pub fn sample_grid(f: &(impl Fn(DVec3) -> f64 + Sync), bounds: &Aabb, res: u32) -> Option<SampleGrid> {
-    SampleGrid::sample(f, bounds, res.max(1))
+pub fn sample_grid(
+    f: &(impl Fn(DVec3) -> f64 + Sync),
+    field: Field,
+    bounds: &Aabb,
+    res: u32,
+) -> Option<SampleGrid> {
+    SampleGrid::sample(f, bounds, res.max(1), field)
 }
 
 /// The second half of [`extract`]: extracts the zero isosurface of `f` from `grid`, which
@@ -194,12 +205,14 @@ pub fn extract_object(object: &Object, res: u32, method: ExtractMethod) -> Optio
         return None;
     }
     let bounds = object.bounds()?;
-    Some(extract(&|p| tree.distance(p), &bounds, res, method))
+    Some(extract(&|p| tree.distance(p), Field::DistanceBound, &bounds, res, method))
 }
 
 /// Samples of a function on the corners of a regular grid of cubic cells (from
 /// [`sample_grid`]); point `(x, y, z)` is at `origin + cell * (x, y, z)` and its sample is
-/// `values[x + n[0] * (y + n[1] * z)]`. Samples on the outermost layer are positive.
+/// `values[x + n[0] * (y + n[1] * z)]`. Samples on the outermost layer are positive. For a
+/// [`Field::DistanceBound`] function, points in blocks far from the surface hold a bound
+/// `b` of their value instead (`f`'s sign, `0 < |b| <= |f|`; see [`Blocks`]).
 pub struct SampleGrid {
     origin: DVec3,
     /// Cell size.
@@ -230,7 +243,12 @@ impl SampleGrid {
         &self.values
     }
 
-    fn sample(f: &(impl Fn(DVec3) -> f64 + Sync), bounds: &Aabb, res: u32) -> Option<SampleGrid> {
+    fn sample(
+        f: &(impl Fn(DVec3) -> f64 + Sync),
+        bounds: &Aabb,
+        res: u32,
+        field: Field,
+    ) -> Option<SampleGrid> {
         let (lo, hi) = (bounds.min.as_dvec3(), bounds.max.as_dvec3());
         let ext = (hi - lo).max(DVec3::ZERO);
         let longest = ext.max_element();
@@ -250,32 +268,46 @@ impl SampleGrid {
         // Grid point indices are stored as u32 (res up to about 1600).
         assert!(n[0] * n[1] * n[2] < u32::MAX as usize, "extraction grid too large: {n:?} points");
         let mut grid = SampleGrid { origin, h, n, values: vec![0.0; n[0] * n[1] * n[2]] };
+        let blocks = match field {
+            Field::DistanceBound => Blocks::classify(f, &grid),
+            Field::Arbitrary => Blocks::all_sampled(),
+        };
         let slice = n[0] * n[1];
         let (origin, nn) = (grid.origin, grid.n);
-        grid.values.par_chunks_mut(slice).enumerate().for_each(|(z, vals)| {
-            for (y, row) in vals.chunks_exact_mut(nn[0]).enumerate() {
-                for (x, v) in row.iter_mut().enumerate() {
-                    *v = f(origin + h * DVec3::new(x as f64, y as f64, z as f64)) as f32;
+        grid.values.par_chunks_mut(slice).enumerate().for_each_init(
+            || vec![0.0f32; blocks.n[0]],
+            |row_fill, (z, vals)| {
+                for (y, row) in vals.chunks_exact_mut(nn[0]).enumerate() {
+                    blocks.row_fill(y, z, row_fill);
+                    for (x, v) in row.iter_mut().enumerate() {
+                        let (b0, b1) = blocks.along(x);
+                        let (f0, f1) = (row_fill[b0], row_fill[b1]);
+                        *v = if f0.is_nan() || f1.is_nan() {
+                            f(origin + h * DVec3::new(x as f64, y as f64, z as f64)) as f32
+                        } else {
+                            f0
+                        };
+                    }
                 }
-            }
-            // The outermost layer positive: whole slices at the ends, else the rows at
-            // y = 0 and the last y, and both ends of the others.
-            let outside = |v: &mut f32| {
-                if !(*v > 0.0) {
-                    *v = f32::MIN_POSITIVE;
+                // The outermost layer positive: whole slices at the ends, else the rows at
+                // y = 0 and the last y, and both ends of the others.
+                let outside = |v: &mut f32| {
+                    if !(*v > 0.0) {
+                        *v = f32::MIN_POSITIVE;
+                    }
+                };
+                let rows = vals.len() / nn[0];
+                for (y, row) in vals.chunks_exact_mut(nn[0]).enumerate() {
+                    if z == 0 || z + 1 == nn[2] || y == 0 || y + 1 == rows {
+                        row.iter_mut().for_each(outside);
+                    } else {
+                        outside(&mut row[0]);
+                        outside(&mut row[nn[0] - 1]);
+                    }
                 }
-            };
-            let rows = vals.len() / nn[0];
-            for (y, row) in vals.chunks_exact_mut(nn[0]).enumerate() {
-                if z == 0 || z + 1 == nn[2] || y == 0 || y + 1 == rows {
-                    row.iter_mut().for_each(outside);
-                } else {
-                    outside(&mut row[0]);
-                    outside(&mut row[nn[0] - 1]);
-                }
-            }
-            crate::progress::advance(1);
-        });
+                crate::progress::advance(1);
+            },
+        );
         Some(grid)
     }
 
@@ -308,6 +340,147 @@ impl SampleGrid {
     #[inline]
     fn inside(&self, i: usize) -> bool {
         self.values[i] < 0.0
+    }
+}
+
+/// What extraction may assume of the function it samples.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Field {
+    /// A signed distance or a lower bound of one that is Lipschitz-1 (`|f(p) - f(q)| <=
+    /// |p - q|`), like [`SdfTree::distance`]. Then a box of the grid whose centre value is
+    /// farther from zero than the box's half-diagonal holds no sign change and no surface,
+    /// and its points are not evaluated (see [`Blocks`]).
+    DistanceBound,
+    /// Anything else (for example a trilinearly interpolated grid, noise): every grid point
+    /// is evaluated.
+    Arbitrary,
+}
+
+/// Cells along each axis of the smallest blocks of [`Blocks`].
+const BLOCK_CELLS: usize = 4;
+
+/// Which blocks of [`BLOCK_CELLS`]³ cells of a [`SampleGrid`] must be sampled, for a
+/// [`Field::DistanceBound`] function.
+///
+/// Built top-down: starting from the whole grid, a box of blocks (all its cells' corners)
+/// is evaluated at its centre `c` only; when `|f(c)|` exceeds the half-diagonal `r` of the
+/// box's points, Lipschitz continuity puts every point `q` of the box on the sign of
+/// `f(c)`, with `|f(q)| >= |f(c)| - r`, so the box holds no crossing and its points get that
+/// bound as their value. Otherwise the box is split in two along each axis longer than one
+/// block, down to single blocks, whose points are all sampled. Every grid cell lies in
+/// exactly one block and every corner of a cell in a sampled block is sampled, so the cells
+/// with a sign change, and the samples extraction reads around them (corners, ambiguous
+/// faces), are those of sampling every point; the far points only keep their sign. Around
+/// a surface this samples a shell about 2 √3 blocks thick: a sphere of radius 1 at 128
+/// cells takes about a fifth of the evaluations of the full grid.
+struct Blocks {
+    /// Blocks per axis (the last may be partial).
+    n: [usize; 3],
+    /// Per block, x fastest: the value of all its points when it is not sampled (`|f|`
+    /// bound with `f`'s sign, never zero), NaN when it is.
+    fill: Vec<f32>,
+}
+
+impl Blocks {
+    /// Every block sampled.
+    fn all_sampled() -> Blocks {
+        Blocks { n: [1; 3], fill: vec![f32::NAN] }
+    }
+
+    fn classify(f: &(impl Fn(DVec3) -> f64 + Sync), grid: &SampleGrid) -> Blocks {
+        let cells = grid.n.map(|p| p - 1);
+        let n = cells.map(|c| c.div_ceil(BLOCK_CELLS));
+        let mut fill = vec![f32::NAN; n[0] * n[1] * n[2]];
+        // Boxes of blocks, `[lo, hi)` in block indices.
+        let mut level = vec![([0usize; 3], n)];
+        let mut far = Vec::new();
+        while !level.is_empty() {
+            let bounds: Vec<Option<f32>> = level
+                .par_iter()
+                .map(|&(lo, hi)| {
+                    let p0 = grid.origin + grid.h * DVec3::from(lo.map(|b| (b * BLOCK_CELLS) as f64));
+                    let p1 = grid.origin
+                        + grid.h
+                            * DVec3::from(std::array::from_fn(|a| {
+                                (hi[a] * BLOCK_CELLS).min(cells[a]) as f64
+                            }));
+                    let r = 0.5 * p0.distance(p1);
+                    let v = f(0.5 * (p0 + p1));
+                    // A relative margin for rounding in `f` and in the positions.
+                    let margin = r * (1.0 + 1e-9) + 1e-12 * p0.abs().max(p1.abs()).max_element();
+                    (v.abs() > margin).then(|| {
+                        let b = (v.abs() - r) as f32;
+                        if v > 0.0 { b.max(f32::MIN_POSITIVE) } else { -b.max(f32::MIN_POSITIVE) }
+                    })
+                })
+                .collect();
+            let mut next = Vec::new();
+            for (&(lo, hi), bound) in level.iter().zip(bounds) {
+                if let Some(b) = bound {
+                    far.push((lo, hi, b));
+                    continue;
+                }
+                // Split each axis longer than one block in two.
+                let halves: [Vec<(usize, usize)>; 3] = std::array::from_fn(|a| {
+                    let mid = lo[a] + (hi[a] - lo[a]) / 2;
+                    if hi[a] - lo[a] > 1 { vec![(lo[a], mid), (mid, hi[a])] } else { vec![(lo[a], hi[a])] }
+                });
+                if halves.iter().all(|h| h.len() == 1) {
+                    continue; // A single block near the surface: sampled.
+                }
+                for &(z0, z1) in &halves[2] {
+                    for &(y0, y1) in &halves[1] {
+                        for &(x0, x1) in &halves[0] {
+                            next.push(([x0, y0, z0], [x1, y1, z1]));
+                        }
+                    }
+                }
+            }
+            level = next;
+        }
+        for (lo, hi, b) in far {
+            for z in lo[2]..hi[2] {
+                for y in lo[1]..hi[1] {
+                    let row = n[0] * (y + n[1] * z);
+                    fill[row + lo[0]..row + hi[0]].fill(b);
+                }
+            }
+        }
+        Blocks { n, fill }
+    }
+
+    /// The blocks along one axis whose points include coordinate `i` (two where `i` is on
+    /// a boundary between blocks, else the same one twice).
+    #[inline]
+    fn along_axis(&self, a: usize, i: usize) -> (usize, usize) {
+        if self.n[a] == 1 {
+            return (0, 0);
+        }
+        let b = i / BLOCK_CELLS;
+        let hi = b.min(self.n[a] - 1);
+        (hi, if i % BLOCK_CELLS == 0 && i > 0 { b - 1 } else { hi })
+    }
+
+    /// [`Blocks::along_axis`] for x.
+    #[inline]
+    fn along(&self, x: usize) -> (usize, usize) {
+        self.along_axis(0, x)
+    }
+
+    /// Fills `out` (one entry per block along x) for grid row `(y, z)`: NaN where a block
+    /// containing points of the row must be sampled, else a valid value for those points.
+    fn row_fill(&self, y: usize, z: usize, out: &mut [f32]) {
+        let (y0, y1) = self.along_axis(1, y);
+        let (z0, z1) = self.along_axis(2, z);
+        let rows = [(y0, z0), (y1, z0), (y0, z1), (y1, z1)];
+        for (bx, o) in out.iter_mut().enumerate().take(self.n[0]) {
+            *o = self.fill[bx + self.n[0] * (y0 + self.n[1] * z0)];
+            for &(by, bz) in &rows[1..] {
+                if self.fill[bx + self.n[0] * (by + self.n[1] * bz)].is_nan() {
+                    *o = f32::NAN;
+                }
+            }
+        }
     }
 }
 

@@ -8,7 +8,7 @@ use obvhs::bvh2::Bvh2;
 
 use crate::analytic;
 use crate::bvh;
-use crate::extract::{ExtractMethod, extract_object};
+use crate::extract::{ExtractMethod, Field, extract_object};
 use crate::geometry::{
     Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, box_distance, distance_by_projection, f32_error,
     max_abs,
@@ -492,7 +492,8 @@ pub fn grid_file_mesh(o: &Object, resolution: u32, method: MeshMethod) -> Option
     let (to_local, scale) = (t.to_local_f64, t.min_scale as f64);
     let f = |p: DVec3| grid.trilinear(to_local.transform_point3(p).as_vec3()) as f64 * scale;
     let bounds = o.bounds()?;
-    let mesh = crate::extract::extract(&f, &bounds, resolution.min(MAX_EXTRACT_RESOLUTION), how);
+    let mesh =
+        crate::extract::extract(&f, Field::Arbitrary, &bounds, resolution.min(MAX_EXTRACT_RESOLUTION), how);
     (!mesh.triangles.is_empty()).then_some(mesh)
 }
 

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use glam::{DMat3, DVec3, Vec3, Vec3A};
 use proptest::prelude::*;
-use sdfmesh::extract::{ExtractMethod, extract, extract_object};
+use sdfmesh::extract::{ExtractMethod, Field, extract, extract_object, sample_grid};
 use sdfmesh::geometry::Aabb;
 use sdfmesh::mesh::{TriangleMesh, is_degenerate};
 use sdfmesh::shape::{CsgOp, Object, ObjectKind, Primitive};
@@ -88,7 +88,7 @@ fn sphere_converges_and_is_clean() {
         for res in [16u32, 32, 64, 128] {
             let h = 2.0 / res as f64;
             let t0 = Instant::now();
-            let m = extract(&f, &cube(1.0), res, method);
+            let m = extract(&f, Field::DistanceBound, &cube(1.0), res, method);
             let secs = t0.elapsed().as_secs_f64();
             let what = format!("{method:?} res {res}");
             assert_clean(&m, &what);
@@ -132,8 +132,8 @@ fn dual_contouring_keeps_box_edges() {
     let f = rotated_box(DVec3::new(0.6, 0.5, 0.4), rot);
     for res in [24u32, 48] {
         let h = 2.0 / res as f64;
-        let mc = extract(&f, &cube(1.0), res, ExtractMethod::MarchingCubes);
-        let dc = extract(&f, &cube(1.0), res, ExtractMethod::DualContouring);
+        let mc = extract(&f, Field::DistanceBound, &cube(1.0), res, ExtractMethod::MarchingCubes);
+        let dc = extract(&f, Field::DistanceBound, &cube(1.0), res, ExtractMethod::DualContouring);
         assert_clean(&mc, "box mc");
         assert_clean(&dc, "box dc");
         assert_outward(&mc, f, "box mc");
@@ -236,13 +236,19 @@ fn degenerate_input_gives_empty_or_capped_mesh() {
     // Zero-size bounds: nothing to sample.
     let f = |p: DVec3| p.length() - 1.0;
     let empty = Aabb::new(Vec3A::ZERO, Vec3A::ZERO);
-    assert!(extract(&f, &empty, 16, ExtractMethod::MarchingCubes).triangles.is_empty());
+    assert!(extract(&f, Field::Arbitrary, &empty, 16, ExtractMethod::MarchingCubes).triangles.is_empty());
     // Negative everywhere: the surface is capped inside the padded box, still closed.
     for method in METHODS {
-        let m = extract(&|_| -1.0, &cube(1.0), 8, method);
+        let m = extract(&|_| -1.0, Field::Arbitrary, &cube(1.0), 8, method);
         assert_clean(&m, &format!("all inside {method:?}"));
         // Samples exactly zero on grid points.
-        let m = extract(&|p: DVec3| p.x.abs().max(p.y.abs()).max(p.z.abs()) - 0.5, &cube(1.0), 8, method);
+        let m = extract(
+            &|p: DVec3| p.x.abs().max(p.y.abs()).max(p.z.abs()) - 0.5,
+            Field::Arbitrary,
+            &cube(1.0),
+            8,
+            method,
+        );
         assert_clean(&m, &format!("grid-aligned cube {method:?}"));
     }
 }
@@ -262,14 +268,89 @@ proptest! {
     ) {
         let s: Vec<(DVec3, f64)> = spheres.iter().map(|&((x, y, z), r)| (DVec3::new(x, y, z), r)).collect();
         let f = |p: DVec3| s.iter().map(|&(c, r)| (p - c).length() - r).reduce(|a, b| smin(a, b, k)).unwrap();
-        let m = extract(&f, &cube(1.6), 24, ExtractMethod::MarchingCubes);
+        let m = extract(&f, Field::Arbitrary, &cube(1.6), 24, ExtractMethod::MarchingCubes);
         assert_clean(&m, "blob mc");
         prop_assert!(signed_volume(&m) > 0.0);
-        let dc = extract(&f, &cube(1.6), 24, ExtractMethod::DualContouring);
+        let dc = extract(&f, Field::Arbitrary, &cube(1.6), 24, ExtractMethod::DualContouring);
         // Dual contouring is edge-manifold here too thanks to the ambiguous-face flip
         // (without it 2 of these 24 cases had a non-manifold edge).
         assert_clean(&dc, "blob dc");
         prop_assert!(signed_volume(&dc) > 0.0);
+    }
+}
+
+/// Random smooth-min blobs (Lipschitz 1) at random resolutions: skipping the blocks that
+/// the distance bound rules out gives the same mesh, for every method.
+#[test]
+fn distance_bound_gives_the_same_meshes() {
+    let mut runner =
+        proptest::test_runner::TestRunner::new(ProptestConfig { cases: 16, ..ProptestConfig::default() });
+    let blobs = (
+        prop::collection::vec(((-0.8f64..0.8, -0.8f64..0.8, -0.8f64..0.8), 0.05f64..0.5), 1..5),
+        0.01f64..0.3,
+        4u32..48,
+    );
+    runner
+        .run(&blobs, |(spheres, k, res)| {
+            let s: Vec<(DVec3, f64)> =
+                spheres.iter().map(|&((x, y, z), r)| (DVec3::new(x, y, z), r)).collect();
+            let f =
+                |p: DVec3| s.iter().map(|&(c, r)| (p - c).length() - r).reduce(|a, b| smin(a, b, k)).unwrap();
+            for method in METHODS {
+                let dense = extract(&f, Field::Arbitrary, &cube(1.0), res, method);
+                let sparse = extract(&f, Field::DistanceBound, &cube(1.0), res, method);
+                prop_assert_eq!(&dense.positions, &sparse.positions, "{:?} res {}", method, res);
+                prop_assert_eq!(&dense.triangles, &sparse.triangles, "{:?} res {}", method, res);
+            }
+            Ok(())
+        })
+        .unwrap();
+}
+
+/// The sparse samples of a distance bound: sampled points hold `f`, the others a bound with
+/// `f`'s sign and at most `|f|`; far fewer evaluations than the full grid.
+#[test]
+fn distance_bound_samples_a_shell() {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let rot = DMat3::from_euler(glam::EulerRot::XYZ, 0.3, 0.5, 0.2);
+    let boxed = rotated_box(DVec3::new(0.6, 0.5, 0.4), rot);
+    let sphere = |p: DVec3| p.length() - 0.9;
+    let cases: [(&str, &(dyn Fn(DVec3) -> f64 + Sync), f64); 2] =
+        [("sphere", &sphere, 0.25), ("box", &boxed, 0.3)];
+    for (name, f, most) in cases {
+        let calls = AtomicUsize::new(0);
+        let counted = |p: DVec3| {
+            calls.fetch_add(1, Ordering::Relaxed);
+            f(p)
+        };
+        let grid = sample_grid(&counted, Field::DistanceBound, &cube(1.0), 128).unwrap();
+        let n = grid.dims();
+        let points = n[0] * n[1] * n[2];
+        let evaluated = calls.load(Ordering::Relaxed);
+        println!(
+            "{name}: {evaluated} evaluations for {points} points ({:.1}%)",
+            100.0 * evaluated as f64 / points as f64
+        );
+        assert!((evaluated as f64) < most * points as f64, "{name}: {evaluated} of {points}");
+        let (mut exact, mut bounded) = (0usize, 0usize);
+        for z in 1..n[2] - 1 {
+            for y in 1..n[1] - 1 {
+                for x in 1..n[0] - 1 {
+                    let p = grid.origin() + grid.cell() * DVec3::new(x as f64, y as f64, z as f64);
+                    let (v, want) = (grid.values()[x + n[0] * (y + n[1] * z)], f(p) as f32);
+                    if v == want {
+                        exact += 1;
+                    } else {
+                        bounded += 1;
+                        assert!(
+                            v != 0.0 && (v < 0.0) == (want < 0.0) && v.abs() <= want.abs(),
+                            "{name} at {p}: {v} for {want}"
+                        );
+                    }
+                }
+            }
+        }
+        assert!(exact > 0 && bounded > points / 2, "{name}: {exact} exact, {bounded} bounded");
     }
 }
 
@@ -284,7 +365,7 @@ fn timing_sphere() {
             let mut tris = 0;
             for _ in 0..5 {
                 let t0 = Instant::now();
-                let m = extract(&f, &cube(1.0), res, method);
+                let m = extract(&f, Field::Arbitrary, &cube(1.0), res, method);
                 best = best.min(t0.elapsed().as_secs_f64());
                 tris = m.triangles.len();
             }
@@ -305,7 +386,7 @@ fn gyroid_is_closed_and_manifold() {
                 g.max(p.length() - 1.0)
             };
             for method in METHODS {
-                let m = extract(&f, &cube(1.0), res, method);
+                let m = extract(&f, Field::Arbitrary, &cube(1.0), res, method);
                 assert_clean(&m, &format!("gyroid freq {freq} res {res} {method:?}"));
             }
         }

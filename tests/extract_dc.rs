@@ -3,7 +3,7 @@
 //! marching cubes' at the same resolution, measured densely over each triangle's area.
 
 use glam::{DVec3, Vec3A};
-use sdfmesh::extract::{ExtractMethod, extract};
+use sdfmesh::extract::{ExtractMethod, Field, extract};
 use sdfmesh::geometry::Aabb;
 use sdfmesh::mesh::TriangleMesh;
 
@@ -48,8 +48,8 @@ fn area_mean_distance(m: &TriangleMesh, f: impl Fn(DVec3) -> f64) -> (f64, f64) 
 fn dual_contouring_is_closer_than_marching_cubes_on_curved_surfaces() {
     let bounds = Aabb::new(Vec3A::new(-0.9, -0.9, -0.9), Vec3A::new(0.9, 0.9, 0.9));
     for res in [16u32, 24, 32] {
-        let dc = extract(&torus, &bounds, res, ExtractMethod::DualContouring);
-        let mc = extract(&torus, &bounds, res, ExtractMethod::MarchingCubes);
+        let dc = extract(&torus, Field::Arbitrary, &bounds, res, ExtractMethod::DualContouring);
+        let mc = extract(&torus, Field::Arbitrary, &bounds, res, ExtractMethod::MarchingCubes);
         assert!(dc.is_closed() && mc.is_closed(), "res {res}");
         let (dm, dmax) = area_mean_distance(&dc, torus);
         let (mm, mmax) = area_mean_distance(&mc, torus);
@@ -73,7 +73,7 @@ fn dual_contouring_is_closer_than_marching_cubes_on_curved_surfaces() {
 fn dual_contouring_facets_straddle_a_sphere() {
     let f = |p: DVec3| p.length() - 0.7;
     let bounds = Aabb::new(Vec3A::splat(-0.8), Vec3A::splat(0.8));
-    let m = extract(&f, &bounds, 20, ExtractMethod::DualContouring);
+    let m = extract(&f, Field::Arbitrary, &bounds, 20, ExtractMethod::DualContouring);
     let outside = m.positions.iter().filter(|p| f(p.as_dvec3()) > 0.0).count();
     let inside_centroids = m
         .triangles

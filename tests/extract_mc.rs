@@ -9,7 +9,7 @@ use std::process::Command;
 
 use glam::{DVec3, Vec3};
 use proptest::prelude::*;
-use sdfmesh::extract::{ExtractMethod, extract, extract_sampled, sample_grid};
+use sdfmesh::extract::{ExtractMethod, Field, extract, extract_sampled, sample_grid};
 use sdfmesh::geometry::Aabb;
 use sdfmesh::mesh::{TriangleMesh, is_degenerate};
 
@@ -86,7 +86,7 @@ fn noise(seed: u64, s: f64, bias: f64) -> impl Fn(DVec3) -> f64 + Sync {
 
 /// Sign-changing axis edges of `f`'s extraction grid at `res` over `bounds`.
 fn crossing_edges(f: &(impl Fn(DVec3) -> f64 + Sync), bounds: &Aabb, res: u32) -> usize {
-    let grid = sample_grid(f, bounds, res).expect("bounded");
+    let grid = sample_grid(f, Field::Arbitrary, bounds, res).expect("bounded");
     let (n, v) = (grid.dims(), grid.values());
     let idx = |x: usize, y: usize, z: usize| x + n[0] * (y + n[1] * z);
     let mut count = 0;
@@ -122,7 +122,7 @@ proptest! {
         let edges = crossing_edges(&f, &bounds, res);
         prop_assume!(edges > 0);
         for method in PROVEN {
-            let m = extract(&f, &bounds, res, method);
+            let m = extract(&f, Field::Arbitrary, &bounds, res, method);
             let what = format!("{method:?} seed {seed} spacing {spacing} bias {bias} res {res}");
             assert_clean(&m, &what);
             if method == ExtractMethod::MarchingCubes {
@@ -141,7 +141,7 @@ fn cycles_with_their_own_vertex_stay_clean() {
     let mut with_own = 0;
     for seed in 0..60u64 {
         let f = noise(seed * 7919 + 1, 0.09, 0.0);
-        let m = extract(&f, &cube(1.0), 24, ExtractMethod::MarchingCubes);
+        let m = extract(&f, Field::Arbitrary, &cube(1.0), 24, ExtractMethod::MarchingCubes);
         assert_clean(&m, &format!("seed {seed}"));
         let edges = crossing_edges(&f, &cube(1.0), 24);
         assert!(m.positions.len() >= edges);
@@ -160,8 +160,8 @@ fn marching_cubes_has_a_third_of_tetrahedra_triangles() {
         q.length() - 0.8 + 0.1 * (3.0 * p.x).sin() * (2.0 * p.y).cos()
     };
     for res in [24u32, 48, 96] {
-        let mc = extract(&f, &cube(1.2), res, ExtractMethod::MarchingCubes);
-        let mt = extract(&f, &cube(1.2), res, ExtractMethod::MarchingTetrahedra);
+        let mc = extract(&f, Field::Arbitrary, &cube(1.2), res, ExtractMethod::MarchingCubes);
+        let mt = extract(&f, Field::Arbitrary, &cube(1.2), res, ExtractMethod::MarchingTetrahedra);
         assert_clean(&mc, "mc");
         assert_clean(&mt, "mt");
         let (vc, vt) = (signed_volume(&mc), signed_volume(&mt));
@@ -188,8 +188,8 @@ fn sampled_extraction_is_the_same() {
     for method in
         [ExtractMethod::MarchingCubes, ExtractMethod::MarchingTetrahedra, ExtractMethod::DualContouring]
     {
-        let a = extract(&f, &cube(1.0), 20, method);
-        let grid = sample_grid(&f, &cube(1.0), 20).unwrap();
+        let a = extract(&f, Field::Arbitrary, &cube(1.0), 20, method);
+        let grid = sample_grid(&f, Field::Arbitrary, &cube(1.0), 20).unwrap();
         let b = extract_sampled(&f, &grid, method);
         assert_eq!(a.positions, b.positions, "{method:?}");
         assert_eq!(a.triangles, b.triangles, "{method:?}");

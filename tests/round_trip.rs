@@ -4,7 +4,7 @@
 //! every sample farther than a cell from the surface has the right sign.
 
 use glam::{DVec3, Vec3};
-use sdfmesh::extract::{ExtractMethod, extract};
+use sdfmesh::extract::{ExtractMethod, Field, extract};
 use sdfmesh::geometry::Aabb;
 use sdfmesh::grid::sample_mesh;
 
@@ -20,7 +20,7 @@ fn round_trip(
     method: ExtractMethod,
     band: f64,
 ) -> (f64, usize) {
-    let mesh = extract(f, &cube(1.2), res, method);
+    let mesh = extract(f, Field::Arbitrary, &cube(1.2), res, method);
     assert!(mesh.is_closed(), "{method:?} at {res}: the extracted mesh is closed");
     let grid = sample_mesh(&mesh, 32, 2).unwrap();
     let h = 2.4 / res as f64;

@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 use crate::budget::{MemoryBudget, extraction_bytes, mesh_to_grid_bytes, scene_bytes};
 use crate::commands::{Overrides, check_repr, load_scene_or_mesh};
 use crate::error::{Error, Result};
-use crate::extract::{ExtractMethod, extract};
+use crate::extract::{ExtractMethod, Field, extract};
 use crate::geometry::{Geometry, aabb};
 use crate::grid::{SdfGrid, sample_mesh};
 use crate::march::MarchParams;
@@ -390,6 +390,7 @@ fn build(scene: &Scene, b: Build, budget: &MemoryBudget) -> Result<Built> {
             let cells = (grid.dims - 1).max_element();
             let mesh = extract(
                 &|p: DVec3| grid.trilinear(p.as_vec3()) as f64,
+                Field::Arbitrary,
                 &aabb(lo, hi),
                 cells,
                 ExtractMethod::MarchingCubes,
