@@ -458,7 +458,7 @@ impl Blocks {
         }
         let b = i / BLOCK_CELLS;
         let hi = b.min(self.n[a] - 1);
-        (hi, if i % BLOCK_CELLS == 0 && i > 0 { b - 1 } else { hi })
+        (hi, if i.is_multiple_of(BLOCK_CELLS) && i > 0 { b - 1 } else { hi })
     }
 
     /// [`Blocks::along_axis`] for x.
