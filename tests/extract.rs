@@ -315,8 +315,8 @@ fn distance_bound_samples_a_shell() {
     let rot = DMat3::from_euler(glam::EulerRot::XYZ, 0.3, 0.5, 0.2);
     let boxed = rotated_box(DVec3::new(0.6, 0.5, 0.4), rot);
     let sphere = |p: DVec3| p.length() - 0.9;
-    let cases: [(&str, &(dyn Fn(DVec3) -> f64 + Sync), f64); 2] =
-        [("sphere", &sphere, 0.25), ("box", &boxed, 0.3)];
+    type Field3 = dyn Fn(DVec3) -> f64 + Sync;
+    let cases: [(&str, &Field3, f64); 2] = [("sphere", &sphere, 0.25), ("box", &boxed, 0.3)];
     for (name, f, most) in cases {
         let calls = AtomicUsize::new(0);
         let counted = |p: DVec3| {
