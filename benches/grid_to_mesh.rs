@@ -32,7 +32,8 @@
 //!   baselines: `mcubes` (classic marching cubes, linear interpolation) and
 //!   fast-surface-nets (with `--features peers`), and our marching cubes and tetrahedra.
 //!
-//! `cargo bench --features peers --bench grid_to_mesh` runs it all; without `peers` only
+//! `cargo bench --features peers --bench grid_to_mesh` runs it all (`-- --only WORD`: only
+//! the parts whose label, such as `speed sphere` or `sweep csg`, contains WORD); without `peers` only
 //! our methods are measured. Without `--bench` in the arguments (as under `cargo test
 //! --all-targets`) it runs a quick smoke check at a small resolution instead.
 
@@ -685,11 +686,24 @@ fn main() {
         plan.threads,
         std::thread::available_parallelism().map_or(0, |n| n.get())
     );
+    // `--only WORD`: only the parts whose label ("speed sphere", "sweep csg", ...) contains WORD.
+    let only = args.iter().position(|a| a == "--only").and_then(|i| args.get(i + 1)).cloned();
+    let run = |label: &str| only.as_deref().is_none_or(|w| label.contains(w));
     let (sphere, csg, boxes) =
         (sphere_case(), scene_case("thesis_sdf_csg.toml"), scene_case("thesis_sdf_boxes.toml"));
-    speed(&sphere, &plan);
-    speed(&csg, &plan);
-    sweep(&boxes, &plan);
-    sweep(&off_grid(scene_case("thesis_sdf_boxes.toml"), 0.0137), &plan);
-    sweep(&csg, &plan);
+    if run("speed sphere") {
+        speed(&sphere, &plan);
+    }
+    if run("speed csg") {
+        speed(&csg, &plan);
+    }
+    if run("sweep boxes") {
+        sweep(&boxes, &plan);
+    }
+    if run("sweep boxes off-grid") {
+        sweep(&off_grid(scene_case("thesis_sdf_boxes.toml"), 0.0137), &plan);
+    }
+    if run("sweep csg") {
+        sweep(&csg, &plan);
+    }
 }
