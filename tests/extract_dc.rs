@@ -94,3 +94,26 @@ fn dual_contouring_facets_straddle_a_sphere() {
     // Vertices outside by less than three times the mesh's mean distance.
     assert!(vmean > 0.0 && vmean < 3.0 * dm, "vertex offset {vmean} vs mean distance {dm}");
 }
+
+/// Thin wedges: the rim of a sphere with a spherical bite (a 61.5° edge) and the edge of a
+/// lens pass between the grid points of cells they cross. Vertices reach out of their cells
+/// and slide along the crease, so every vertex stays within 0.15 cells of the surface
+/// (clamped into their cells some were 0.3 cells inside); closed and manifold.
+#[test]
+fn thin_wedges_keep_their_vertices_on_the_surface() {
+    let sphere = |p: DVec3, c: DVec3, r: f64| (p - c).length() - r;
+    let bite = move |p: DVec3| sphere(p, DVec3::ZERO, 1.0).max(-sphere(p, DVec3::new(0.3, 0.3, -0.8), 0.7));
+    let lens = move |p: DVec3| sphere(p, DVec3::X * -0.5, 1.0).max(sphere(p, DVec3::X * 0.5, 1.0));
+    let bounds = Aabb::new(Vec3A::splat(-1.05), Vec3A::splat(1.05));
+    let fields: [(&str, &(dyn Fn(DVec3) -> f64 + Sync)); 2] = [("bite", &bite), ("lens", &lens)];
+    for (name, f) in fields {
+        for res in [32u32, 64, 128] {
+            let h = 2.1 / res as f64;
+            let m = extract(&f, Field::DistanceBound, &bounds, res, ExtractMethod::DualContouring);
+            let worst = m.positions.iter().map(|p| f(p.as_dvec3()).abs()).fold(0.0, f64::max) / h;
+            println!("{name} res {res}: {} triangles, worst vertex {worst:.3} cells", m.triangles.len());
+            assert!(m.is_closed(), "{name} res {res}: {} boundary edges", m.boundary_edge_count());
+            assert!(worst < 0.15, "{name} res {res}: a vertex {worst} cells off the surface");
+        }
+    }
+}
