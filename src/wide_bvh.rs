@@ -81,7 +81,7 @@ pub struct WideBvh {
 }
 
 /// A ray prepared for the eight-box test of a [`Node`].
-trait BoxTest: Copy {
+pub(crate) trait BoxTest: Copy {
     /// Prepares the ray `origin + t * dir`.
     fn new(origin: Vec3, dir: Vec3) -> Self;
     /// The lanes whose child box the ray enters within `[t_min, t_max]` (bit `l` for lane
@@ -104,7 +104,7 @@ fn box_setup(dir: Vec3) -> ([f32; 3], [usize; 3], [usize; 3]) {
 
 /// The portable box test: each node as two halves of four lanes ([`F4`]).
 #[derive(Clone, Copy, Debug)]
-struct BoxRay {
+pub(crate) struct BoxRay {
     origin: [F4; 3],
     inv: [F4; 3],
     near: [usize; 3],
@@ -152,7 +152,7 @@ impl BoxTest for BoxRay {
 /// [`WideBvh::avx2`] says the CPU has it.
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy, Debug)]
-struct BoxRayAvx2 {
+pub(crate) struct BoxRayAvx2 {
     origin: [core::arch::x86_64::__m256; 3],
     inv: [core::arch::x86_64::__m256; 3],
     near: [usize; 3],
@@ -414,12 +414,7 @@ impl WideBvh {
         w.fill(bvh, boxes, &corners, 0, children, 1);
         w.nodes.shrink_to_fit();
         w.packets.shrink_to_fit();
-        #[cfg(target_arch = "x86_64")]
-        {
-            w.avx2 = std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("popcnt")
-                && std::arch::is_x86_feature_detected!("bmi1");
-        }
+        w.avx2 = avx2_detected();
         w
     }
 
@@ -646,9 +641,11 @@ macro_rules! with_stack {
     };
 }
 
-/// [`WideBvh::closest_hit`] with the box test `B` and a stack from [`with_stack`].
+/// [`WideBvh::closest_hit`] with the box test `B` and a stack from [`with_stack`]. Inlined
+/// into its callers, so that under `#[target_feature(enable = "avx2,popcnt,bmi1")]` (which
+/// alone may use [`BoxRayAvx2`]) all of it is compiled with AVX2.
 #[inline(always)]
-fn closest_walk<B: BoxTest>(
+pub(crate) fn closest_walk<B: BoxTest>(
     bvh: &WideBvh,
     origin: Vec3,
     dir: Vec3,
@@ -734,11 +731,13 @@ fn closest_walk_in<B: BoxTest>(
             let p = &bvh.packets[packet as usize];
             tests += u64::from((cur & 3) + 1);
             let sheared = sheared.get_or_insert_with(|| ShearedRay::new(origin, dir));
-            let t = sheared.intersect4(&p.tri, t_min, t_max);
-            for (lane, &tl) in t.iter().enumerate() {
-                // NaN (a miss) fails the comparison.
-                if tl <= t_max {
-                    t_max = tl;
+            let (t, mut hits) = sheared.intersect4(&p.tri, t_min, t_max);
+            // The nearest hit lane (the last of equals, as a lane-by-lane scan would take).
+            while hits != 0 {
+                let lane = hits.trailing_zeros() as usize;
+                hits &= hits - 1;
+                if t[lane] <= t_max {
+                    t_max = t[lane];
                     best = Some((packet, lane));
                 }
             }
@@ -817,13 +816,27 @@ fn any_walk_in<B: BoxTest>(
             let p = &bvh.packets[((cur & !LEAF) >> 2) as usize];
             stats.prim_tests += u64::from((cur & 3) + 1);
             let sheared = sheared.get_or_insert_with(|| ShearedRay::new(origin, dir));
-            if sheared.intersect4(&p.tri, t_min, t_max).iter().any(|t| !t.is_nan()) {
+            if sheared.intersect4(&p.tri, t_min, t_max).1 != 0 {
                 found = true;
                 break;
             }
         }
     }
     found
+}
+
+/// Whether the CPU has AVX2, POPCNT and BMI1 (the walks' fast box test).
+fn avx2_detected() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("popcnt")
+            && std::arch::is_x86_feature_detected!("bmi1")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
 }
 
 fn empty_node() -> Node {
