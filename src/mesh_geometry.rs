@@ -1,7 +1,9 @@
 //! Triangle meshes in the tracer: a BVH per mesh (an obvhs PLOC BVH2 collapsed into the
 //! 8-wide [`WideBvh`] with triangle corners pre-gathered into leaf packets; the triangle
 //! list reordered into leaf order), the watertight ray/triangle test, flat or smooth
-//! (vertex-normal) shading, instancing under a transform, and exact byte counts.
+//! (vertex-normal) shading, instancing under a transform, and exact byte counts. Where the
+//! CPU has AVX2 a closest hit runs whole (ray setup, walk, hit record) in one function
+//! compiled for it, with no call in between.
 
 use std::time::{Duration, Instant};
 
@@ -15,7 +17,9 @@ use crate::mesh::TriangleMesh;
 pub use crate::shape::Shading;
 use crate::transform::Transform;
 use crate::triangle::ShearedRay;
-use crate::wide_bvh::{LeafHit, WideBvh};
+#[cfg(target_arch = "x86_64")]
+use crate::wide_bvh::BoxRayAvx2;
+use crate::wide_bvh::{BoxRay, BoxTest, LeafHit, WideBvh, closest_walk};
 
 /// A triangle mesh ready for tracing.
 pub struct MeshGeometry {
@@ -152,6 +156,55 @@ impl MeshGeometry {
         self.bvh.bytes_used()
     }
 
+    /// [`Geometry::closest_hit`] with the AVX2 box test: the whole of it (ray setup, walk and
+    /// hit record) compiled with AVX2, in one function.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,popcnt,bmi1")]
+    fn closest_hit_avx2(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
+        self.closest_hit_with::<BoxRayAvx2>(ray, t_min, t_max, stats)
+    }
+
+    /// [`Geometry::closest_hit`] with the portable box test.
+    #[inline(never)]
+    fn closest_hit_portable(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
+        self.closest_hit_with::<BoxRay>(ray, t_min, t_max, stats)
+    }
+
+    /// [`Geometry::closest_hit`] with the box test `B` (inlined, see [`closest_walk`]).
+    #[inline(always)]
+    fn closest_hit_with<B: BoxTest>(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        stats: &mut RayStats,
+    ) -> Option<Hit> {
+        let local = if self.transform.identity { *ray } else { self.transform.ray_to_local(ray) };
+        let LeafHit { triangle: i, t, corners: [a, b, c] } =
+            closest_walk::<B>(&self.bvh, local.origin, local.dir, t_min, t_max, stats)?;
+        let geometric = (b - a).cross(c - a);
+        let normal = self.transform.normal_to_world(geometric);
+        let mut shading_normal = normal;
+        if let Some(normals) = &self.normals {
+            // The same test on the winner alone, for its barycentrics (bit-identical `t`).
+            let bary = ShearedRay::new(local.origin, local.dir)
+                .intersect(a, b, c, t, t)
+                .map_or([1.0 / 3.0; 3], |h| h.bary);
+            let t = self.triangles[i as usize];
+            let s = normals[t[0] as usize] * bary[0]
+                + normals[t[1] as usize] * bary[1]
+                + normals[t[2] as usize] * bary[2];
+            // Keep the side the geometric normal is on, so inside/outside stays consistent.
+            if s.dot(geometric) > 0.0 {
+                shading_normal = self.transform.normal_to_world(s);
+            }
+        }
+        let point = ray.at(t);
+        let local_point = local.at(t);
+        let m = max_abs(point).max(max_abs(ray.origin)).max(max_abs(local_point) * self.transform.max_scale);
+        Some(Hit { t, point, normal, shading_normal, material: self.material, error: f32_error(m) })
+    }
+
     #[inline]
     fn corners(&self, i: u32) -> [Vec3; 3] {
         let t = self.triangles[i as usize];
@@ -165,36 +218,12 @@ impl Geometry for MeshGeometry {
     }
 
     fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
-        let local = if self.transform.identity { *ray } else { self.transform.ray_to_local(ray) };
-        let LeafHit { triangle: i, t, corners: [a, b, c] } =
-            self.bvh.closest_hit(local.origin, local.dir, t_min, t_max, stats)?;
-        let geometric = (b - a).cross(c - a);
-        let mut shading = geometric;
-        if let Some(normals) = &self.normals {
-            // The same test on the winner alone, for its barycentrics (bit-identical `t`).
-            let bary = ShearedRay::new(local.origin, local.dir)
-                .intersect(a, b, c, t, t)
-                .map_or([1.0 / 3.0; 3], |h| h.bary);
-            let t = self.triangles[i as usize];
-            let s = normals[t[0] as usize] * bary[0]
-                + normals[t[1] as usize] * bary[1]
-                + normals[t[2] as usize] * bary[2];
-            // Keep the side the geometric normal is on, so inside/outside stays consistent.
-            if s.dot(geometric) > 0.0 {
-                shading = s;
-            }
+        #[cfg(target_arch = "x86_64")]
+        if self.bvh.uses_avx2() {
+            // SAFETY: `uses_avx2` is only true where the CPU has AVX2, POPCNT and BMI1.
+            return unsafe { self.closest_hit_avx2(ray, t_min, t_max, stats) };
         }
-        let point = ray.at(t);
-        let local_point = local.at(t);
-        let m = max_abs(point).max(max_abs(ray.origin)).max(max_abs(local_point) * self.transform.max_scale);
-        Some(Hit {
-            t,
-            point,
-            normal: self.transform.normal_to_world(geometric),
-            shading_normal: self.transform.normal_to_world(shading),
-            material: self.material,
-            error: f32_error(m),
-        })
+        self.closest_hit_portable(ray, t_min, t_max, stats)
     }
 
     fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {

@@ -2,7 +2,9 @@
 //! so it runs along +z, and edge functions are evaluated in 2D with a fallback to f64 when
 //! one is exactly zero. Rays through shared edges and vertices of a closed mesh never pass
 //! between its triangles. [`ShearedRay::intersect4`] runs the same test on four triangles
-//! at once (structure-of-arrays, vectorised by the compiler) with bit-identical results.
+//! at once (structure-of-arrays, vectorised by the compiler) with bit-identical results,
+//! returning a hit mask and skipping the distances and their division when no lane's edge
+//! functions agree in sign.
 
 use std::ops::{Add, Div, Mul, Sub};
 
@@ -98,10 +100,13 @@ pub type Tri4 = [[[f32; 4]; 3]; 3];
 
 impl ShearedRay {
     /// [`ShearedRay::intersect`] on the four triangles of `tri` at once: per lane, the hit's
-    /// `t` (bit-identical to the one-triangle test) or `f32::NAN` for a miss. Lanes with an
-    /// edge function exactly zero in f32 are redone one at a time in f64, as there.
+    /// `t` (bit-identical to the one-triangle test), and a mask with bit `l` set where lane
+    /// `l` hits (the `t` of other lanes is unspecified). Lanes with an edge function exactly
+    /// zero in f32 are redone one at a time in f64, as there. Returns at once, before the
+    /// distances and their division, when no lane's edge functions agree in sign (most
+    /// packets a ray visits).
     #[inline(always)]
-    pub fn intersect4(&self, tri: &Tri4, t_min: f32, t_max: f32) -> [f32; 4] {
+    pub fn intersect4(&self, tri: &Tri4, t_min: f32, t_max: f32) -> ([f32; 4], u32) {
         let [kx, ky, kz] = self.k;
         let (sx, sy, sz) = (F4::splat(self.shear.x), F4::splat(self.shear.y), F4::splat(self.shear.z));
         let (ox, oy, oz) =
@@ -123,18 +128,19 @@ impl ShearedRay {
             self.edges_f64(tri, &mut uvw);
             (u, v, w) = (F4::load(&uvw[0]), F4::load(&uvw[1]), F4::load(&uvw[2]));
         }
-        let outside = (u.lt(zero) | v.lt(zero) | w.lt(zero)) & (zero.lt(u) | zero.lt(v) | zero.lt(w));
+        // Inside: no edge function of either sign against the others (for numbers, the
+        // negation of "some negative and some positive"; NaN lanes, unused or degenerate,
+        // are never inside, as their `t` would be NaN).
+        let inside = (zero.le(u) & zero.le(v) & zero.le(w)) | (u.le(zero) & v.le(zero) & w.le(zero));
         let det = u.add(v).add(w);
+        let candidates = inside & !det.eq(zero) & 0xf;
+        if candidates == 0 {
+            return ([0.0; 4], 0);
+        }
         let t_scaled = u.mul(sz.mul(az)).add(v.mul(sz.mul(bz))).add(w.mul(sz.mul(cz)));
         let t = t_scaled.mul(F4::splat(1.0).div(det));
-        let ok = !outside & !det.eq(zero) & F4::splat(t_min).le(t) & t.le(F4::splat(t_max)) & 0xf;
-        let mut out = t.to_array();
-        for (l, x) in out.iter_mut().enumerate() {
-            if ok & (1 << l) == 0 {
-                *x = f32::NAN;
-            }
-        }
-        out
+        let ok = candidates & F4::splat(t_min).le(t) & t.le(F4::splat(t_max));
+        (t.to_array(), ok)
     }
 
     /// The edge functions of the lanes of `tri` where one is exactly zero in f32, redone

@@ -1,4 +1,5 @@
-//! The per-mesh 8-wide BVH: an obvhs `Bvh2` collapsed into nodes of eight children whose
+//! The per-mesh 8-wide BVH: an obvhs `Bvh2` collapsed (grouped by a surface area heuristic
+//! dynamic programme, [`WideBvh::from_bvh2`]) into nodes of eight children whose
 //! boxes are stored as structure-of-arrays (so one ray tests all eight at once: one AVX2
 //! instruction per step where the CPU has it, detected at run time, else two SSE halves),
 //! with leaves of up to four triangles pre-gathered into a [`Tri4`] packet for
@@ -25,6 +26,12 @@ pub const WIDTH: usize = 8;
 pub const LEAF_MAX: usize = 4;
 /// Marks a child reference as a leaf: `LEAF | packet << 2 | (count - 1)`.
 const LEAF: u32 = 1 << 31;
+/// Cost of a leaf packet test relative to a node test in the surface area heuristic that
+/// groups the BVH2 into wide nodes ([`WideBvh::from_bvh2`]). With obvhs's leaves of up to
+/// four triangles it only decides whether a subtree of at most four triangles (rare: obvhs
+/// has already merged most into a leaf) becomes one packet; 1, 1.5 and 2 built the same
+/// tree for the armadillo.
+const PACKET_COST: f32 = 1.5;
 /// Child reference of an unused slot (its box is empty, so it is never entered).
 const NONE: u32 = u32::MAX;
 /// Traversal stack entries kept on the call stack (enough for a BVH 36 levels deep); a
@@ -81,7 +88,7 @@ pub struct WideBvh {
 }
 
 /// A ray prepared for the eight-box test of a [`Node`].
-trait BoxTest: Copy {
+pub(crate) trait BoxTest: Copy {
     /// Prepares the ray `origin + t * dir`.
     fn new(origin: Vec3, dir: Vec3) -> Self;
     /// The lanes whose child box the ray enters within `[t_min, t_max]` (bit `l` for lane
@@ -104,7 +111,7 @@ fn box_setup(dir: Vec3) -> ([f32; 3], [usize; 3], [usize; 3]) {
 
 /// The portable box test: each node as two halves of four lanes ([`F4`]).
 #[derive(Clone, Copy, Debug)]
-struct BoxRay {
+pub(crate) struct BoxRay {
     origin: [F4; 3],
     inv: [F4; 3],
     near: [usize; 3],
@@ -152,7 +159,7 @@ impl BoxTest for BoxRay {
 /// [`WideBvh::avx2`] says the CPU has it.
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy, Debug)]
-struct BoxRayAvx2 {
+pub(crate) struct BoxRayAvx2 {
     origin: [core::arch::x86_64::__m256; 3],
     inv: [core::arch::x86_64::__m256; 3],
     near: [usize; 3],
@@ -396,83 +403,63 @@ mod f4 {
     }
 }
 
-/// A child being gathered during the collapse: its box and reference.
-type Child = (Aabb, u32);
-
 impl WideBvh {
     /// Collapses `bvh`, built over the boxes `boxes` of the triangles `corners(i)`, with
-    /// its primitive indices already in leaf order (`primitive_indices[i] == i`). Leaves
-    /// with more than [`LEAF_MAX`] triangles are split into several packets.
+    /// its primitive indices already in leaf order (`primitive_indices[i] == i`). Which BVH2
+    /// subtrees become the up to eight children of each wide node, and which (of at most
+    /// [`LEAF_MAX`] triangles) one leaf packet, is chosen by the surface area heuristic: a
+    /// dynamic programme over the BVH2 (after Ylitie, Karras and Laine 2017, with the costs
+    /// of our node and packet tests, [`PACKET_COST`]). Leaves with more than [`LEAF_MAX`]
+    /// triangles are split into several packets.
     pub fn from_bvh2(bvh: &Bvh2, boxes: &[Aabb], corners: impl Fn(u32) -> [Vec3; 3]) -> Self {
         let mut w = WideBvh::default();
         if bvh.nodes.is_empty() {
             return w;
         }
-        let root = &bvh.nodes[0];
         w.nodes.push(empty_node());
-        let children = if root.is_leaf() { vec![(*root.aabb(), 0)] } else { Self::gather(bvh, 0) };
-        w.fill(bvh, boxes, &corners, 0, children, 1);
+        w.depth = 1;
+        let root = &bvh.nodes[0];
+        if root.is_leaf() {
+            let prims: Vec<u32> = bvh.primitive_indices.clone();
+            let reference = w.leaf(boxes, &corners, &prims, 2);
+            set_lane(&mut w.nodes[0], 0, root.aabb(), reference);
+        } else {
+            let plan = SahPlan::new(bvh, PACKET_COST);
+            w.fill(bvh, &plan, boxes, &corners, 0, 0, 1);
+        }
         w.nodes.shrink_to_fit();
         w.packets.shrink_to_fit();
-        #[cfg(target_arch = "x86_64")]
-        {
-            w.avx2 = std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("popcnt")
-                && std::arch::is_x86_feature_detected!("bmi1");
-        }
+        w.avx2 = avx2_detected();
         w
     }
 
-    /// Up to eight descendants of inner node `node` to become one wide node's children:
-    /// starting from its two children, the inner child of largest surface area is opened
-    /// while there is room. Returns Bvh2 node indices.
-    fn gather(bvh: &Bvh2, node: usize) -> Vec<Child> {
-        let n = &bvh.nodes[node];
-        let mut kids: Vec<Child> = (0..2)
-            .map(|i| {
-                let c = n.first_index + i;
-                (*bvh.nodes[c as usize].aabb(), c)
-            })
-            .collect();
-        while kids.len() < WIDTH {
-            let open = kids
-                .iter()
-                .enumerate()
-                .filter(|(_, (_, c))| !bvh.nodes[*c as usize].is_leaf())
-                .max_by(|a, b| a.1.0.half_area().total_cmp(&b.1.0.half_area()))
-                .map(|(i, _)| i);
-            let Some(i) = open else { break };
-            let (_, c) = kids.swap_remove(i);
-            let f = bvh.nodes[c as usize].first_index;
-            kids.push((*bvh.nodes[f as usize].aabb(), f));
-            kids.push((*bvh.nodes[f as usize + 1].aabb(), f + 1));
-        }
-        kids
-    }
-
-    /// Fills wide node `at` (already pushed) with `kids` (Bvh2 node indices), recursing.
+    /// Fills wide node `at` (already pushed) with the children `plan` gives the inner BVH2
+    /// node `node`, recursing.
+    #[allow(clippy::too_many_arguments)]
     fn fill(
         &mut self,
         bvh: &Bvh2,
+        plan: &SahPlan,
         boxes: &[Aabb],
         corners: &impl Fn(u32) -> [Vec3; 3],
         at: usize,
-        kids: Vec<Child>,
+        node: usize,
         depth: usize,
     ) {
         self.depth = self.depth.max(depth);
-        for (lane, (b, c)) in kids.into_iter().enumerate() {
-            let n = &bvh.nodes[c as usize];
-            let reference = if n.is_leaf() {
-                let prims: Vec<u32> = (n.first_index..n.first_index + n.prim_count)
-                    .map(|i| bvh.primitive_indices[i as usize])
-                    .collect();
+        let mut kids = Vec::with_capacity(WIDTH);
+        plan.wide_children(bvh, node, &mut kids);
+        let mut prims = Vec::new();
+        for (lane, (c, packet)) in kids.into_iter().enumerate() {
+            let b = *bvh.nodes[c].aabb();
+            let reference = if packet {
+                prims.clear();
+                subtree_prims(bvh, c, &mut prims);
                 self.leaf(boxes, corners, &prims, depth + 1)
             } else {
                 let index = self.nodes.len();
                 self.nodes.push(empty_node());
-                let grand = Self::gather(bvh, c as usize);
-                self.fill(bvh, boxes, corners, index, grand, depth + 1);
+                self.fill(bvh, plan, boxes, corners, index, c, depth + 1);
                 index as u32
             };
             set_lane(&mut self.nodes[at], lane, &b, reference);
@@ -646,9 +633,11 @@ macro_rules! with_stack {
     };
 }
 
-/// [`WideBvh::closest_hit`] with the box test `B` and a stack from [`with_stack`].
+/// [`WideBvh::closest_hit`] with the box test `B` and a stack from [`with_stack`]. Inlined
+/// into its callers, so that under `#[target_feature(enable = "avx2,popcnt,bmi1")]` (which
+/// alone may use [`BoxRayAvx2`]) all of it is compiled with AVX2.
 #[inline(always)]
-fn closest_walk<B: BoxTest>(
+pub(crate) fn closest_walk<B: BoxTest>(
     bvh: &WideBvh,
     origin: Vec3,
     dir: Vec3,
@@ -734,11 +723,13 @@ fn closest_walk_in<B: BoxTest>(
             let p = &bvh.packets[packet as usize];
             tests += u64::from((cur & 3) + 1);
             let sheared = sheared.get_or_insert_with(|| ShearedRay::new(origin, dir));
-            let t = sheared.intersect4(&p.tri, t_min, t_max);
-            for (lane, &tl) in t.iter().enumerate() {
-                // NaN (a miss) fails the comparison.
-                if tl <= t_max {
-                    t_max = tl;
+            let (t, mut hits) = sheared.intersect4(&p.tri, t_min, t_max);
+            // The nearest hit lane (the last of equals, as a lane-by-lane scan would take).
+            while hits != 0 {
+                let lane = hits.trailing_zeros() as usize;
+                hits &= hits - 1;
+                if t[lane] <= t_max {
+                    t_max = t[lane];
                     best = Some((packet, lane));
                 }
             }
@@ -817,13 +808,134 @@ fn any_walk_in<B: BoxTest>(
             let p = &bvh.packets[((cur & !LEAF) >> 2) as usize];
             stats.prim_tests += u64::from((cur & 3) + 1);
             let sheared = sheared.get_or_insert_with(|| ShearedRay::new(origin, dir));
-            if sheared.intersect4(&p.tri, t_min, t_max).iter().any(|t| !t.is_nan()) {
+            if sheared.intersect4(&p.tri, t_min, t_max).1 != 0 {
                 found = true;
                 break;
             }
         }
     }
     found
+}
+
+/// Whether the CPU has AVX2, POPCNT and BMI1 (the walks' fast box test).
+fn avx2_detected() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("popcnt")
+            && std::arch::is_x86_feature_detected!("bmi1")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Appends the primitives of the BVH2 subtree at `node` to `out`.
+fn subtree_prims(bvh: &Bvh2, node: usize, out: &mut Vec<u32>) {
+    let n = &bvh.nodes[node];
+    if n.is_leaf() {
+        out.extend((n.first_index..n.first_index + n.prim_count).map(|i| bvh.primitive_indices[i as usize]));
+    } else {
+        subtree_prims(bvh, n.first_index as usize, out);
+        subtree_prims(bvh, n.first_index as usize + 1, out);
+    }
+}
+
+/// The SAH-optimal grouping of a BVH2 into wide nodes and packets
+/// ([`WideBvh::from_bvh2_sah`]). Per BVH2 node and slot budget `j` (1 to [`WIDTH`]), how its
+/// subtree is best covered by at most `j` child slots of a wide node.
+struct SahPlan {
+    /// `choice[node][j - 1]`: [`SahPlan::PACKET`] (one slot, a leaf packet),
+    /// [`SahPlan::NODE`] (one slot, a wide node of its own) or `SPLIT | kl << 3 | kr`
+    /// (its two children covered with `kl` and `kr` slots).
+    choice: Vec<[u8; WIDTH]>,
+    /// Per inner node, `kl << 3 | kr`: its children's slots as a wide node of its own.
+    wide: Vec<u8>,
+}
+
+impl SahPlan {
+    const PACKET: u8 = 0;
+    const NODE: u8 = 1;
+    const SPLIT: u8 = 64;
+
+    fn new(bvh: &Bvh2, packet_cost: f32) -> Self {
+        let count = bvh.nodes.len();
+        let mut cost = vec![[0.0f32; WIDTH]; count];
+        let mut choice = vec![[Self::PACKET; WIDTH]; count];
+        let mut wide = vec![0u8; count];
+        let mut prims = vec![0u32; count];
+        // Parents before children; visited in reverse, children come first.
+        let mut order = Vec::with_capacity(count);
+        let mut stack = vec![0usize];
+        while let Some(i) = stack.pop() {
+            order.push(i);
+            let n = &bvh.nodes[i];
+            if !n.is_leaf() {
+                stack.extend([n.first_index as usize, n.first_index as usize + 1]);
+            }
+        }
+        for &i in order.iter().rev() {
+            let n = &bvh.nodes[i];
+            let area = n.aabb().half_area();
+            if n.is_leaf() {
+                prims[i] = n.prim_count;
+                // A leaf over LEAF_MAX becomes a node of packets (see `WideBvh::leaf`).
+                let packets = (n.prim_count as usize).div_ceil(LEAF_MAX) as f32;
+                let c =
+                    if packets <= 1.0 { packet_cost * area } else { area * (1.0 + packet_cost * packets) };
+                cost[i] = [c; WIDTH];
+                continue;
+            }
+            let (l, r) = (n.first_index as usize, n.first_index as usize + 1);
+            prims[i] = prims[l] + prims[r];
+            // Best split of `j` slots between the two children, j = 2..=WIDTH.
+            let mut split = [(f32::INFINITY, 0u8); WIDTH];
+            for (j, best) in split.iter_mut().enumerate().skip(1) {
+                for kl in 1..=j {
+                    let c = cost[l][kl - 1] + cost[r][j - kl];
+                    if c < best.0 {
+                        *best = (c, ((kl as u8) << 3) | (j + 1 - kl) as u8);
+                    }
+                }
+            }
+            wide[i] = split[WIDTH - 1].1;
+            let as_node = area + split[WIDTH - 1].0;
+            let as_packet = if prims[i] as usize <= LEAF_MAX { packet_cost * area } else { f32::INFINITY };
+            (cost[i][0], choice[i][0]) =
+                if as_packet <= as_node { (as_packet, Self::PACKET) } else { (as_node, Self::NODE) };
+            for j in 1..WIDTH {
+                (cost[i][j], choice[i][j]) = if split[j].0 < cost[i][j - 1] {
+                    (split[j].0, Self::SPLIT | split[j].1)
+                } else {
+                    (cost[i][j - 1], choice[i][j - 1])
+                };
+            }
+        }
+        SahPlan { choice, wide }
+    }
+
+    /// The children of the wide node made from inner BVH2 node `node`: BVH2 nodes, each
+    /// with whether it becomes a packet (else a wide node).
+    fn wide_children(&self, bvh: &Bvh2, node: usize, out: &mut Vec<(usize, bool)>) {
+        let n = &bvh.nodes[node];
+        let w = self.wide[node];
+        self.cover(bvh, n.first_index as usize, (w >> 3) as usize, out);
+        self.cover(bvh, n.first_index as usize + 1, (w & 7) as usize, out);
+    }
+
+    /// Appends the slots covering `node` with at most `slots` slots.
+    fn cover(&self, bvh: &Bvh2, node: usize, slots: usize, out: &mut Vec<(usize, bool)>) {
+        match self.choice[node][slots - 1] {
+            Self::PACKET => out.push((node, true)),
+            Self::NODE => out.push((node, false)),
+            c => {
+                let first = bvh.nodes[node].first_index as usize;
+                self.cover(bvh, first, ((c >> 3) & 7) as usize, out);
+                self.cover(bvh, first + 1, (c & 7) as usize, out);
+            }
+        }
+    }
 }
 
 fn empty_node() -> Node {
