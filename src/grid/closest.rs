@@ -17,15 +17,16 @@
 //! stays about constant. A packet's four triangles get Ericson's test with SIMD, without
 //! branches (every region evaluated, the scalar code's region selected per lane) and with
 //! the same `f32` operations in the same order as [`closest_point_on_triangle`], so its
-//! distances and points are bit for bit those of the scalar test. [`TriangleBvh::nearest`] walks the wide nodes
-//! depth first, nearer children first, pruning every node whose bound (squared distance)
-//! is farther than the best triangle so far or than a caller-supplied upper bound.
-//! [`TriangleBvh::nearest_group`] answers up to [`GROUP_MAX`] nearby points in one walk
-//! (a node is opened when any of them needs it, each prunes by its own best), which shares
-//! the node loads and overlaps the points' independent arithmetic; where the CPU has AVX2
-//! (detected at run time) its node test takes two points per instruction, with the same
-//! operations in the same order as the portable one (so the same results). Neither
-//! allocates: the caller passes a reusable [`NodeStack`] or [`GroupStack`].
+//! distances and points are bit for bit those of the scalar test.
+//! [`TriangleBvh::nearest`] walks the wide nodes depth first, nearer children first,
+//! pruning every node whose bound (squared distance) is farther than the best triangle so
+//! far or than a caller-supplied upper bound. [`TriangleBvh::nearest_group`] answers up to
+//! [`GROUP_MAX`] nearby points in one walk (a node is opened when any of them needs it,
+//! each prunes by its own best), which shares the node loads and overlaps the points'
+//! independent arithmetic; where the CPU has AVX2 (detected at run time) its node and
+//! leaf tests take two points per instruction, with the same operations in the same order
+//! as the portable ones (so the same results). Neither allocates: the caller passes a
+//! reusable [`NodeStack`] or [`GroupStack`].
 //! [`TriangleBvh::axis_segment_may_meet`] is a conservative segment test for signing by
 //! regions.
 
@@ -660,10 +661,10 @@ fn node_within(n: &Node4, qs: &[[Vec4; 3]; GROUP_MAX], best2: &[f32; GROUP_MAX],
 
 #[cfg(target_arch = "x86_64")]
 use core::arch::x86_64::{
-    __m256, _CMP_LE_OQ, _mm_min_ps, _mm256_add_ps, _mm256_andnot_ps, _mm256_blendv_ps, _mm256_broadcast_ps,
-    _mm256_castps256_ps128, _mm256_cmp_ps, _mm256_extractf128_ps, _mm256_max_ps, _mm256_min_ps,
-    _mm256_movemask_ps, _mm256_mul_ps, _mm256_set_m128, _mm256_set1_ps, _mm256_setzero_ps, _mm256_sqrt_ps,
-    _mm256_sub_ps,
+    __m256, _CMP_LE_OQ, _mm_min_ps, _mm256_add_ps, _mm256_and_ps, _mm256_andnot_ps, _mm256_blendv_ps,
+    _mm256_broadcast_ps, _mm256_castps256_ps128, _mm256_cmp_ps, _mm256_div_ps, _mm256_extractf128_ps,
+    _mm256_max_ps, _mm256_min_ps, _mm256_movemask_ps, _mm256_mul_ps, _mm256_set_m128, _mm256_set1_ps,
+    _mm256_setzero_ps, _mm256_sqrt_ps, _mm256_storeu_ps, _mm256_sub_ps,
 };
 
 /// The group's points in pairs for the AVX2 node test: entry `j` holds point `2 j` in the
@@ -765,6 +766,133 @@ unsafe fn avx2_node_within(
         let lo = _mm256_castps256_ps128(nearest);
         let hi = _mm256_extractf128_ps::<1>(nearest);
         (within_all, Vec4::from(_mm_min_ps(lo, hi)))
+    }
+}
+
+/// [`Tri4::closest`] for two points at once (`q`: point `2 j` in the low four lanes,
+/// `2 j + 1` in the high four, as [`pair_coordinates`] gives them) with AVX: the same
+/// operations in the same order, so the same bits. Safety: only for code running with AVX
+/// enabled.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn avx2_tri_closest(t: &Tri4, q: &[__m256; 3]) -> (__m256, [__m256; 3]) {
+    // SAFETY: AVX intrinsics; the caller runs with AVX enabled.
+    unsafe {
+        let sub = |u: [__m256; 3], v: [__m256; 3]| {
+            [_mm256_sub_ps(u[0], v[0]), _mm256_sub_ps(u[1], v[1]), _mm256_sub_ps(u[2], v[2])]
+        };
+        let dot = |u: [__m256; 3], v: [__m256; 3]| {
+            _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(u[0], v[0]), _mm256_mul_ps(u[1], v[1])),
+                _mm256_mul_ps(u[2], v[2]),
+            )
+        };
+        // `a + e s` per coordinate.
+        let along = |a: [__m256; 3], e: [__m256; 3], s: __m256| {
+            [
+                _mm256_add_ps(a[0], _mm256_mul_ps(e[0], s)),
+                _mm256_add_ps(a[1], _mm256_mul_ps(e[1], s)),
+                _mm256_add_ps(a[2], _mm256_mul_ps(e[2], s)),
+            ]
+        };
+        let sel = |m: __m256, u: [__m256; 3], v: [__m256; 3]| {
+            [
+                _mm256_blendv_ps(v[0], u[0], m),
+                _mm256_blendv_ps(v[1], u[1], m),
+                _mm256_blendv_ps(v[2], u[2], m),
+            ]
+        };
+        let le = |x: __m256, y: __m256| _mm256_cmp_ps::<_CMP_LE_OQ>(x, y);
+        let and = |x: __m256, y: __m256| _mm256_and_ps(x, y);
+        let a = [both(&t.a[0]), both(&t.a[1]), both(&t.a[2])];
+        let b = [both(&t.b[0]), both(&t.b[1]), both(&t.b[2])];
+        let c = [both(&t.c[0]), both(&t.c[1]), both(&t.c[2])];
+        let n = [both(&t.n[0]), both(&t.n[1]), both(&t.n[2])];
+        let ab = sub(b, a);
+        let ac = sub(c, a);
+        let ap = sub(*q, a);
+        let bp = sub(*q, b);
+        let cp = sub(*q, c);
+        let d1 = dot(ab, ap);
+        let d2 = dot(ac, ap);
+        let d3 = dot(ab, bp);
+        let d4 = dot(ac, bp);
+        let d5 = dot(ab, cp);
+        let d6 = dot(ac, cp);
+        let vc = _mm256_sub_ps(_mm256_mul_ps(d1, d4), _mm256_mul_ps(d3, d2));
+        let vb = _mm256_sub_ps(_mm256_mul_ps(d5, d2), _mm256_mul_ps(d1, d6));
+        let va = _mm256_sub_ps(_mm256_mul_ps(d3, d6), _mm256_mul_ps(d5, d4));
+        let zero = _mm256_setzero_ps();
+        let in_a = and(le(d1, zero), le(d2, zero));
+        let in_b = and(le(zero, d3), le(d4, d3));
+        let in_ab = and(and(le(vc, zero), le(zero, d1)), le(d3, zero));
+        let in_c = and(le(zero, d6), le(d5, d6));
+        let in_ac = and(and(le(vb, zero), le(zero, d2)), le(d6, zero));
+        let (e, f) = (_mm256_sub_ps(d4, d3), _mm256_sub_ps(d5, d6));
+        let in_bc = and(and(le(va, zero), le(zero, e)), le(zero, f));
+        let tt = _mm256_div_ps(dot(ap, n), both(&t.nn));
+        let x = [
+            _mm256_sub_ps(q[0], _mm256_mul_ps(n[0], tt)),
+            _mm256_sub_ps(q[1], _mm256_mul_ps(n[1], tt)),
+            _mm256_sub_ps(q[2], _mm256_mul_ps(n[2], tt)),
+        ];
+        let x = sel(in_bc, along(b, sub(c, b), _mm256_div_ps(e, _mm256_add_ps(e, f))), x);
+        let x = sel(in_ac, along(a, ac, _mm256_div_ps(d2, _mm256_sub_ps(d2, d6))), x);
+        let x = sel(in_c, c, x);
+        let x = sel(in_ab, along(a, ab, _mm256_div_ps(d1, _mm256_sub_ps(d1, d3))), x);
+        let x = sel(in_b, b, x);
+        let x = sel(in_a, a, x);
+        let off = sub(x, *q);
+        (dot(off, off), x)
+    }
+}
+
+/// [`Packet::improve`] for points `s` and `s + 1` (`s` even; those in `mask`) of a group
+/// walk at once, with AVX. Safety: only for code running with AVX2 enabled.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn avx2_improve_pair(
+    packet: &Packet,
+    q: &[__m256; 3],
+    s: usize,
+    mask: u32,
+    best2: &mut [f32; GROUP_MAX],
+    best: &mut [(u32, Vec3A); GROUP_MAX],
+) {
+    // SAFETY: AVX intrinsics; the caller runs with AVX2 enabled.
+    unsafe {
+        let (d2, x) = avx2_tri_closest(&packet.tri, q);
+        // Points outside `mask` get a negative best: no lane is within it.
+        let (b0, b1) = (masked_best(best2, mask, s), masked_best(best2, mask, s + 1));
+        let within = _mm256_cmp_ps::<_CMP_LE_OQ>(d2, _mm256_set_m128(b1.into(), b0.into()));
+        let bits = _mm256_movemask_ps(within) as u32;
+        if bits == 0 {
+            return;
+        }
+        let mut d = [0.0f32; 8];
+        _mm256_storeu_ps(d.as_mut_ptr(), d2);
+        for h in 0..2 {
+            let mut lanes = bits >> (4 * h) & 0xf;
+            if lanes == 0 {
+                continue;
+            }
+            let t = s + h;
+            let mut found = 0;
+            while lanes != 0 {
+                let l = lanes.trailing_zeros() as usize;
+                lanes &= lanes - 1;
+                if d[4 * h + l] <= best2[t] {
+                    best2[t] = d[4 * h + l];
+                    found = l;
+                }
+            }
+            let mut xs = [[0.0f32; 8]; 3];
+            for (xa, &xv) in xs.iter_mut().zip(&x) {
+                _mm256_storeu_ps(xa.as_mut_ptr(), xv);
+            }
+            let i = 4 * h + found;
+            best[t] = (packet.slot[found], Vec3A::new(xs[0][i], xs[1][i], xs[2][i]));
+        }
     }
 }
 
@@ -950,7 +1078,8 @@ impl TriangleBvh {
         self.group_walk::<false>(points, hints, out, stack, visited)
     }
 
-    /// [`TriangleBvh::nearest_group`] with the AVX2 node test (two points per instruction).
+    /// [`TriangleBvh::nearest_group`] with the AVX2 node and leaf tests (two points per
+    /// instruction).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,popcnt,bmi1")]
     fn nearest_group_avx2(
@@ -964,15 +1093,59 @@ impl TriangleBvh {
         self.group_walk::<true>(points, hints, out, stack, visited)
     }
 
-    /// Whether [`TriangleBvh::nearest_group`] uses the AVX2 node test.
+    /// Whether [`TriangleBvh::nearest_group`] uses the AVX2 node and leaf tests.
     pub fn uses_avx2(&self) -> bool {
         self.avx2
     }
 
-    /// Makes [`TriangleBvh::nearest_group`] use the portable node test even where the CPU
-    /// has AVX2 (for comparing the two; the results are bit-identical).
+    /// Makes [`TriangleBvh::nearest_group`] use the portable node and leaf tests even where
+    /// the CPU has AVX2 (for comparing the two; the results are bit-identical).
     pub fn use_portable_node_test(&mut self) {
         self.avx2 = false;
+    }
+
+    /// The leaf `r` (a reference with [`Node4::LEAF`]) for the points in `mask` of a group
+    /// walk: each point's best improved by the leaf's triangles, as [`Packet::improve`]
+    /// does (with AVX2, two points per instruction, the same bits).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn group_leaf<const AVX2: bool>(
+        &self,
+        r: u32,
+        mask: u32,
+        qs: &[[Vec4; 3]; GROUP_MAX],
+        #[cfg(target_arch = "x86_64")] qs8: &[[__m256; 3]; GROUP_MAX / 2],
+        best2: &mut [f32; GROUP_MAX],
+        best: &mut [(u32, Vec3A); GROUP_MAX],
+    ) {
+        let mut at = (r & !Node4::LEAF) as usize;
+        loop {
+            let packet = &self.packets[at];
+            #[cfg(target_arch = "x86_64")]
+            if AVX2 {
+                let mut pairs = (mask | mask >> 1) & 0x55;
+                while pairs != 0 {
+                    let s = pairs.trailing_zeros() as usize;
+                    pairs &= pairs - 1;
+                    // SAFETY: `AVX2` walks only run under `nearest_group_avx2`.
+                    unsafe { avx2_improve_pair(packet, &qs8[s / 2], s, mask, best2, best) };
+                }
+            }
+            if !AVX2 || cfg!(not(target_arch = "x86_64")) {
+                let mut m = mask;
+                while m != 0 {
+                    let s = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    if let Some(found) = packet.improve(&qs[s], &mut best2[s]) {
+                        best[s] = found;
+                    }
+                }
+            }
+            if !packet.more {
+                break;
+            }
+            at += 1;
+        }
     }
 
     #[inline(always)]
@@ -1006,25 +1179,6 @@ impl TriangleBvh {
         }
         #[cfg(target_arch = "x86_64")]
         let qs8 = pair_coordinates(&qa);
-        let test_leaf =
-            |r: u32, mask: u32, best2: &mut [f32; GROUP_MAX], best: &mut [(u32, Vec3A); GROUP_MAX]| {
-                let mut at = (r & !Node4::LEAF) as usize;
-                loop {
-                    let packet = &self.packets[at];
-                    let mut m = mask;
-                    while m != 0 {
-                        let s = m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        if let Some(found) = packet.improve(&qs[s], &mut best2[s]) {
-                            best[s] = found;
-                        }
-                    }
-                    if !packet.more {
-                        break;
-                    }
-                    at += 1;
-                }
-            };
         let wide = &self.wide;
         stack.0.clear();
         stack.0.push(GroupEntry { bound: 0.0, node: 0, mask: (1 << g) - 1 });
@@ -1061,7 +1215,15 @@ impl TriangleBvh {
             while leaves != 0 {
                 let k = leaves.trailing_zeros() as usize;
                 leaves &= leaves - 1;
-                test_leaf(n.child[k], children[k], &mut best2, &mut best);
+                self.group_leaf::<AVX2>(
+                    n.child[k],
+                    children[k],
+                    &qs,
+                    #[cfg(target_arch = "x86_64")]
+                    &qs8,
+                    &mut best2,
+                    &mut best,
+                );
             }
             // Inner nodes onto the stack, farthest first (keys: bound bits, child number).
             let d = nearest.to_array();
