@@ -1053,7 +1053,7 @@ impl TriangleBvh {
     }
 
     /// [`TriangleBvh::nearest_with_hint`] for up to [`GROUP_MAX`] nearby points at once
-    /// (e.g. a 2x2 block of grid samples): one walk whose nodes are opened when any of the
+    /// (e.g. a 2x4 block of grid samples): one walk whose nodes are opened when any of the
     /// points needs them, each point pruning by its own best distance, so that the nodes'
     /// bounds are loaded once for all and the points' independent arithmetic overlaps.
     /// `hints[i]` (a slot, see [`Nearest::slot`]) bounds point `i`'s search from the start.
