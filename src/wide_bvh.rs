@@ -648,7 +648,64 @@ pub(crate) fn closest_walk<B: BoxTest>(
     with_stack!(bvh, stack => closest_walk_in::<B>(bvh, stack, origin, dir, t_min, t_max, stats))
 }
 
-/// [`closest_walk`] on `stack` (at least [`stack_needed`] entries).
+/// Tests the children of node `n` and pushes every hit one but the nearest onto `stack`
+/// (above `len`), farthest deepest, with its entry distance; returns the nearest, or
+/// [`NONE`] where the ray enters none.
+#[inline(always)]
+fn visit_node<B: BoxTest>(
+    br: &B,
+    n: &Node,
+    t_min: f32,
+    t_max: f32,
+    stack: &mut [MaybeUninit<Entry>],
+    len: &mut usize,
+) -> u32 {
+    let (mut mask, d) = br.hit(n, t_min, t_max);
+    match mask.count_ones() {
+        0 => NONE,
+        1 => n.children[mask.trailing_zeros() as usize],
+        2 => {
+            let a = mask.trailing_zeros() as usize;
+            let b = (mask & (mask - 1)).trailing_zeros() as usize;
+            let (near, far) = if d[b] < d[a] { (b, a) } else { (a, b) };
+            stack[*len].write((n.children[far], d[far]));
+            *len += 1;
+            n.children[near]
+        }
+        _ => {
+            // Sort by entry distance (insertion sort of at most eight), push all but the
+            // nearest, farthest first.
+            let mut ch = [0u32; WIDTH];
+            let mut cd = [0.0f32; WIDTH];
+            let mut k = 0;
+            while mask != 0 {
+                let l = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let (c, x) = (n.children[l], d[l]);
+                let mut j = k;
+                while j > 0 && cd[j - 1] > x {
+                    ch[j] = ch[j - 1];
+                    cd[j] = cd[j - 1];
+                    j -= 1;
+                }
+                ch[j] = c;
+                cd[j] = x;
+                k += 1;
+            }
+            for i in (1..k).rev() {
+                stack[*len].write((ch[i], cd[i]));
+                *len += 1;
+            }
+            ch[0]
+        }
+    }
+}
+
+/// [`closest_walk`] on `stack` (at least [`stack_needed`] entries). Two loops: the first
+/// descends to the first leaf the ray reaches, with no triangle test prepared, so that the
+/// most rays, which miss the mesh's triangles without reaching a leaf, never pay for the
+/// sheared ray (which the compiler would otherwise set up before the walk); the second
+/// goes on from that leaf with it.
 #[inline(always)]
 fn closest_walk_in<B: BoxTest>(
     bvh: &WideBvh,
@@ -663,66 +720,39 @@ fn closest_walk_in<B: BoxTest>(
         return None;
     }
     let br = B::new(origin, dir);
-    // Prepared at the first leaf: most rays miss the mesh without reaching one.
-    let mut sheared: Option<ShearedRay> = None;
-    let mut best = None;
-    let (mut nodes, mut tests) = (0u64, 0u64);
+    let mut nodes = 0u64;
     // Entries below `len` are initialised; the rest are never read.
     let mut len = 0usize;
     let mut cur = 0u32;
+    // Down to the first leaf. No hit yet, so every pushed child (entered within `t_max`)
+    // is still in front.
+    while cur & LEAF == 0 {
+        nodes += 1;
+        cur = visit_node(&br, &bvh.nodes[cur as usize], t_min, t_max, stack, &mut len);
+        if cur == NONE {
+            if len == 0 {
+                stats.bvh_nodes += nodes;
+                return None;
+            }
+            len -= 1;
+            // SAFETY: entries below the old `len` were written by a push.
+            cur = unsafe { stack[len].assume_init() }.0;
+        }
+    }
+    let sheared = ShearedRay::new(origin, dir);
+    let mut best = None;
+    let mut tests = 0u64;
     'walk: loop {
         if cur & LEAF == 0 {
-            let n = &bvh.nodes[cur as usize];
             nodes += 1;
-            let (mut mask, d) = br.hit(n, t_min, t_max);
-            match mask.count_ones() {
-                0 => {}
-                1 => {
-                    cur = n.children[mask.trailing_zeros() as usize];
-                    continue 'walk;
-                }
-                2 => {
-                    let a = mask.trailing_zeros() as usize;
-                    let b = (mask & (mask - 1)).trailing_zeros() as usize;
-                    let (near, far) = if d[b] < d[a] { (b, a) } else { (a, b) };
-                    stack[len].write((n.children[far], d[far]));
-                    len += 1;
-                    cur = n.children[near];
-                    continue 'walk;
-                }
-                _ => {
-                    // Sort by entry distance (insertion sort of at most eight), push all
-                    // but the nearest, farthest first.
-                    let mut ch = [0u32; WIDTH];
-                    let mut cd = [0.0f32; WIDTH];
-                    let mut k = 0;
-                    while mask != 0 {
-                        let l = mask.trailing_zeros() as usize;
-                        mask &= mask - 1;
-                        let (c, x) = (n.children[l], d[l]);
-                        let mut j = k;
-                        while j > 0 && cd[j - 1] > x {
-                            ch[j] = ch[j - 1];
-                            cd[j] = cd[j - 1];
-                            j -= 1;
-                        }
-                        ch[j] = c;
-                        cd[j] = x;
-                        k += 1;
-                    }
-                    for i in (1..k).rev() {
-                        stack[len].write((ch[i], cd[i]));
-                        len += 1;
-                    }
-                    cur = ch[0];
-                    continue 'walk;
-                }
+            cur = visit_node(&br, &bvh.nodes[cur as usize], t_min, t_max, stack, &mut len);
+            if cur != NONE {
+                continue 'walk;
             }
         } else {
             let packet = (cur & !LEAF) >> 2;
             let p = &bvh.packets[packet as usize];
             tests += u64::from((cur & 3) + 1);
-            let sheared = sheared.get_or_insert_with(|| ShearedRay::new(origin, dir));
             let (t, mut hits) = sheared.intersect4(&p.tri, t_min, t_max);
             // The nearest hit lane (the last of equals, as a lane-by-lane scan would take).
             while hits != 0 {
