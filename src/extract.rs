@@ -291,7 +291,7 @@ impl SampleGrid {
                 for (y, row) in vals.chunks_exact_mut(nn[0]).enumerate() {
                     blocks.row_fill(y, z, row_fill);
                     for (x, v) in row.iter_mut().enumerate() {
-                        let (b0, b1) = blocks.along(x);
+                        let (b0, b1) = blocks.along_axis(0, x);
                         let (f0, f1) = (row_fill[b0], row_fill[b1]);
                         *v = if f0.is_nan() || f1.is_nan() {
                             f(origin + h * DVec3::new(x as f64, y as f64, z as f64)) as f32
@@ -468,14 +468,8 @@ impl Blocks {
             return (0, 0);
         }
         let b = i / BLOCK_CELLS;
-        let hi = b.min(self.n[a] - 1);
-        (hi, if i.is_multiple_of(BLOCK_CELLS) && i > 0 { b - 1 } else { hi })
-    }
-
-    /// [`Blocks::along_axis`] for x.
-    #[inline]
-    fn along(&self, x: usize) -> (usize, usize) {
-        self.along_axis(0, x)
+        let own = b.min(self.n[a] - 1);
+        (own, if i.is_multiple_of(BLOCK_CELLS) && i > 0 { b - 1 } else { own })
     }
 
     /// Fills `out` (one entry per block along x) for grid row `(y, z)`: NaN where a block
