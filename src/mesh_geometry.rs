@@ -160,8 +160,15 @@ impl MeshGeometry {
     /// hit record) compiled with AVX2, in one function.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,popcnt,bmi1")]
-    fn closest_hit_avx2(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
-        self.closest_hit_with::<BoxRayAvx2>(ray, t_min, t_max, stats)
+    fn closest_hit_avx2(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        stats: &mut RayStats,
+    ) -> Option<Hit> {
+        self.closest_hit_with::<BoxRayAvx2>(&Ray { origin, dir }, t_min, t_max, stats)
     }
 
     /// [`Geometry::closest_hit`] with the portable box test.
@@ -221,7 +228,9 @@ impl Geometry for MeshGeometry {
         #[cfg(target_arch = "x86_64")]
         if self.bvh.uses_avx2() {
             // SAFETY: `uses_avx2` is only true where the CPU has AVX2, POPCNT and BMI1.
-            return unsafe { self.closest_hit_avx2(ray, t_min, t_max, stats) };
+            // The ray goes by value: a caller that has just written it would otherwise
+            // have its stores read back by wider loads, which cannot be forwarded.
+            return unsafe { self.closest_hit_avx2(ray.origin, ray.dir, t_min, t_max, stats) };
         }
         self.closest_hit_portable(ray, t_min, t_max, stats)
     }

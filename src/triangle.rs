@@ -16,6 +16,10 @@ use crate::wide_bvh::F4;
 #[derive(Clone, Copy, Debug)]
 pub struct ShearedRay {
     origin: Vec3,
+    /// The origin's coordinates on the axes `k` (x', y', z' of the sheared frame), kept
+    /// so that the packet test does not index a `Vec3` (a branch per axis) per call.
+    origin_k: [f32; 3],
+    /// The axes that become x', y' and z' (each in `0..3`).
     k: [usize; 3],
     shear: Vec3,
 }
@@ -43,11 +47,12 @@ impl ShearedRay {
         };
         let mut kx = (kz + 1) % 3;
         let mut ky = (kx + 1) % 3;
-        if dir[kz] < 0.0 {
+        if dir.to_array()[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
-        let shear = Vec3::new(dir[kx] / dir[kz], dir[ky] / dir[kz], 1.0 / dir[kz]);
-        ShearedRay { origin, k: [kx, ky, kz], shear }
+        let (d, o) = (dir.to_array(), origin.to_array());
+        let shear = Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
+        ShearedRay { origin, origin_k: [o[kx], o[ky], o[kz]], k: [kx, ky, kz], shear }
     }
 
     /// Intersects the triangle (`v0`, `v1`, `v2`), both sides, for `t` in `[t_min, t_max]`.
@@ -110,7 +115,7 @@ impl ShearedRay {
         let [kx, ky, kz] = self.k;
         let (sx, sy, sz) = (F4::splat(self.shear.x), F4::splat(self.shear.y), F4::splat(self.shear.z));
         let (ox, oy, oz) =
-            (F4::splat(self.origin[kx]), F4::splat(self.origin[ky]), F4::splat(self.origin[kz]));
+            (F4::splat(self.origin_k[0]), F4::splat(self.origin_k[1]), F4::splat(self.origin_k[2]));
         // Per vertex: sheared x, y and the z offset along the ray's main axis.
         let vertex = |v: &[[f32; 4]; 3]| {
             let z = F4::load(&v[kz]).sub(oz);

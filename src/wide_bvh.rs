@@ -32,7 +32,7 @@ const LEAF: u32 = 1 << 31;
 /// has already merged most into a leaf) becomes one packet; 1, 1.5 and 2 built the same
 /// tree for the armadillo.
 const PACKET_COST: f32 = 1.5;
-/// Child reference of an unused slot (its box is empty, so it is never entered).
+/// Child reference of an unused slot (its box is NaN, so it is never entered).
 const NONE: u32 = u32::MAX;
 /// Traversal stack entries kept on the call stack (enough for a BVH 36 levels deep); a
 /// deeper BVH walks with a heap stack.
@@ -44,7 +44,7 @@ const STACK: usize = 253;
 #[repr(C, align(64))]
 pub struct Node {
     /// Child boxes, scene units: `bounds[0..3][lane]` are the minimum x, y, z and
-    /// `bounds[3..6][lane]` the maximum; unused lanes are empty (min `+inf`, max `-inf`).
+    /// `bounds[3..6][lane]` the maximum; unused lanes are NaN (no ray enters them).
     pub bounds: [[f32; WIDTH]; 6],
     /// Per lane: an index into [`WideBvh::nodes`], or `LEAF | packet << 2 | (count - 1)`
     /// for a leaf of `count` triangles in [`WideBvh::packets`]`[packet]`, or `u32::MAX`.
@@ -96,17 +96,11 @@ pub(crate) trait BoxTest: Copy {
     fn hit(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [f32; WIDTH]);
 }
 
-/// The safe reciprocal direction and, per axis, which bounds row is the near plane (by
-/// the sign of the direction) and which the far one.
+/// The safe reciprocal of the direction, per axis (finite and nonzero, with the
+/// direction's sign), so that no slab distance is NaN for a nonempty box.
 #[inline(always)]
-fn box_setup(dir: Vec3) -> ([f32; 3], [usize; 3], [usize; 3]) {
-    let inv =
-        [obvhs::ray::safe_inverse(dir.x), obvhs::ray::safe_inverse(dir.y), obvhs::ray::safe_inverse(dir.z)];
-    // The minimum row `a` is the near plane for a positive direction, the maximum row
-    // `a + 3` for a negative one.
-    let neg = inv.map(|i| usize::from(i < 0.0));
-    let near = [3 * neg[0], 1 + 3 * neg[1], 2 + 3 * neg[2]];
-    (inv, near, near.map(|r| (r + 3) % 6))
+fn safe_inverse(dir: Vec3) -> [f32; 3] {
+    [obvhs::ray::safe_inverse(dir.x), obvhs::ray::safe_inverse(dir.y), obvhs::ray::safe_inverse(dir.z)]
 }
 
 /// The portable box test: each node as two halves of four lanes ([`F4`]).
@@ -114,19 +108,15 @@ fn box_setup(dir: Vec3) -> ([f32; 3], [usize; 3], [usize; 3]) {
 pub(crate) struct BoxRay {
     origin: [F4; 3],
     inv: [F4; 3],
-    near: [usize; 3],
-    far: [usize; 3],
 }
 
 impl BoxTest for BoxRay {
     #[inline(always)]
     fn new(origin: Vec3, dir: Vec3) -> Self {
-        let (inv, near, far) = box_setup(dir);
+        let inv = safe_inverse(dir);
         BoxRay {
             origin: [F4::splat(origin.x), F4::splat(origin.y), F4::splat(origin.z)],
             inv: [F4::splat(inv[0]), F4::splat(inv[1]), F4::splat(inv[2])],
-            near,
-            far,
         }
     }
 
@@ -138,12 +128,16 @@ impl BoxTest for BoxRay {
                 let lanes = if h == 0 { b[row].first_chunk::<4>() } else { b[row].last_chunk::<4>() };
                 F4::load(lanes.expect("eight lanes")).sub(self.origin[a]).mul(self.inv[a])
             };
-            let near = slab(self.near[0], 0)
-                .max(slab(self.near[1], 1))
-                .max(slab(self.near[2], 2).max(F4::splat(t_min)));
-            let far = slab(self.far[0], 0)
-                .min(slab(self.far[1], 1))
-                .min(slab(self.far[2], 2).min(F4::splat(t_max)));
+            // Per axis, the entry and exit distances of the slab. `min` and `max` return
+            // their second operand where either is NaN, so the NaN of an empty lane carries
+            // through every step below and fails the final comparison.
+            let axis = |a: usize| {
+                let (lo, hi) = (slab(a, a), slab(a + 3, a));
+                (lo.min(hi), lo.max(hi))
+            };
+            let ((nx, fx), (ny, fy), (nz, fz)) = (axis(0), axis(1), axis(2));
+            let near = nx.max(ny).max(F4::splat(t_min).max(nz));
+            let far = fx.min(fy).min(F4::splat(t_max).min(fz));
             (near.le(far), near.to_array())
         };
         let ((m0, d0), (m1, d1)) = (half(0), half(1));
@@ -162,8 +156,6 @@ impl BoxTest for BoxRay {
 pub(crate) struct BoxRayAvx2 {
     origin: [core::arch::x86_64::__m256; 3],
     inv: [core::arch::x86_64::__m256; 3],
-    near: [usize; 3],
-    far: [usize; 3],
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -171,15 +163,13 @@ impl BoxTest for BoxRayAvx2 {
     #[inline(always)]
     fn new(origin: Vec3, dir: Vec3) -> Self {
         use core::arch::x86_64::_mm256_set1_ps;
-        let (inv, near, far) = box_setup(dir);
+        let inv = safe_inverse(dir);
         // SAFETY: only reached inside the `avx2` walks (see the type's documentation), so
         // the CPU has AVX.
         let splat = |x: f32| unsafe { _mm256_set1_ps(x) };
         BoxRayAvx2 {
             origin: [splat(origin.x), splat(origin.y), splat(origin.z)],
             inv: [splat(inv[0]), splat(inv[1]), splat(inv[2])],
-            near,
-            far,
         }
     }
 
@@ -192,16 +182,22 @@ impl BoxTest for BoxRayAvx2 {
         unsafe {
             // `(bound - origin) * inv`, not a fused `bound * inv - origin * inv`: the same
             // rounding as the portable test, without cancellation far from the origin.
+            // Both rows of an axis at fixed offsets, ordered by `min` and `max` (which keep
+            // an empty lane's NaN, as in the portable test), rather than rows chosen by the
+            // direction's signs: no row index to keep per ray.
             let slab = |row: usize, a: usize| {
                 _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(b[row].as_ptr()), self.origin[a]), self.inv[a])
             };
+            let (x0, x1) = (slab(0, 0), slab(3, 0));
+            let (y0, y1) = (slab(1, 1), slab(4, 1));
+            let (z0, z1) = (slab(2, 2), slab(5, 2));
             let near = _mm256_max_ps(
-                _mm256_max_ps(slab(self.near[0], 0), slab(self.near[1], 1)),
-                _mm256_max_ps(slab(self.near[2], 2), _mm256_set1_ps(t_min)),
+                _mm256_max_ps(_mm256_min_ps(x0, x1), _mm256_min_ps(y0, y1)),
+                _mm256_max_ps(_mm256_set1_ps(t_min), _mm256_min_ps(z0, z1)),
             );
             let far = _mm256_min_ps(
-                _mm256_min_ps(slab(self.far[0], 0), slab(self.far[1], 1)),
-                _mm256_min_ps(slab(self.far[2], 2), _mm256_set1_ps(t_max)),
+                _mm256_min_ps(_mm256_max_ps(x0, x1), _mm256_max_ps(y0, y1)),
+                _mm256_min_ps(_mm256_set1_ps(t_max), _mm256_max_ps(z0, z1)),
             );
             let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(near, far)) as u32;
             let mut d = [0.0f32; WIDTH];
@@ -558,6 +554,38 @@ impl WideBvh {
         any_walk::<BoxRayAvx2>(self, origin, dir, t_min, t_max, stats)
     }
 
+    /// Asks the CPU to start loading the node or leaf packet that the child reference `c`
+    /// (not [`NONE`]) names into its caches, for a child pushed onto the traversal stack:
+    /// when it is popped, its lines are there (as Embree does for its children).
+    #[inline(always)]
+    fn prefetch(&self, c: u32) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+            // SAFETY: a prefetch is a hint: it never faults, whatever the address.
+            let line = |p: *const i8| unsafe { _mm_prefetch::<_MM_HINT_T0>(p) };
+            if c & LEAF == 0 {
+                // A node: four whole cache lines (it is 64-byte aligned).
+                let p = self.nodes.as_ptr().wrapping_add(c as usize) as *const i8;
+                const { assert!(std::mem::size_of::<Node>() == 256) };
+                line(p);
+                line(p.wrapping_add(64));
+                line(p.wrapping_add(128));
+                line(p.wrapping_add(192));
+            } else {
+                // A packet: 160 bytes from a 16-byte boundary, so at most four lines, of
+                // which the first three hold the corners.
+                let p = self.packets.as_ptr().wrapping_add(((c & !LEAF) >> 2) as usize) as *const i8;
+                const { assert!(std::mem::size_of::<Packet>() == 160) };
+                line(p);
+                line(p.wrapping_add(64));
+                line(p.wrapping_add(128));
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = c;
+    }
+
     /// Whether the walks use the AVX2 box test.
     pub fn uses_avx2(&self) -> bool {
         self.avx2
@@ -654,6 +682,7 @@ pub(crate) fn closest_walk<B: BoxTest>(
 #[inline(always)]
 fn visit_node<B: BoxTest>(
     br: &B,
+    bvh: &WideBvh,
     n: &Node,
     t_min: f32,
     t_max: f32,
@@ -668,6 +697,7 @@ fn visit_node<B: BoxTest>(
             let a = mask.trailing_zeros() as usize;
             let b = (mask & (mask - 1)).trailing_zeros() as usize;
             let (near, far) = if d[b] < d[a] { (b, a) } else { (a, b) };
+            bvh.prefetch(n.children[far]);
             stack[*len].write((n.children[far], d[far]));
             *len += 1;
             n.children[near]
@@ -693,6 +723,7 @@ fn visit_node<B: BoxTest>(
                 k += 1;
             }
             for i in (1..k).rev() {
+                bvh.prefetch(ch[i]);
                 stack[*len].write((ch[i], cd[i]));
                 *len += 1;
             }
@@ -728,7 +759,7 @@ fn closest_walk_in<B: BoxTest>(
     // is still in front.
     while cur & LEAF == 0 {
         nodes += 1;
-        cur = visit_node(&br, &bvh.nodes[cur as usize], t_min, t_max, stack, &mut len);
+        cur = visit_node(&br, bvh, &bvh.nodes[cur as usize], t_min, t_max, stack, &mut len);
         if cur == NONE {
             if len == 0 {
                 stats.bvh_nodes += nodes;
@@ -745,7 +776,7 @@ fn closest_walk_in<B: BoxTest>(
     'walk: loop {
         if cur & LEAF == 0 {
             nodes += 1;
-            cur = visit_node(&br, &bvh.nodes[cur as usize], t_min, t_max, stack, &mut len);
+            cur = visit_node(&br, bvh, &bvh.nodes[cur as usize], t_min, t_max, stack, &mut len);
             if cur != NONE {
                 continue 'walk;
             }
@@ -968,9 +999,9 @@ impl SahPlan {
     }
 }
 
+/// A node with every lane unused: NaN boxes (never entered) and [`NONE`] references.
 fn empty_node() -> Node {
-    let e = [f32::INFINITY; WIDTH];
-    Node { bounds: [e, e, e, e.map(|x| -x), e.map(|x| -x), e.map(|x| -x)], children: [NONE; WIDTH] }
+    Node { bounds: [[f32::NAN; WIDTH]; 6], children: [NONE; WIDTH] }
 }
 
 fn set_lane(n: &mut Node, lane: usize, b: &Aabb, reference: u32) {
