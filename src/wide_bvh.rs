@@ -636,8 +636,40 @@ impl WideBvh {
     }
 }
 
-/// A traversal stack entry: a child reference and the distance at which the ray enters it.
-type Entry = (u32, f32);
+/// A traversal stack entry: the order key ([`order_key`]) of the distance at which the ray
+/// enters the child in the high 32 bits, its child reference in the low ones. Comparing
+/// entries as integers compares their distances, so sorting children is a few
+/// branch-free compare-exchanges of one register each.
+type Entry = u64;
+
+/// The bits of `x` mapped so that unsigned integer order is the order of the floats
+/// (negative floats have their bits flipped, others their sign bit set).
+#[inline(always)]
+fn order_key(x: f32) -> u32 {
+    let b = x.to_bits();
+    b ^ ((((b as i32) >> 31) as u32) | 0x8000_0000)
+}
+
+/// A stack entry for child reference `child` entered at distance key `key`.
+#[inline(always)]
+fn entry(key: u32, child: u32) -> Entry {
+    (u64::from(key) << 32) | u64::from(child)
+}
+
+/// The lowest lane set in `mask` (nonzero), cleared from it. The lane is masked below
+/// [`WIDTH`], which it is, so that indexing with it needs no bounds check.
+#[inline(always)]
+fn next_lane(mask: &mut u32) -> usize {
+    let l = mask.trailing_zeros() as usize & (WIDTH - 1);
+    *mask &= *mask - 1;
+    l
+}
+
+/// The two entries in order.
+#[inline(always)]
+fn ordered(a: Entry, b: Entry) -> (Entry, Entry) {
+    (a.min(b), a.max(b))
+}
 
 /// Stack entries a walk over `bvh` needs at most: each level of the current path holds at
 /// most `WIDTH - 1` pending children.
@@ -678,7 +710,8 @@ pub(crate) fn closest_walk<B: BoxTest>(
 
 /// Tests the children of node `n` and pushes every hit one but the nearest onto `stack`
 /// (above `len`), farthest deepest, with its entry distance; returns the nearest, or
-/// [`NONE`] where the ray enters none.
+/// [`NONE`] where the ray enters none. Two to four children are ordered by a sorting
+/// network of compare-exchanges on their entries, more by insertion.
 #[inline(always)]
 fn visit_node<B: BoxTest>(
     br: &B,
@@ -690,46 +723,59 @@ fn visit_node<B: BoxTest>(
     len: &mut usize,
 ) -> u32 {
     let (mut mask, d) = br.hit(n, t_min, t_max);
-    match mask.count_ones() {
-        0 => NONE,
-        1 => n.children[mask.trailing_zeros() as usize],
-        2 => {
-            let a = mask.trailing_zeros() as usize;
-            let b = (mask & (mask - 1)).trailing_zeros() as usize;
-            let (near, far) = if d[b] < d[a] { (b, a) } else { (a, b) };
-            bvh.prefetch(n.children[far]);
-            stack[*len].write((n.children[far], d[far]));
-            *len += 1;
-            n.children[near]
-        }
-        _ => {
-            // Sort by entry distance (insertion sort of at most eight), push all but the
-            // nearest, farthest first.
-            let mut ch = [0u32; WIDTH];
-            let mut cd = [0.0f32; WIDTH];
-            let mut k = 0;
-            while mask != 0 {
-                let l = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                let (c, x) = (n.children[l], d[l]);
-                let mut j = k;
-                while j > 0 && cd[j - 1] > x {
-                    ch[j] = ch[j - 1];
-                    cd[j] = cd[j - 1];
-                    j -= 1;
-                }
-                ch[j] = c;
-                cd[j] = x;
-                k += 1;
-            }
-            for i in (1..k).rev() {
-                bvh.prefetch(ch[i]);
-                stack[*len].write((ch[i], cd[i]));
-                *len += 1;
-            }
-            ch[0]
-        }
+    if mask == 0 {
+        return NONE;
     }
+    let l0 = next_lane(&mut mask);
+    if mask == 0 {
+        return n.children[l0];
+    }
+    let key = |l: usize| entry(order_key(d[l]), n.children[l]);
+    let mut push = |e: Entry| {
+        bvh.prefetch(e as u32);
+        stack[*len].write(e);
+        *len += 1;
+    };
+    let (a, b) = ordered(key(l0), key(next_lane(&mut mask)));
+    if mask == 0 {
+        push(b);
+        return a as u32;
+    }
+    // Three: insert the third into the ordered pair.
+    let (b, c) = ordered(b, key(next_lane(&mut mask)));
+    let (a, b) = ordered(a, b);
+    if mask == 0 {
+        push(c);
+        push(b);
+        return a as u32;
+    }
+    // Four: sort the fourth into the ordered three.
+    let (c, d4) = ordered(c, key(next_lane(&mut mask)));
+    let (b, c) = ordered(b, c);
+    let (a, b) = ordered(a, b);
+    if mask == 0 {
+        push(d4);
+        push(c);
+        push(b);
+        return a as u32;
+    }
+    // Five to eight (rare): insertion sort of all, then push all but the nearest.
+    let mut sorted = [a, b, c, d4, 0, 0, 0, 0];
+    let mut k = 4;
+    while mask != 0 {
+        let x = key(next_lane(&mut mask));
+        let mut j = k;
+        while j > 0 && sorted[j - 1] > x {
+            sorted[j] = sorted[j - 1];
+            j -= 1;
+        }
+        sorted[j] = x;
+        k += 1;
+    }
+    for &e in sorted[1..k].iter().rev() {
+        push(e);
+    }
+    sorted[0] as u32
 }
 
 /// [`closest_walk`] on `stack` (at least [`stack_needed`] entries). Two loops: the first
@@ -767,12 +813,14 @@ fn closest_walk_in<B: BoxTest>(
             }
             len -= 1;
             // SAFETY: entries below the old `len` were written by a push.
-            cur = unsafe { stack[len].assume_init() }.0;
+            cur = unsafe { stack[len].assume_init() } as u32;
         }
     }
     let sheared = ShearedRay::new(origin, dir);
     let mut best = None;
     let mut tests = 0u64;
+    // `order_key(t_max)`, to compare with the distance keys of stack entries.
+    let mut t_max_key = order_key(t_max);
     'walk: loop {
         if cur & LEAF == 0 {
             nodes += 1;
@@ -785,14 +833,18 @@ fn closest_walk_in<B: BoxTest>(
             let p = &bvh.packets[packet as usize];
             tests += u64::from((cur & 3) + 1);
             let (t, mut hits) = sheared.intersect4(&p.tri, t_min, t_max);
-            // The nearest hit lane (the last of equals, as a lane-by-lane scan would take).
-            while hits != 0 {
-                let lane = hits.trailing_zeros() as usize;
-                hits &= hits - 1;
-                if t[lane] <= t_max {
-                    t_max = t[lane];
-                    best = Some((packet, lane));
+            if hits != 0 {
+                // The nearest hit lane (the last of equals, as a lane-by-lane scan would
+                // take).
+                while hits != 0 {
+                    let lane = hits.trailing_zeros() as usize & (LEAF_MAX - 1);
+                    hits &= hits - 1;
+                    if t[lane] <= t_max {
+                        t_max = t[lane];
+                        best = Some((packet, lane));
+                    }
                 }
+                t_max_key = order_key(t_max);
             }
         }
         // Pop the nearest pending child still in front of the closest hit.
@@ -802,9 +854,9 @@ fn closest_walk_in<B: BoxTest>(
             }
             len -= 1;
             // SAFETY: entries below the old `len` were written by a push.
-            let (c, d) = unsafe { stack[len].assume_init() };
-            if d <= t_max {
-                cur = c;
+            let e = unsafe { stack[len].assume_init() };
+            if (e >> 32) as u32 <= t_max_key {
+                cur = e as u32;
                 break;
             }
         }
@@ -849,12 +901,12 @@ fn any_walk_in<B: BoxTest>(
     let mut sheared: Option<ShearedRay> = None;
     let mut found = false;
     // Entries below `len` are initialised; the rest are never read.
-    stack[0].write((0, 0.0));
+    stack[0].write(0);
     let mut len = 1usize;
     while len > 0 {
         len -= 1;
         // SAFETY: entries below the old `len` were written.
-        let (cur, _) = unsafe { stack[len].assume_init() };
+        let cur = unsafe { stack[len].assume_init() } as u32;
         if cur & LEAF == 0 {
             let n = &bvh.nodes[cur as usize];
             stats.bvh_nodes += 1;
@@ -862,7 +914,7 @@ fn any_walk_in<B: BoxTest>(
             while mask != 0 {
                 let l = mask.trailing_zeros() as usize;
                 mask &= mask - 1;
-                stack[len].write((n.children[l], 0.0));
+                stack[len].write(u64::from(n.children[l]));
                 len += 1;
             }
         } else {
