@@ -92,8 +92,8 @@ pub(crate) trait BoxTest: Copy {
     /// Prepares the ray `origin + t * dir`.
     fn new(origin: Vec3, dir: Vec3) -> Self;
     /// The lanes whose child box the ray enters within `[t_min, t_max]` (bit `l` for lane
-    /// `l`) and the entry distances.
-    fn hit(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [f32; WIDTH]);
+    /// `l`) and the [`order_key`]s of the entry distances.
+    fn hit(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]);
 }
 
 /// The safe reciprocal of the direction, per axis (finite and nonzero, with the
@@ -121,7 +121,7 @@ impl BoxTest for BoxRay {
     }
 
     #[inline(always)]
-    fn hit(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [f32; WIDTH]) {
+    fn hit(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
         let b = &n.bounds;
         let half = |h: usize| {
             let slab = |row: usize, a: usize| {
@@ -141,9 +141,10 @@ impl BoxTest for BoxRay {
             (near.le(far), near.to_array())
         };
         let ((m0, d0), (m1, d1)) = (half(0), half(1));
-        let mut d = [0.0; WIDTH];
-        d[..4].copy_from_slice(&d0);
-        d[4..].copy_from_slice(&d1);
+        let mut d = [0; WIDTH];
+        for (k, x) in d.iter_mut().zip(d0.into_iter().chain(d1)) {
+            *k = order_key(x);
+        }
         (m0 | m1 << 4, d)
     }
 }
@@ -174,7 +175,7 @@ impl BoxTest for BoxRayAvx2 {
     }
 
     #[inline(always)]
-    fn hit(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [f32; WIDTH]) {
+    fn hit(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
         use core::arch::x86_64::*;
         let b = &n.bounds;
         // SAFETY: as in `new`, the CPU has AVX; loads and stores go through references to
@@ -200,8 +201,11 @@ impl BoxTest for BoxRayAvx2 {
                 _mm256_min_ps(_mm256_set1_ps(t_max), _mm256_max_ps(z0, z1)),
             );
             let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(near, far)) as u32;
-            let mut d = [0.0f32; WIDTH];
-            _mm256_storeu_ps(d.as_mut_ptr(), near);
+            // `order_key` on all lanes at once.
+            let bits = _mm256_castps_si256(near);
+            let flip = _mm256_or_si256(_mm256_srai_epi32::<31>(bits), _mm256_set1_epi32(i32::MIN));
+            let mut d = [0u32; WIDTH];
+            _mm256_storeu_si256(d.as_mut_ptr() as *mut __m256i, _mm256_xor_si256(bits, flip));
             (mask, d)
         }
     }
@@ -554,38 +558,6 @@ impl WideBvh {
         any_walk::<BoxRayAvx2>(self, origin, dir, t_min, t_max, stats)
     }
 
-    /// Asks the CPU to start loading the node or leaf packet that the child reference `c`
-    /// (not [`NONE`]) names into its caches, for a child pushed onto the traversal stack:
-    /// when it is popped, its lines are there (as Embree does for its children).
-    #[inline(always)]
-    fn prefetch(&self, c: u32) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-            // SAFETY: a prefetch is a hint: it never faults, whatever the address.
-            let line = |p: *const i8| unsafe { _mm_prefetch::<_MM_HINT_T0>(p) };
-            if c & LEAF == 0 {
-                // A node: four whole cache lines (it is 64-byte aligned).
-                let p = self.nodes.as_ptr().wrapping_add(c as usize) as *const i8;
-                const { assert!(std::mem::size_of::<Node>() == 256) };
-                line(p);
-                line(p.wrapping_add(64));
-                line(p.wrapping_add(128));
-                line(p.wrapping_add(192));
-            } else {
-                // A packet: 160 bytes from a 16-byte boundary, so at most four lines, of
-                // which the first three hold the corners.
-                let p = self.packets.as_ptr().wrapping_add(((c & !LEAF) >> 2) as usize) as *const i8;
-                const { assert!(std::mem::size_of::<Packet>() == 160) };
-                line(p);
-                line(p.wrapping_add(64));
-                line(p.wrapping_add(128));
-            }
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        let _ = c;
-    }
-
     /// Whether the walks use the AVX2 box test.
     pub fn uses_avx2(&self) -> bool {
         self.avx2
@@ -715,7 +687,6 @@ pub(crate) fn closest_walk<B: BoxTest>(
 #[inline(always)]
 fn visit_node<B: BoxTest>(
     br: &B,
-    bvh: &WideBvh,
     n: &Node,
     t_min: f32,
     t_max: f32,
@@ -730,9 +701,8 @@ fn visit_node<B: BoxTest>(
     if mask == 0 {
         return n.children[l0];
     }
-    let key = |l: usize| entry(order_key(d[l]), n.children[l]);
+    let key = |l: usize| entry(d[l], n.children[l]);
     let mut push = |e: Entry| {
-        bvh.prefetch(e as u32);
         stack[*len].write(e);
         *len += 1;
     };
@@ -805,7 +775,7 @@ fn closest_walk_in<B: BoxTest>(
     // is still in front.
     while cur & LEAF == 0 {
         nodes += 1;
-        cur = visit_node(&br, bvh, &bvh.nodes[cur as usize], t_min, t_max, stack, &mut len);
+        cur = visit_node(&br, &bvh.nodes[cur as usize], t_min, t_max, stack, &mut len);
         if cur == NONE {
             if len == 0 {
                 stats.bvh_nodes += nodes;
@@ -824,7 +794,7 @@ fn closest_walk_in<B: BoxTest>(
     'walk: loop {
         if cur & LEAF == 0 {
             nodes += 1;
-            cur = visit_node(&br, bvh, &bvh.nodes[cur as usize], t_min, t_max, stack, &mut len);
+            cur = visit_node(&br, &bvh.nodes[cur as usize], t_min, t_max, stack, &mut len);
             if cur != NONE {
                 continue 'walk;
             }
