@@ -148,6 +148,112 @@ impl ShearedRay {
         (t.to_array(), ok)
     }
 
+    /// [`ShearedRay::intersect4`] on two packets at once, `a` in lanes 0..4 and `b` in
+    /// lanes 4..8 of 256-bit registers: the same operations in the same order, so every
+    /// lane's `t` and hit bit equal the four-lane test's. Only inlined into functions
+    /// compiled with AVX (the AVX2 walks of [`crate::wide_bvh`]).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(crate) fn intersect8_avx(&self, a: &Tri4, b: &Tri4, t_min: f32, t_max: f32) -> ([f32; 8], u32) {
+        use core::arch::x86_64::*;
+        let [kx, ky, kz] = self.k;
+        // Macros rather than closures: a closure is not compiled with the AVX target
+        // feature of the function it is inlined into, and would call every intrinsic.
+        macro_rules! row {
+            ($v:expr, $axis:expr) => {
+                _mm256_set_m128(_mm_loadu_ps(b[$v][$axis].as_ptr()), _mm_loadu_ps(a[$v][$axis].as_ptr()))
+            };
+        }
+        macro_rules! le {
+            ($x:expr, $y:expr) => {
+                _mm256_cmp_ps::<_CMP_LE_OQ>($x, $y)
+            };
+        }
+        // SAFETY: only reached inside functions compiled with AVX (see above); loads and
+        // stores go through references to four- and eight-lane arrays.
+        unsafe {
+            let (sx, sy, sz) =
+                (_mm256_set1_ps(self.shear.x), _mm256_set1_ps(self.shear.y), _mm256_set1_ps(self.shear.z));
+            let (ox, oy, oz) = (
+                _mm256_set1_ps(self.origin_k[0]),
+                _mm256_set1_ps(self.origin_k[1]),
+                _mm256_set1_ps(self.origin_k[2]),
+            );
+            macro_rules! vertex {
+                ($v:expr) => {{
+                    let z = _mm256_sub_ps(row!($v, kz), oz);
+                    (
+                        _mm256_sub_ps(_mm256_sub_ps(row!($v, kx), ox), _mm256_mul_ps(sx, z)),
+                        _mm256_sub_ps(_mm256_sub_ps(row!($v, ky), oy), _mm256_mul_ps(sy, z)),
+                        z,
+                    )
+                }};
+            }
+            let (ax, ay, az) = vertex!(0);
+            let (bx, by, bz) = vertex!(1);
+            let (cx, cy, cz) = vertex!(2);
+            let mut u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+            let mut v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+            let mut w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+            let zero = _mm256_setzero_ps();
+            let eq0 = _mm256_or_ps(
+                _mm256_or_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(u, zero), _mm256_cmp_ps::<_CMP_EQ_OQ>(v, zero)),
+                _mm256_cmp_ps::<_CMP_EQ_OQ>(w, zero),
+            );
+            if _mm256_movemask_ps(eq0) != 0 {
+                let mut uvw = [[0.0f32; 8]; 3];
+                _mm256_storeu_ps(uvw[0].as_mut_ptr(), u);
+                _mm256_storeu_ps(uvw[1].as_mut_ptr(), v);
+                _mm256_storeu_ps(uvw[2].as_mut_ptr(), w);
+                self.edges_f64_8(a, b, &mut uvw);
+                u = _mm256_loadu_ps(uvw[0].as_ptr());
+                v = _mm256_loadu_ps(uvw[1].as_ptr());
+                w = _mm256_loadu_ps(uvw[2].as_ptr());
+            }
+            let inside = _mm256_or_ps(
+                _mm256_and_ps(_mm256_and_ps(le!(zero, u), le!(zero, v)), le!(zero, w)),
+                _mm256_and_ps(_mm256_and_ps(le!(u, zero), le!(v, zero)), le!(w, zero)),
+            );
+            let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
+            let candidates =
+                _mm256_movemask_ps(_mm256_andnot_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(det, zero), inside)) as u32;
+            if candidates == 0 {
+                return ([0.0; 8], 0);
+            }
+            let t_scaled = _mm256_add_ps(
+                _mm256_add_ps(
+                    _mm256_mul_ps(u, _mm256_mul_ps(sz, az)),
+                    _mm256_mul_ps(v, _mm256_mul_ps(sz, bz)),
+                ),
+                _mm256_mul_ps(w, _mm256_mul_ps(sz, cz)),
+            );
+            let t = _mm256_mul_ps(t_scaled, _mm256_div_ps(_mm256_set1_ps(1.0), det));
+            let in_range = _mm256_and_ps(le!(_mm256_set1_ps(t_min), t), le!(t, _mm256_set1_ps(t_max)));
+            let ok = candidates & _mm256_movemask_ps(in_range) as u32;
+            let mut out = [0.0f32; 8];
+            _mm256_storeu_ps(out.as_mut_ptr(), t);
+            (out, ok)
+        }
+    }
+
+    /// [`ShearedRay::edges_f64`] on the two packets of an eight-lane test (lanes 0..4 of
+    /// `uvw` are `a`'s, 4..8 `b`'s).
+    #[cfg(target_arch = "x86_64")]
+    #[cold]
+    #[inline(never)]
+    fn edges_f64_8(&self, a: &Tri4, b: &Tri4, uvw: &mut [[f32; 8]; 3]) {
+        for (h, tri) in [a, b].into_iter().enumerate() {
+            let mut half = [[0.0f32; 4]; 3];
+            for (dst, src) in half.iter_mut().zip(uvw.iter()) {
+                dst.copy_from_slice(&src[4 * h..4 * h + 4]);
+            }
+            self.edges_f64(tri, &mut half);
+            for (dst, src) in uvw.iter_mut().zip(half.iter()) {
+                dst[4 * h..4 * h + 4].copy_from_slice(src);
+            }
+        }
+    }
+
     /// The edge functions of the lanes of `tri` where one is exactly zero in f32, redone
     /// in f64 (the rare path of [`ShearedRay::intersect4`]).
     #[cold]
@@ -200,7 +306,66 @@ mod tests {
         assert!(r.intersect(Vec3::ZERO, Vec3::X, Vec3::Y, 0.0, 10.0).is_none());
     }
 
+    /// `intersect8_avx` compiled with AVX, as the walks that call it are.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    fn intersect8_with_avx(r: &ShearedRay, a: &Tri4, b: &Tri4, t_min: f32, t_max: f32) -> ([f32; 8], u32) {
+        r.intersect8_avx(a, b, t_min, t_max)
+    }
+
+    /// Packs four triangles into a packet.
+    fn packet(tris: &[[Vec3; 3]]) -> Tri4 {
+        let mut p = [[[f32::NAN; 4]; 3]; 3];
+        for (lane, t) in tris.iter().enumerate() {
+            for (v, c) in t.iter().enumerate() {
+                for a in 0..3 {
+                    p[v][a][lane] = c[a];
+                }
+            }
+        }
+        p
+    }
+
     proptest! {
+        /// The eight-lane AVX test of two packets gives, lane for lane, the hit bits and
+        /// the bits of `t` of the four-lane test on each, also for rays aimed exactly at a
+        /// corner or an edge (edge functions exactly zero, redone in f64) and for unused
+        /// (NaN) lanes.
+        #[cfg(target_arch = "x86_64")]
+        #[test]
+        fn eight_lane_test_equals_two_four_lane_tests(
+            corners in prop::collection::vec(-2.0f32..2.0, 72),
+            used in 1usize..=8,
+            aim in 0usize..8,
+            at in 0usize..4,
+            o in prop::array::uniform3(-6.0f32..6.0),
+        ) {
+            prop_assume!(std::arch::is_x86_feature_detected!("avx"));
+            let tris: Vec<[Vec3; 3]> = corners
+                .chunks(9)
+                .map(|c| [Vec3::new(c[0], c[1], c[2]), Vec3::new(c[3], c[4], c[5]), Vec3::new(c[6], c[7], c[8])])
+                .take(used)
+                .collect();
+            let (a, b) = (packet(&tris[..used.min(4)]), packet(&tris[used.min(4)..]));
+            // Aim at a corner (at < 3) or an edge midpoint of one used triangle.
+            let t = tris[aim % used];
+            let target = if at < 3 { t[at] } else { (t[0] + t[1]) * 0.5 };
+            let origin = Vec3::from(o);
+            prop_assume!((target - origin).length() > 1e-3);
+            let r = ShearedRay::new(origin, (target - origin).normalize());
+            // SAFETY: the CPU has AVX (checked above).
+            let (t8, m8) = unsafe { intersect8_with_avx(&r, &a, &b, 0.0, 100.0) };
+            let (ta, ma) = r.intersect4(&a, 0.0, 100.0);
+            let (tb, mb) = r.intersect4(&b, 0.0, 100.0);
+            prop_assert_eq!(m8, ma | mb << 4);
+            for l in 0..8 {
+                if m8 & (1 << l) != 0 {
+                    let t4 = if l < 4 { ta[l] } else { tb[l - 4] };
+                    prop_assert_eq!(t8[l].to_bits(), t4.to_bits());
+                }
+            }
+        }
+
         /// Rays aimed exactly at the shared diagonal or the shared vertices of a quad split
         /// into two triangles (in a random plane, seen from either side) hit at least one.
         #[test]

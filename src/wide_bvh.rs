@@ -2,8 +2,9 @@
 //! dynamic programme, [`WideBvh::from_bvh2`]) into nodes of eight children whose
 //! boxes are stored as structure-of-arrays (so one ray tests all eight at once: one AVX2
 //! instruction per step where the CPU has it, detected at run time, else two SSE halves),
-//! with leaves of up to four triangles pre-gathered into a [`Tri4`] packet for
-//! [`ShearedRay::intersect4`]. Owns the closest-hit, any-hit and nearest-point walks over
+//! with leaves of up to eight triangles pre-gathered into one or two [`Tri4`] packets
+//! (tested together in one eight-lane AVX test, [`ShearedRay::intersect8_avx`], where the
+//! CPU has it, else one [`ShearedRay::intersect4`] after the other). Owns the closest-hit, any-hit and nearest-point walks over
 //! it and their work counting, and [`F4`], the four-lane f32 vector the box and triangle
 //! tests use (SSE on x86_64, plain arrays elsewhere). The scene's top-level BVH over
 //! objects stays in [`crate::bvh`].
@@ -24,13 +25,22 @@ use crate::triangle::{ShearedRay, Tri4};
 pub const WIDTH: usize = 8;
 /// Triangles per leaf packet.
 pub const LEAF_MAX: usize = 4;
-/// Marks a child reference as a leaf: `LEAF | packet << 2 | (count - 1)`.
+/// Packets per leaf at most: a leaf of up to `LEAF_MAX * LEAF_PACKETS` triangles is that
+/// many consecutive packets. Two, because the AVX2 walks test two packets in one
+/// eight-lane test for about the cost of one: with leaves of up to eight triangles the
+/// armadillo's hit rays visit 7.7 nodes instead of 8.4 and its BVH shrinks from 6.19 to
+/// 5.20 MB (benches/primary_rays.rs).
+pub const LEAF_PACKETS: usize = 2;
+/// Marks a child reference as a leaf: `LEAF | first_packet << LEAF_SHIFT | (triangles - 1)`.
 const LEAF: u32 = 1 << 31;
-/// Cost of a leaf packet test relative to a node test in the surface area heuristic that
-/// groups the BVH2 into wide nodes ([`WideBvh::from_bvh2`]). With obvhs's leaves of up to
-/// four triangles it only decides whether a subtree of at most four triangles (rare: obvhs
-/// has already merged most into a leaf) becomes one packet; 1, 1.5 and 2 built the same
-/// tree for the armadillo.
+/// Bits of a leaf reference that hold its triangle count less one.
+const LEAF_SHIFT: u32 = 5;
+const _: () = assert!(LEAF_MAX * LEAF_PACKETS <= 1 << LEAF_SHIFT);
+/// Cost of a leaf test (one or two packets, one eight-lane test) relative to a node test
+/// in the surface area heuristic that groups the BVH2 into wide nodes
+/// ([`WideBvh::from_bvh2`]). It decides which subtrees of at most eight triangles become
+/// one leaf; 1, 1.5 and 2.5 built nearly the same tree for the armadillo (7.70 to 7.72
+/// nodes per hit ray) and traced it equally fast.
 const PACKET_COST: f32 = 1.5;
 /// Child reference of an unused slot (its box is NaN, so it is never entered).
 const NONE: u32 = u32::MAX;
@@ -46,12 +56,14 @@ pub struct Node {
     /// Child boxes, scene units: `bounds[0..3][lane]` are the minimum x, y, z and
     /// `bounds[3..6][lane]` the maximum; unused lanes are NaN (no ray enters them).
     pub bounds: [[f32; WIDTH]; 6],
-    /// Per lane: an index into [`WideBvh::nodes`], or `LEAF | packet << 2 | (count - 1)`
-    /// for a leaf of `count` triangles in [`WideBvh::packets`]`[packet]`, or `u32::MAX`.
+    /// Per lane: an index into [`WideBvh::nodes`], or `LEAF | first << LEAF_SHIFT |
+    /// (count - 1)` for a leaf of `count` triangles in the packets from
+    /// [`WideBvh::packets`]`[first]` on, or `u32::MAX`.
     pub children: [u32; WIDTH],
 }
 
-/// A leaf: up to four triangles' corners and their indices.
+/// Up to four triangles' corners and their indices; a leaf is one or two consecutive
+/// packets.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(16))]
 pub struct Packet {
@@ -94,6 +106,21 @@ pub(crate) trait BoxTest: Copy {
     /// The lanes whose child box the ray enters within `[t_min, t_max]` (bit `l` for lane
     /// `l`) and the [`order_key`]s of the entry distances.
     fn hit(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]);
+
+    /// Tests the triangles of one leaf (its one or two packets) with `sheared`: per lane
+    /// (`LEAF_MAX * k + l` for lane `l` of packet `k`) the hit's `t`, and the mask of lanes
+    /// hit within `[t_min, t_max]`.
+    #[inline(always)]
+    fn leaf(sheared: &ShearedRay, packets: &[Packet], t_min: f32, t_max: f32) -> ([f32; 8], u32) {
+        let mut t = [0.0; 8];
+        let mut mask = 0;
+        for (k, p) in packets.iter().enumerate() {
+            let (tk, mk) = sheared.intersect4(&p.tri, t_min, t_max);
+            t[LEAF_MAX * k..LEAF_MAX * (k + 1)].copy_from_slice(&tk);
+            mask |= mk << (LEAF_MAX * k);
+        }
+        (t, mask)
+    }
 }
 
 /// The safe reciprocal of the direction, per axis (finite and nonzero, with the
@@ -207,6 +234,21 @@ impl BoxTest for BoxRayAvx2 {
             let mut d = [0u32; WIDTH];
             _mm256_storeu_si256(d.as_mut_ptr() as *mut __m256i, _mm256_xor_si256(bits, flip));
             (mask, d)
+        }
+    }
+
+    /// Both packets of a two-packet leaf in one eight-lane test.
+    #[inline(always)]
+    fn leaf(sheared: &ShearedRay, packets: &[Packet], t_min: f32, t_max: f32) -> ([f32; 8], u32) {
+        const { assert!(LEAF_PACKETS == 2) };
+        match packets {
+            [a, b] => sheared.intersect8_avx(&a.tri, &b.tri, t_min, t_max),
+            _ => {
+                let (t4, mask) = sheared.intersect4(&packets[0].tri, t_min, t_max);
+                let mut t = [0.0; 8];
+                t[..LEAF_MAX].copy_from_slice(&t4);
+                (t, mask)
+            }
         }
     }
 }
@@ -407,10 +449,10 @@ impl WideBvh {
     /// Collapses `bvh`, built over the boxes `boxes` of the triangles `corners(i)`, with
     /// its primitive indices already in leaf order (`primitive_indices[i] == i`). Which BVH2
     /// subtrees become the up to eight children of each wide node, and which (of at most
-    /// [`LEAF_MAX`] triangles) one leaf packet, is chosen by the surface area heuristic: a
-    /// dynamic programme over the BVH2 (after Ylitie, Karras and Laine 2017, with the costs
-    /// of our node and packet tests, [`PACKET_COST`]). Leaves with more than [`LEAF_MAX`]
-    /// triangles are split into several packets.
+    /// `LEAF_MAX * LEAF_PACKETS` triangles) one leaf of one or two packets, is chosen by the
+    /// surface area heuristic: a dynamic programme over the BVH2 (after Ylitie, Karras and
+    /// Laine 2017, with the costs of our node and leaf tests, [`PACKET_COST`]). BVH2 leaves
+    /// with more triangles become a node over several leaves.
     pub fn from_bvh2(bvh: &Bvh2, boxes: &[Aabb], corners: impl Fn(u32) -> [Vec3; 3]) -> Self {
         let mut w = WideBvh::default();
         if bvh.nodes.is_empty() {
@@ -466,8 +508,8 @@ impl WideBvh {
         }
     }
 
-    /// A child reference for the triangles `prims`: one packet, or (more than
-    /// [`LEAF_MAX`]) a node over up to eight groups of them, recursively.
+    /// A child reference for the triangles `prims`: a leaf of one or two packets, or (more
+    /// than `LEAF_MAX * LEAF_PACKETS`) a node over up to eight groups of them, recursively.
     fn leaf(
         &mut self,
         boxes: &[Aabb],
@@ -475,23 +517,26 @@ impl WideBvh {
         prims: &[u32],
         depth: usize,
     ) -> u32 {
-        if prims.len() <= LEAF_MAX {
-            let mut p = Packet { tri: [[[f32::NAN; LEAF_MAX]; 3]; 3], ids: [u32::MAX; LEAF_MAX] };
-            for (lane, &i) in prims.iter().enumerate() {
-                for (v, c) in corners(i).into_iter().enumerate() {
-                    for a in 0..3 {
-                        p.tri[v][a][lane] = c[a];
+        if prims.len() <= LEAF_MAX * LEAF_PACKETS {
+            let first = self.packets.len() as u32;
+            for chunk in prims.chunks(LEAF_MAX) {
+                let mut p = Packet { tri: [[[f32::NAN; LEAF_MAX]; 3]; 3], ids: [u32::MAX; LEAF_MAX] };
+                for (lane, &i) in chunk.iter().enumerate() {
+                    for (v, c) in corners(i).into_iter().enumerate() {
+                        for a in 0..3 {
+                            p.tri[v][a][lane] = c[a];
+                        }
                     }
+                    p.ids[lane] = i;
                 }
-                p.ids[lane] = i;
+                self.packets.push(p);
             }
-            self.packets.push(p);
-            return LEAF | ((self.packets.len() as u32 - 1) << 2) | (prims.len() as u32 - 1);
+            return LEAF | (first << LEAF_SHIFT) | (prims.len() as u32 - 1);
         }
         self.depth = self.depth.max(depth);
         let index = self.nodes.len();
         self.nodes.push(empty_node());
-        let group = prims.len().div_ceil(WIDTH).max(LEAF_MAX);
+        let group = prims.len().div_ceil(WIDTH).max(LEAF_MAX * LEAF_PACKETS);
         for (lane, chunk) in prims.chunks(group).enumerate() {
             let b = chunk.iter().map(|&i| boxes[i as usize]).reduce(|a, b| a.union(&b)).expect("nonempty");
             let r = self.leaf(boxes, corners, chunk, depth + 1);
@@ -583,9 +628,11 @@ impl WideBvh {
                 continue;
             }
             if cur & LEAF != 0 {
-                let packet = &self.packets[((cur & !LEAF) >> 2) as usize];
-                for &i in &packet.ids[..=(cur & 3) as usize] {
-                    best = best.min(dist(i));
+                let (first, count) = leaf_range(cur);
+                for p in &self.packets[first..first + count.div_ceil(LEAF_MAX)] {
+                    for &i in p.ids.iter().filter(|&&i| i != u32::MAX) {
+                        best = best.min(dist(i));
+                    }
                 }
                 continue;
             }
@@ -620,6 +667,13 @@ type Entry = u64;
 fn order_key(x: f32) -> u32 {
     let b = x.to_bits();
     b ^ ((((b as i32) >> 31) as u32) | 0x8000_0000)
+}
+
+/// The first packet of the leaf reference `cur` and its number of triangles (its packets
+/// are the next `count.div_ceil(LEAF_MAX)`).
+#[inline(always)]
+fn leaf_range(cur: u32) -> (usize, usize) {
+    (((cur & !LEAF) >> LEAF_SHIFT) as usize, ((cur & ((1 << LEAF_SHIFT) - 1)) + 1) as usize)
 }
 
 /// A stack entry for child reference `child` entered at distance key `key`.
@@ -799,19 +853,19 @@ fn closest_walk_in<B: BoxTest>(
                 continue 'walk;
             }
         } else {
-            let packet = (cur & !LEAF) >> 2;
-            let p = &bvh.packets[packet as usize];
-            tests += u64::from((cur & 3) + 1);
-            let (t, mut hits) = sheared.intersect4(&p.tri, t_min, t_max);
+            let (first, count) = leaf_range(cur);
+            tests += count as u64;
+            let packets = &bvh.packets[first..first + count.div_ceil(LEAF_MAX)];
+            let (t, mut hits) = B::leaf(&sheared, packets, t_min, t_max);
             if hits != 0 {
                 // The nearest hit lane (the last of equals, as a lane-by-lane scan would
                 // take).
                 while hits != 0 {
-                    let lane = hits.trailing_zeros() as usize & (LEAF_MAX - 1);
+                    let lane = hits.trailing_zeros() as usize & 7;
                     hits &= hits - 1;
                     if t[lane] <= t_max {
                         t_max = t[lane];
-                        best = Some((packet, lane));
+                        best = Some((first + lane / LEAF_MAX, lane % LEAF_MAX));
                     }
                 }
                 t_max_key = order_key(t_max);
@@ -834,7 +888,7 @@ fn closest_walk_in<B: BoxTest>(
     stats.bvh_nodes += nodes;
     stats.prim_tests += tests;
     best.map(|(packet, lane)| {
-        let p = &bvh.packets[packet as usize];
+        let p = &bvh.packets[packet];
         let corner = |v: usize| Vec3::new(p.tri[v][0][lane], p.tri[v][1][lane], p.tri[v][2][lane]);
         LeafHit { triangle: p.ids[lane], t: t_max, corners: [corner(0), corner(1), corner(2)] }
     })
@@ -888,10 +942,10 @@ fn any_walk_in<B: BoxTest>(
                 len += 1;
             }
         } else {
-            let p = &bvh.packets[((cur & !LEAF) >> 2) as usize];
-            stats.prim_tests += u64::from((cur & 3) + 1);
+            let (first, count) = leaf_range(cur);
+            stats.prim_tests += count as u64;
             let sheared = sheared.get_or_insert_with(|| ShearedRay::new(origin, dir));
-            if sheared.intersect4(&p.tri, t_min, t_max).1 != 0 {
+            if B::leaf(sheared, &bvh.packets[first..first + count.div_ceil(LEAF_MAX)], t_min, t_max).1 != 0 {
                 found = true;
                 break;
             }
@@ -929,7 +983,7 @@ fn subtree_prims(bvh: &Bvh2, node: usize, out: &mut Vec<u32>) {
 /// ([`WideBvh::from_bvh2_sah`]). Per BVH2 node and slot budget `j` (1 to [`WIDTH`]), how its
 /// subtree is best covered by at most `j` child slots of a wide node.
 struct SahPlan {
-    /// `choice[node][j - 1]`: [`SahPlan::PACKET`] (one slot, a leaf packet),
+    /// `choice[node][j - 1]`: [`SahPlan::PACKET`] (one slot, a leaf of one or two packets),
     /// [`SahPlan::NODE`] (one slot, a wide node of its own) or `SPLIT | kl << 3 | kr`
     /// (its two children covered with `kl` and `kr` slots).
     choice: Vec<[u8; WIDTH]>,
@@ -963,10 +1017,11 @@ impl SahPlan {
             let area = n.aabb().half_area();
             if n.is_leaf() {
                 prims[i] = n.prim_count;
-                // A leaf over LEAF_MAX becomes a node of packets (see `WideBvh::leaf`).
-                let packets = (n.prim_count as usize).div_ceil(LEAF_MAX) as f32;
+                // A leaf over LEAF_MAX * LEAF_PACKETS becomes a node of leaves (see
+                // `WideBvh::leaf`).
+                let leaves = (n.prim_count as usize).div_ceil(LEAF_MAX * LEAF_PACKETS);
                 let c =
-                    if packets <= 1.0 { packet_cost * area } else { area * (1.0 + packet_cost * packets) };
+                    if leaves <= 1 { packet_cost * area } else { area * (1.0 + packet_cost * leaves as f32) };
                 cost[i] = [c; WIDTH];
                 continue;
             }
@@ -984,7 +1039,8 @@ impl SahPlan {
             }
             wide[i] = split[WIDTH - 1].1;
             let as_node = area + split[WIDTH - 1].0;
-            let as_packet = if prims[i] as usize <= LEAF_MAX { packet_cost * area } else { f32::INFINITY };
+            let as_packet =
+                if prims[i] as usize <= LEAF_MAX * LEAF_PACKETS { packet_cost * area } else { f32::INFINITY };
             (cost[i][0], choice[i][0]) =
                 if as_packet <= as_node { (as_packet, Self::PACKET) } else { (as_node, Self::NODE) };
             for j in 1..WIDTH {
