@@ -700,7 +700,8 @@ fn ordered(a: Entry, b: Entry) -> (Entry, Entry) {
 /// Stack entries a walk over `bvh` needs at most: each level of the current path holds at
 /// most `WIDTH - 1` pending children.
 fn stack_needed(bvh: &WideBvh) -> usize {
-    bvh.depth * (WIDTH - 1) + 1
+    // Two more for the writes of `visit_node`, which may go two past the entries it keeps.
+    bvh.depth * (WIDTH - 1) + 1 + 2
 }
 
 /// Evaluates `$walk` with `$stack` bound to a traversal stack for `$bvh`: on the call stack
@@ -756,33 +757,41 @@ fn visit_node<B: BoxTest>(
         return n.children[l0];
     }
     let key = |l: usize| entry(d[l], n.children[l]);
+    // Two to four children without a branch on their number (which varies from node to
+    // node and would be mispredicted): absent ones get the largest key, which sorts last,
+    // a network of five compare-exchanges sorts all four, and the pushes write three
+    // slots whatever the number, of which the stack keeps the present ones.
+    let k1 = key(next_lane(&mut mask));
+    let present2 = mask != 0;
+    let k2 = if present2 { key(next_lane(&mut mask)) } else { Entry::MAX };
+    let present3 = mask != 0;
+    let k3 = if present3 { key(next_lane(&mut mask)) } else { Entry::MAX };
+    let (a, b) = ordered(key(l0), k1);
+    let (c, d4) = ordered(k2, k3);
+    let (a, c) = ordered(a, c);
+    let (b, d4) = ordered(b, d4);
+    let (b, c) = ordered(b, c);
+    if mask == 0 {
+        // `pushed` entries, farthest deepest: [b], [c, b] or [d4, c, b].
+        let pushed = 1 + usize::from(present2) + usize::from(present3);
+        let first = if present3 {
+            d4
+        } else if present2 {
+            c
+        } else {
+            b
+        };
+        let second = if present3 { c } else { b };
+        stack[*len].write(first);
+        stack[*len + 1].write(second);
+        stack[*len + 2].write(b);
+        *len += pushed;
+        return a as u32;
+    }
     let mut push = |e: Entry| {
         stack[*len].write(e);
         *len += 1;
     };
-    let (a, b) = ordered(key(l0), key(next_lane(&mut mask)));
-    if mask == 0 {
-        push(b);
-        return a as u32;
-    }
-    // Three: insert the third into the ordered pair.
-    let (b, c) = ordered(b, key(next_lane(&mut mask)));
-    let (a, b) = ordered(a, b);
-    if mask == 0 {
-        push(c);
-        push(b);
-        return a as u32;
-    }
-    // Four: sort the fourth into the ordered three.
-    let (c, d4) = ordered(c, key(next_lane(&mut mask)));
-    let (b, c) = ordered(b, c);
-    let (a, b) = ordered(a, b);
-    if mask == 0 {
-        push(d4);
-        push(c);
-        push(b);
-        return a as u32;
-    }
     // Five to eight (rare): insertion sort of all, then push all but the nearest.
     let mut sorted = [a, b, c, d4, 0, 0, 0, 0];
     let mut k = 4;
