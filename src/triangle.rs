@@ -91,7 +91,7 @@ impl ShearedRay {
         let cz = sz * c[kz];
         let t_scaled = u * az + v * bz + w * cz;
         let inv = 1.0 / det;
-        let t = t_scaled * inv;
+        let t = t_scaled / det;
         if !(t >= t_min && t <= t_max) {
             return None;
         }
@@ -143,7 +143,7 @@ impl ShearedRay {
             return ([0.0; 4], 0);
         }
         let t_scaled = u.mul(sz.mul(az)).add(v.mul(sz.mul(bz))).add(w.mul(sz.mul(cz)));
-        let t = t_scaled.mul(F4::splat(1.0).div(det));
+        let t = t_scaled.div(det);
         let ok = candidates & F4::splat(t_min).le(t) & t.le(F4::splat(t_max));
         (t.to_array(), ok)
     }
@@ -227,7 +227,7 @@ impl ShearedRay {
                 ),
                 _mm256_mul_ps(w, _mm256_mul_ps(sz, cz)),
             );
-            let t = _mm256_mul_ps(t_scaled, _mm256_div_ps(_mm256_set1_ps(1.0), det));
+            let t = _mm256_div_ps(t_scaled, det);
             let in_range = _mm256_and_ps(le!(_mm256_set1_ps(t_min), t), le!(t, _mm256_set1_ps(t_max)));
             let ok = candidates & _mm256_movemask_ps(in_range) as u32;
             let mut out = [0.0f32; 8];
