@@ -39,10 +39,11 @@ pub struct MeshGeometry {
 impl MeshGeometry {
     /// The BVH build parameters used by [`MeshGeometry::new`], chosen by measurement
     /// (benches/primary_rays.rs, reports/bench/primary_rays.txt): obvhs's fast PLOC preset
-    /// with at most four triangles per leaf, so each leaf fills one packet of the 8-wide
-    /// BVH it is collapsed into. On the armadillo it traced as fast as the medium and slow
-    /// presets (within the noise, about 12 Mrays per CPU-second), 11% faster than one
-    /// triangle per leaf, and built in three quarters of the medium preset's time.
+    /// with at most four triangles per leaf (one packet; the grouping into the 8-wide BVH
+    /// merges sibling leaves into leaves of up to eight). On the armadillo it traced as
+    /// fast as the medium and slow presets and as one to three triangles per leaf (16.1
+    /// Mrays/s on one thread, within the noise), with the smallest BVH (5.20 MB against
+    /// 5.46 with one triangle per leaf), in three quarters of the medium preset's time.
     pub const BUILD_PARAMS: BvhBuildParams =
         BvhBuildParams { max_prims_per_leaf: 4, ..BvhBuildParams::fast_build() };
 
