@@ -46,7 +46,7 @@ const PACKET_COST: f32 = 1.5;
 const NONE: u32 = u32::MAX;
 /// Traversal stack entries kept on the call stack (enough for a BVH 36 levels deep); a
 /// deeper BVH walks with a heap stack.
-const STACK: usize = 253;
+const STACK: usize = 255;
 
 /// An inner node: eight child boxes and references (224 bytes, aligned to a 64-byte cache
 /// line).
@@ -698,9 +698,9 @@ fn ordered(a: Entry, b: Entry) -> (Entry, Entry) {
 }
 
 /// Stack entries a walk over `bvh` needs at most: each level of the current path holds at
-/// most `WIDTH - 1` pending children.
+/// most `WIDTH - 1` pending children, and [`visit_node`] may write two slots past the
+/// entries it keeps.
 fn stack_needed(bvh: &WideBvh) -> usize {
-    // Two more for the writes of `visit_node`, which may go two past the entries it keeps.
     bvh.depth * (WIDTH - 1) + 1 + 2
 }
 
