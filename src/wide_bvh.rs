@@ -3,11 +3,11 @@
 //! boxes are stored as structure-of-arrays (so one ray tests all eight at once: one AVX2
 //! instruction per step where the CPU has it, detected at run time, else two SSE halves),
 //! with leaves of up to eight triangles pre-gathered into one or two [`Tri4`] packets
-//! (tested together in one eight-lane AVX test, [`ShearedRay::intersect8_avx`], where the
-//! CPU has it, else one [`ShearedRay::intersect4`] after the other). Owns the closest-hit, any-hit and nearest-point walks over
-//! it and their work counting, and [`F4`], the four-lane f32 vector the box and triangle
-//! tests use (SSE on x86_64, plain arrays elsewhere). The scene's top-level BVH over
-//! objects stays in [`crate::bvh`].
+//! (tested together in one eight-lane AVX test, `ShearedRay::intersect8_avx`, where the
+//! CPU has it, else one [`ShearedRay::intersect4`] after the other). Owns the closest-hit,
+//! any-hit and nearest-point walks over it and their work counting, and [`F4`], the
+//! four-lane f32 vector the box and triangle tests use (SSE on x86_64, plain arrays
+//! elsewhere). The scene's top-level BVH over objects stays in [`crate::bvh`].
 
 use std::mem::MaybeUninit;
 use std::ops::{Mul, Sub};
