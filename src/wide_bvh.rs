@@ -603,6 +603,13 @@ impl WideBvh {
         any_walk::<BoxRayAvx2>(self, origin, dir, t_min, t_max, stats)
     }
 
+    /// The packets of the leaf whose first packet and triangle count are `range` (from
+    /// [`leaf_range`]).
+    #[inline(always)]
+    fn leaf_packets(&self, (first, count): (usize, usize)) -> &[Packet] {
+        &self.packets[first..first + count.div_ceil(LEAF_MAX)]
+    }
+
     /// Whether the walks use the AVX2 box test.
     pub fn uses_avx2(&self) -> bool {
         self.avx2
@@ -628,8 +635,7 @@ impl WideBvh {
                 continue;
             }
             if cur & LEAF != 0 {
-                let (first, count) = leaf_range(cur);
-                for p in &self.packets[first..first + count.div_ceil(LEAF_MAX)] {
+                for p in self.leaf_packets(leaf_range(cur)) {
                     for &i in p.ids.iter().filter(|&&i| i != u32::MAX) {
                         best = best.min(dist(i));
                     }
@@ -864,8 +870,7 @@ fn closest_walk_in<B: BoxTest>(
         } else {
             let (first, count) = leaf_range(cur);
             tests += count as u64;
-            let packets = &bvh.packets[first..first + count.div_ceil(LEAF_MAX)];
-            let (t, mut hits) = B::leaf(&sheared, packets, t_min, t_max);
+            let (t, mut hits) = B::leaf(&sheared, bvh.leaf_packets((first, count)), t_min, t_max);
             if hits != 0 {
                 // The nearest hit lane (the last of equals, as a lane-by-lane scan would
                 // take).
@@ -954,7 +959,7 @@ fn any_walk_in<B: BoxTest>(
             let (first, count) = leaf_range(cur);
             stats.prim_tests += count as u64;
             let sheared = sheared.get_or_insert_with(|| ShearedRay::new(origin, dir));
-            if B::leaf(sheared, &bvh.packets[first..first + count.div_ceil(LEAF_MAX)], t_min, t_max).1 != 0 {
+            if B::leaf(sheared, bvh.leaf_packets((first, count)), t_min, t_max).1 != 0 {
                 found = true;
                 break;
             }
