@@ -160,7 +160,7 @@ impl MeshGeometry {
     /// [`Geometry::closest_hit`] with the AVX2 box test: the whole of it (ray setup, walk and
     /// hit record) compiled with AVX2, in one function.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,popcnt,bmi1")]
+    #[target_feature(enable = "avx2,fma,popcnt,bmi1")]
     fn closest_hit_avx2(
         &self,
         origin: Vec3,
@@ -228,7 +228,7 @@ impl Geometry for MeshGeometry {
     fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
         #[cfg(target_arch = "x86_64")]
         if self.bvh.uses_avx2() {
-            // SAFETY: `uses_avx2` is only true where the CPU has AVX2, POPCNT and BMI1.
+            // SAFETY: `uses_avx2` is only true where the CPU has AVX2, FMA, POPCNT and BMI1.
             // The ray goes by value: a caller that has just written it would otherwise
             // have its stores read back by wider loads, which cannot be forwarded.
             return unsafe { self.closest_hit_avx2(ray.origin, ray.dir, t_min, t_max, stats) };

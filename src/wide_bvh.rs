@@ -94,8 +94,8 @@ pub struct WideBvh {
     pub packets: Vec<Packet>,
     /// Deepest node level (root = 1), which bounds the traversal stack.
     pub depth: usize,
-    /// Whether the walks test boxes with AVX2 and count lanes with POPCNT and BMI1 (true only
-    /// where the CPU has all three).
+    /// Whether the walks test boxes with AVX2 and FMA and count lanes with POPCNT and BMI1
+    /// (true only where the CPU has all four).
     avx2: bool,
 }
 
@@ -106,6 +106,12 @@ pub(crate) trait BoxTest: Copy {
     /// The lanes whose child box the ray enters within `[t_min, t_max]` (bit `l` for lane
     /// `l`) and the [`order_key`]s of the entry distances.
     fn hit(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]);
+
+    /// [`BoxTest::hit`] for the root, the first node of every walk.
+    #[inline(always)]
+    fn hit_root(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
+        self.hit(n, t_min, t_max)
+    }
 
     /// Tests the triangles of one leaf (its one or two packets) with `sheared`: per lane
     /// (`LEAF_MAX * k + l` for lane `l` of packet `k`) the hit's `t`, and the mask of lanes
@@ -176,14 +182,60 @@ impl BoxTest for BoxRay {
     }
 }
 
+/// The eight-lane box test on the slab distances `$slab(row)` of the six bound rows
+/// (unsafe AVX intrinsics: expanded inside `unsafe` blocks of functions compiled with
+/// AVX). Both rows of an axis sit at fixed offsets and are ordered by `min` and `max`,
+/// which keep an empty lane's NaN (as in the portable test), rather than rows chosen by
+/// the direction's signs: no row index to keep per ray. Shared by
+/// [`BoxRayAvx2::hit`] and [`BoxRayAvx2::hit_root`], which differ only in the slab
+/// distance.
+#[cfg(target_arch = "x86_64")]
+macro_rules! box_test_avx {
+    ($t_min:expr, $t_max:expr, $slab:expr) => {{
+        let slab = $slab;
+        let (x0, x1) = (slab(0), slab(3));
+        let (y0, y1) = (slab(1), slab(4));
+        let (z0, z1) = (slab(2), slab(5));
+        let near = _mm256_max_ps(
+            _mm256_max_ps(_mm256_min_ps(x0, x1), _mm256_min_ps(y0, y1)),
+            _mm256_max_ps(_mm256_set1_ps($t_min), _mm256_min_ps(z0, z1)),
+        );
+        let far = _mm256_min_ps(
+            _mm256_min_ps(_mm256_max_ps(x0, x1), _mm256_max_ps(y0, y1)),
+            _mm256_min_ps(_mm256_set1_ps($t_max), _mm256_max_ps(z0, z1)),
+        );
+        let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(near, far)) as u32;
+        // `order_key` on all lanes at once.
+        let bits = _mm256_castps_si256(near);
+        let flip = _mm256_or_si256(_mm256_srai_epi32::<31>(bits), _mm256_set1_epi32(i32::MIN));
+        let mut d = [0u32; WIDTH];
+        _mm256_storeu_si256(d.as_mut_ptr() as *mut __m256i, _mm256_xor_si256(bits, flip));
+        (mask, d)
+    }};
+}
+
 /// The AVX2 box test: all eight lanes in one 256-bit register. Only built by walks that
-/// run under `#[target_feature(enable = "avx2,popcnt,bmi1")]`, which are only called where
-/// [`WideBvh::avx2`] says the CPU has it.
+/// run under `#[target_feature(enable = "avx2,fma,popcnt,bmi1")]`, which are only called
+/// where [`WideBvh::avx2`] says the CPU has it.
+///
+/// Below the root a slab distance is one fused `bound * inv - offset`, with `offset` the
+/// product `origin * inv` rounded away from the box: its rounding error (up to half an
+/// ulp of the product, an absolute error that grows with the origin's distance from the
+/// mesh's frame, unlike the relative error of `(bound - origin) * inv`) is bounded by
+/// twice `f32::EPSILON` of it and added to the entry offset and taken from the exit one,
+/// so the fused test never shrinks a box; it can only grow by about an ulp of the origin.
+/// A fused product is one operation of latency instead of two on each node of a hit
+/// ray's chain. The root, tested while `offset` is still being computed at the ray's
+/// start, uses `(bound - origin) * inv` as the portable test does.
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct BoxRayAvx2 {
     origin: [core::arch::x86_64::__m256; 3],
     inv: [core::arch::x86_64::__m256; 3],
+    /// Per bound row (minimum x, y, z, then maximum x, y, z): `origin * inv` of its axis,
+    /// raised where the row is the entry slab (the minimum for a nonnegative `inv`) and
+    /// lowered where it is the exit slab.
+    offset: [core::arch::x86_64::__m256; 6],
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -192,48 +244,49 @@ impl BoxTest for BoxRayAvx2 {
     fn new(origin: Vec3, dir: Vec3) -> Self {
         use core::arch::x86_64::_mm256_set1_ps;
         let inv = safe_inverse(dir);
+        let o = origin.to_array();
         // SAFETY: only reached inside the `avx2` walks (see the type's documentation), so
         // the CPU has AVX.
         let splat = |x: f32| unsafe { _mm256_set1_ps(x) };
+        // `p + e` and `p - e` with `e >= 2 ulp(p)` bracket the exact product (the rounded
+        // `p` is within half an ulp of it); `copysign` picks the entry row without a branch.
+        let offset = |row: usize| {
+            let a = row % 3;
+            let p = o[a] * inv[a];
+            let e = (p.abs() * (2.0 * f32::EPSILON)).copysign(inv[a]);
+            splat(if row < 3 { p + e } else { p - e })
+        };
         BoxRayAvx2 {
-            origin: [splat(origin.x), splat(origin.y), splat(origin.z)],
+            origin: [splat(o[0]), splat(o[1]), splat(o[2])],
             inv: [splat(inv[0]), splat(inv[1]), splat(inv[2])],
+            offset: [offset(0), offset(1), offset(2), offset(3), offset(4), offset(5)],
         }
     }
 
     #[inline(always)]
     fn hit(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
-        use core::arch::x86_64::*;
-        let b = &n.bounds;
-        // SAFETY: as in `new`, the CPU has AVX; loads and stores go through references to
-        // `[f32; 8]`.
+        // SAFETY: as in `new`, the CPU has AVX and FMA (see the type's documentation).
         unsafe {
-            // `(bound - origin) * inv`, not a fused `bound * inv - origin * inv`: the same
-            // rounding as the portable test, without cancellation far from the origin.
-            // Both rows of an axis at fixed offsets, ordered by `min` and `max` (which keep
-            // an empty lane's NaN, as in the portable test), rather than rows chosen by the
-            // direction's signs: no row index to keep per ray.
-            let slab = |row: usize, a: usize| {
-                _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(b[row].as_ptr()), self.origin[a]), self.inv[a])
-            };
-            let (x0, x1) = (slab(0, 0), slab(3, 0));
-            let (y0, y1) = (slab(1, 1), slab(4, 1));
-            let (z0, z1) = (slab(2, 2), slab(5, 2));
-            let near = _mm256_max_ps(
-                _mm256_max_ps(_mm256_min_ps(x0, x1), _mm256_min_ps(y0, y1)),
-                _mm256_max_ps(_mm256_set1_ps(t_min), _mm256_min_ps(z0, z1)),
-            );
-            let far = _mm256_min_ps(
-                _mm256_min_ps(_mm256_max_ps(x0, x1), _mm256_max_ps(y0, y1)),
-                _mm256_min_ps(_mm256_set1_ps(t_max), _mm256_max_ps(z0, z1)),
-            );
-            let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(near, far)) as u32;
-            // `order_key` on all lanes at once.
-            let bits = _mm256_castps_si256(near);
-            let flip = _mm256_or_si256(_mm256_srai_epi32::<31>(bits), _mm256_set1_epi32(i32::MIN));
-            let mut d = [0u32; WIDTH];
-            _mm256_storeu_si256(d.as_mut_ptr() as *mut __m256i, _mm256_xor_si256(bits, flip));
-            (mask, d)
+            use core::arch::x86_64::*;
+            let b = &n.bounds;
+            box_test_avx!(t_min, t_max, |row: usize| _mm256_fmsub_ps(
+                _mm256_loadu_ps(b[row].as_ptr()),
+                self.inv[row % 3],
+                self.offset[row]
+            ))
+        }
+    }
+
+    #[inline(always)]
+    fn hit_root(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
+        // SAFETY: as in `hit`.
+        unsafe {
+            use core::arch::x86_64::*;
+            let b = &n.bounds;
+            box_test_avx!(t_min, t_max, |row: usize| _mm256_mul_ps(
+                _mm256_sub_ps(_mm256_loadu_ps(b[row].as_ptr()), self.origin[row % 3]),
+                self.inv[row % 3]
+            ))
         }
     }
 
@@ -566,14 +619,14 @@ impl WideBvh {
     ) -> Option<LeafHit> {
         #[cfg(target_arch = "x86_64")]
         if self.avx2 {
-            // SAFETY: `avx2` is only set where the CPU has AVX2, POPCNT and BMI1.
+            // SAFETY: `avx2` is only set where the CPU has AVX2, FMA, POPCNT and BMI1.
             return unsafe { self.closest_hit_avx2(origin, dir, t_min, t_max, stats) };
         }
         closest_walk::<BoxRay>(self, origin, dir, t_min, t_max, stats)
     }
 
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,popcnt,bmi1")]
+    #[target_feature(enable = "avx2,fma,popcnt,bmi1")]
     fn closest_hit_avx2(
         &self,
         origin: Vec3,
@@ -591,14 +644,14 @@ impl WideBvh {
     pub fn any_hit(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
         #[cfg(target_arch = "x86_64")]
         if self.avx2 {
-            // SAFETY: `avx2` is only set where the CPU has AVX2, POPCNT and BMI1.
+            // SAFETY: `avx2` is only set where the CPU has AVX2, FMA, POPCNT and BMI1.
             return unsafe { self.any_hit_avx2(origin, dir, t_min, t_max, stats) };
         }
         any_walk::<BoxRay>(self, origin, dir, t_min, t_max, stats)
     }
 
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,popcnt,bmi1")]
+    #[target_feature(enable = "avx2,fma,popcnt,bmi1")]
     fn any_hit_avx2(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
         any_walk::<BoxRayAvx2>(self, origin, dir, t_min, t_max, stats)
     }
@@ -727,7 +780,7 @@ macro_rules! with_stack {
 }
 
 /// [`WideBvh::closest_hit`] with the box test `B` and a stack from [`with_stack`]. Inlined
-/// into its callers, so that under `#[target_feature(enable = "avx2,popcnt,bmi1")]` (which
+/// into its callers, so that under `#[target_feature(enable = "avx2,fma,popcnt,bmi1")]` (which
 /// alone may use [`BoxRayAvx2`]) all of it is compiled with AVX2.
 #[inline(always)]
 pub(crate) fn closest_walk<B: BoxTest>(
@@ -743,10 +796,10 @@ pub(crate) fn closest_walk<B: BoxTest>(
 
 /// Tests the children of node `n` and pushes every hit one but the nearest onto `stack`
 /// (above `len`), farthest deepest, with its entry distance; returns the nearest, or
-/// [`NONE`] where the ray enters none. Two to four children are ordered by a sorting
-/// network of compare-exchanges on their entries, more by insertion.
+/// [`NONE`] where the ray enters none. Two children are ordered by one compare-exchange of
+/// their entries, three or four by a network of four, more by insertion.
 #[inline(always)]
-fn visit_node<B: BoxTest>(
+fn visit_node<B: BoxTest, const ROOT: bool>(
     br: &B,
     n: &Node,
     t_min: f32,
@@ -754,7 +807,7 @@ fn visit_node<B: BoxTest>(
     stack: &mut [MaybeUninit<Entry>],
     len: &mut usize,
 ) -> u32 {
-    let (mut mask, d) = br.hit(n, t_min, t_max);
+    let (mut mask, d) = if ROOT { br.hit_root(n, t_min, t_max) } else { br.hit(n, t_min, t_max) };
     if mask == 0 {
         return NONE;
     }
@@ -763,31 +816,29 @@ fn visit_node<B: BoxTest>(
         return n.children[l0];
     }
     let key = |l: usize| entry(d[l], n.children[l]);
-    // Two to four children without a branch on their number (which varies from node to
-    // node and would be mispredicted): absent ones get the largest key, which sorts last,
-    // a network of five compare-exchanges sorts all four, and the pushes write three
-    // slots whatever the number, of which the stack keeps the present ones.
-    let k1 = key(next_lane(&mut mask));
-    let present2 = mask != 0;
-    let k2 = if present2 { key(next_lane(&mut mask)) } else { Entry::MAX };
+    let (a, b) = ordered(key(l0), key(next_lane(&mut mask)));
+    if mask == 0 {
+        // Two children, the commonest case after one: no network.
+        stack[*len].write(b);
+        *len += 1;
+        return a as u32;
+    }
+    // Three or four children without a branch on which (it varies from node to node and
+    // would be mispredicted): an absent fourth gets the largest key, which sorts last,
+    // four compare-exchanges finish sorting all four (`a` and `b` are in order), and the
+    // pushes write three slots whatever the number, of which the stack keeps the present
+    // ones.
+    let k2 = key(next_lane(&mut mask));
     let present3 = mask != 0;
     let k3 = if present3 { key(next_lane(&mut mask)) } else { Entry::MAX };
-    let (a, b) = ordered(key(l0), k1);
     let (c, d4) = ordered(k2, k3);
     let (a, c) = ordered(a, c);
     let (b, d4) = ordered(b, d4);
     let (b, c) = ordered(b, c);
     if mask == 0 {
-        // `pushed` entries, farthest deepest: [b], [c, b] or [d4, c, b].
-        let pushed = 1 + usize::from(present2) + usize::from(present3);
-        let first = if present3 {
-            d4
-        } else if present2 {
-            c
-        } else {
-            b
-        };
-        let second = if present3 { c } else { b };
+        // `pushed` entries, farthest deepest: [c, b] or [d4, c, b].
+        let pushed = 2 + usize::from(present3);
+        let (first, second) = if present3 { (d4, c) } else { (c, b) };
         stack[*len].write(first);
         stack[*len + 1].write(second);
         stack[*len + 2].write(b);
@@ -839,12 +890,18 @@ fn closest_walk_in<B: BoxTest>(
     let mut nodes = 0u64;
     // Entries below `len` are initialised; the rest are never read.
     let mut len = 0usize;
-    let mut cur = 0u32;
+    // The root, outside the loop: most rays that miss end here.
+    let mut cur = visit_node::<B, true>(&br, &bvh.nodes[0], t_min, t_max, stack, &mut len);
+    if cur == NONE {
+        stats.bvh_nodes += 1;
+        return None;
+    }
+    nodes += 1;
     // Down to the first leaf. No hit yet, so every pushed child (entered within `t_max`)
     // is still in front.
     while cur & LEAF == 0 {
         nodes += 1;
-        cur = visit_node(&br, &bvh.nodes[cur as usize], t_min, t_max, stack, &mut len);
+        cur = visit_node::<B, false>(&br, &bvh.nodes[cur as usize], t_min, t_max, stack, &mut len);
         if cur == NONE {
             if len == 0 {
                 stats.bvh_nodes += nodes;
@@ -863,7 +920,7 @@ fn closest_walk_in<B: BoxTest>(
     'walk: loop {
         if cur & LEAF == 0 {
             nodes += 1;
-            cur = visit_node(&br, &bvh.nodes[cur as usize], t_min, t_max, stack, &mut len);
+            cur = visit_node::<B, false>(&br, &bvh.nodes[cur as usize], t_min, t_max, stack, &mut len);
             if cur != NONE {
                 continue 'walk;
             }
@@ -968,13 +1025,14 @@ fn any_walk_in<B: BoxTest>(
     found
 }
 
-/// Whether the CPU has AVX2, POPCNT and BMI1 (the walks' fast box test).
+/// Whether the CPU has AVX2, FMA, POPCNT and BMI1 (the walks' fast box test).
 fn avx2_detected() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2")
             && std::arch::is_x86_feature_detected!("popcnt")
             && std::arch::is_x86_feature_detected!("bmi1")
+            && std::arch::is_x86_feature_detected!("fma")
     }
     #[cfg(not(target_arch = "x86_64"))]
     {

@@ -40,10 +40,32 @@ fn the_mesh_is_closed() {
 
 #[test]
 fn rays_at_shared_edges_and_vertices_all_hit() {
-    let mesh = icosphere(3);
+    crack_rays(Vec3::ZERO, 0.01);
+}
+
+/// The same mesh and rays far from the frame's origin, where f32 coordinates are coarse
+/// (an ulp is 1/256 of the sphere's radius) and a box test that rounds the product of
+/// the ray's origin and inverse direction could shrink boxes by more than that.
+#[test]
+fn rays_at_shared_edges_and_vertices_far_from_the_origin_all_hit() {
+    crack_rays(Vec3::new(30_000.0, -20_000.0, 50_000.0), 0.1);
+}
+
+/// Rays from all around aimed exactly at the vertices and at points on the shared edges
+/// of a closed icosphere centred at `centre`, seen by every incident face at a cosine of
+/// at least `facing` (far from the origin, the rounded origin and target shift a ray
+/// by up to an ulp, which can take grazing ones off the sphere): each hits at the target
+/// (within that rounding), where the brute-force loop hits.
+fn crack_rays(centre: Vec3, facing: f32) {
+    let mut mesh = icosphere(3);
+    for p in &mut mesh.positions {
+        *p += centre;
+    }
     let g = geometry(&mesh, Transform::IDENTITY);
     let mut stats = RayStats::default();
     let mut rays = 0;
+    // Rounding of a coordinate, in scene units.
+    let ulp = (centre.abs().max_element() + 1.0) * f32::EPSILON;
     for (k, tri) in mesh.triangles.iter().enumerate() {
         let [a, b, c] = tri.map(|i| mesh.positions[i as usize]);
         // The vertices, the edge midpoints and points at 1/3 along each edge.
@@ -52,7 +74,8 @@ fn rays_at_shared_edges_and_vertices_all_hit() {
         for (n, (j, target)) in targets.iter().enumerate().flat_map(|jt| [jt; 4]).enumerate() {
             // Origins all around, including steep and shallow views.
             let s = (k * 32 + n) as f32;
-            let origin = Vec3::new((s * 0.37).sin(), (s * 0.71).cos(), (s * 0.13).sin()).normalize() * 3.0;
+            let origin =
+                centre + Vec3::new((s * 0.37).sin(), (s * 0.71).cos(), (s * 0.13).sin()).normalize() * 3.0;
             let dir = (*target - origin).normalize();
             // Silhouette targets (some face at the target's edge or vertex seen edge-on or
             // from behind) may rightly be missed: keep rays that every incident face faces.
@@ -66,23 +89,25 @@ fn rays_at_shared_edges_and_vertices_all_hit() {
             };
             let front = mesh.triangles.iter().filter(|t| verts.iter().all(|v| t.contains(v))).all(|t| {
                 let [p, q, r] = t.map(|i| mesh.positions[i as usize]);
-                dir.dot((q - p).cross(r - p).normalize()) < -0.01
+                dir.dot((q - p).cross(r - p).normalize()) < -facing
             });
             if !front {
                 continue;
             }
-            let hit = g.closest_hit(&Ray::new(origin, dir), 0.0, 100.0, &mut stats);
-            let brute = brute_force(&mesh, &Ray::new(origin, dir), 100.0);
+            let ray = Ray::new(origin, dir);
+            let hit = g.closest_hit(&ray, 0.0, 100.0, &mut stats).map(|h| h.t);
+            let brute = brute_force(&mesh, &ray, 100.0);
+            // A ray slipping through would hit the far side of the sphere, about 2 away.
+            let to_target = (*target - origin).length();
             assert!(
-                hit.is_some(),
-                "ray at triangle {k} target {j} slipped through (brute force: {brute:?}, target distance {}, dot {})",
-                (*target - origin).length(),
-                dir.dot(target.normalize())
+                hit.is_some_and(|t| (t - to_target).abs() < 1e-4 + 64.0 * ulp),
+                "ray at triangle {k} target {j} slipped through: hit {hit:?}, brute force {brute:?}, target at {to_target}"
             );
+            assert_eq!(hit, brute, "triangle {k} target {j}");
             rays += 1;
         }
     }
-    assert!(rays > 10_000);
+    assert!(rays > 10_000, "{rays} rays");
 }
 
 proptest! {
