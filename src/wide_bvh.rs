@@ -182,20 +182,26 @@ impl BoxTest for BoxRay {
     }
 }
 
-/// The eight-lane box test on the slab distances `$slab(row)` of the six bound rows
-/// (unsafe AVX intrinsics: expanded inside `unsafe` blocks of functions compiled with
-/// AVX). Both rows of an axis sit at fixed offsets and are ordered by `min` and `max`,
-/// which keep an empty lane's NaN (as in the portable test), rather than rows chosen by
-/// the direction's signs: no row index to keep per ray. Shared by
+/// The eight-lane box test on the slab distances `$slab`, an expression in `$row`, of
+/// the six bound rows (unsafe AVX intrinsics, expanded inside `unsafe` blocks of
+/// functions compiled with AVX, and with no closure, which would not inherit the target
+/// feature). Both rows of an axis sit at fixed offsets and are ordered by `min` and
+/// `max`, which keep an empty lane's NaN (as in the portable test), rather than rows
+/// chosen by the direction's signs: no row index to keep per ray. Shared by
 /// [`BoxRayAvx2::hit`] and [`BoxRayAvx2::hit_root`], which differ only in the slab
 /// distance.
 #[cfg(target_arch = "x86_64")]
 macro_rules! box_test_avx {
-    ($t_min:expr, $t_max:expr, $slab:expr) => {{
-        let slab = $slab;
-        let (x0, x1) = (slab(0), slab(3));
-        let (y0, y1) = (slab(1), slab(4));
-        let (z0, z1) = (slab(2), slab(5));
+    ($t_min:expr, $t_max:expr, $row:ident => $slab:expr) => {{
+        macro_rules! at {
+            ($r:expr) => {{
+                let $row: usize = $r;
+                $slab
+            }};
+        }
+        let (x0, x1) = (at!(0), at!(3));
+        let (y0, y1) = (at!(1), at!(4));
+        let (z0, z1) = (at!(2), at!(5));
         let near = _mm256_max_ps(
             _mm256_max_ps(_mm256_min_ps(x0, x1), _mm256_min_ps(y0, y1)),
             _mm256_max_ps(_mm256_set1_ps($t_min), _mm256_min_ps(z0, z1)),
@@ -272,7 +278,7 @@ impl BoxTest for BoxRayAvx2 {
         unsafe {
             use core::arch::x86_64::*;
             let b = &n.bounds;
-            box_test_avx!(t_min, t_max, |row: usize| _mm256_fmsub_ps(
+            box_test_avx!(t_min, t_max, row => _mm256_fmsub_ps(
                 _mm256_loadu_ps(b[row].as_ptr()),
                 self.inv[row % 3],
                 self.offset[row]
@@ -286,7 +292,7 @@ impl BoxTest for BoxRayAvx2 {
         unsafe {
             use core::arch::x86_64::*;
             let b = &n.bounds;
-            box_test_avx!(t_min, t_max, |row: usize| _mm256_mul_ps(
+            box_test_avx!(t_min, t_max, row => _mm256_mul_ps(
                 _mm256_sub_ps(_mm256_loadu_ps(b[row].as_ptr()), self.origin[row % 3]),
                 self.inv[row % 3]
             ))
