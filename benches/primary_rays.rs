@@ -397,8 +397,10 @@ fn per_ray(total: u64, rays: u64) -> Option<f64> {
 }
 
 /// The obvhs presets compared, by name: the five presets as they are (leaves of up to 8
-/// triangles, which the 8-wide BVH splits into packets of at most 4), then the fast and
-/// medium presets with 1 to 4 triangles per leaf (one packet per leaf).
+/// triangles, which the 8-wide BVH splits into packets of at most 4), the fast preset with
+/// 1 to 4 triangles per leaf (one packet per leaf), and the fast preset with 4 per leaf
+/// and more of obvhs's reinsertion optimisation (the ratio of nodes it tries to move;
+/// the fast preset's is 0.02).
 fn presets() -> Vec<(String, BvhBuildParams)> {
     let mut v: Vec<(String, BvhBuildParams)> = vec![
         ("fastest_build".into(), BvhBuildParams::fastest_build()),
@@ -407,15 +409,21 @@ fn presets() -> Vec<(String, BvhBuildParams)> {
         ("medium_build".into(), BvhBuildParams::medium_build()),
         ("slow_build".into(), BvhBuildParams::slow_build()),
     ];
-    let current = MeshGeometry::BUILD_PARAMS.max_prims_per_leaf;
-    for (name, base) in [("fast", BvhBuildParams::fast_build()), ("medium", BvhBuildParams::medium_build())] {
-        for leaf in 1..=4 {
-            // BUILD_PARAMS is the fast preset with a smaller leaf.
-            let note = if name == "fast" && leaf == current { " (current)" } else { "" };
-            v.push((
-                format!("{name} leaf={leaf}{note}"),
-                BvhBuildParams { max_prims_per_leaf: leaf, ..base },
-            ));
+    let fast = BvhBuildParams::fast_build();
+    for leaf in 1..=4 {
+        v.push((format!("fast leaf={leaf}"), BvhBuildParams { max_prims_per_leaf: leaf, ..fast }));
+    }
+    for ratio in [0.1, 0.2, 0.5, 1.0] {
+        v.push((
+            format!("fast leaf=4 reinsert={ratio}"),
+            BvhBuildParams { max_prims_per_leaf: 4, reinsertion_batch_ratio: ratio, ..fast },
+        ));
+    }
+    // Mark the rows that build what `MeshGeometry::BUILD_PARAMS` builds.
+    let current = MeshGeometry::BUILD_PARAMS;
+    for (name, p) in &mut v {
+        if format!("{p:?}") == format!("{current:?}") {
+            name.push_str(" (current)");
         }
     }
     v
