@@ -55,17 +55,37 @@ proptest! {
 
     #[test]
     fn band_bound_is_conservative_everywhere(x in -1.6..1.6f64, y in -1.6..1.6f64, z in -1.6..1.6f64) {
-        let (_, band) = &*SPHERE_64;
+        let (dense, band) = &*SPHERE_64;
         let p = DVec3::new(x, y, z);
         let exact = sphere(p);
         let v = band.trilinear(p.as_vec3()) as f64;
         let inside_box = band.bounds().0.as_dvec3().cmple(p).all() && p.cmple(band.bounds().1.as_dvec3()).all();
-        if !inside_box || !band.is_stored(cell_of(band, p.as_vec3())) {
+        // Outside the box, the cell is the one nearest `p` on the box's boundary.
+        if band.is_stored(cell_of(band, p.as_vec3())) {
+            // Samples, not a bound (trilinear interpolation of the convex sphere distance
+            // lies above it), continued outside the box as the dense grid's are.
+            let d = dense.trilinear(p.as_vec3()) as f64;
+            prop_assert!((v - d).abs() <= 1e-3 * dense.voxel as f64, "{p}: band {v} dense {d}");
+        } else {
             prop_assert!(v.abs() <= exact.abs() + 1e-5, "{p}: bound {v} exact {exact}");
             prop_assert!(v.signum() == exact.signum(), "{p}: bound {v} exact {exact}");
             prop_assert!(v.abs() >= 2.0 * band.voxel as f64 - 1e-6 || !inside_box, "steps of at least the band");
         }
     }
+}
+
+/// A point proptest found: just outside the grid's box, its nearest boundary cell in the
+/// band, where the band's value (samples continued by the distance to the box) lies above
+/// the exact distance, as the dense grid's does.
+#[test]
+fn outside_the_box_next_to_the_band_is_the_dense_value() {
+    let (dense, band) = &*SPHERE_64;
+    let p = DVec3::new(1.062634303772659, -0.17575025619207976, -0.24004034968572172);
+    assert!(!(band.bounds().0.as_dvec3().cmple(p).all() && p.cmple(band.bounds().1.as_dvec3()).all()));
+    assert!(band.is_stored(cell_of(band, p.as_vec3())));
+    let (v, d) = (band.trilinear(p.as_vec3()), dense.trilinear(p.as_vec3()));
+    assert!((v - d).abs() <= 1e-3 * dense.voxel, "band {v} dense {d}");
+    assert!(v as f64 > sphere(p), "samples, not a bound: {v} against {}", sphere(p));
 }
 
 static SPHERE_64: std::sync::LazyLock<(SdfGrid, BandGrid)> = std::sync::LazyLock::new(|| sphere_grids(64, 2));
