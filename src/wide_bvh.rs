@@ -896,10 +896,9 @@ fn visit_node<B: BoxTest, const ROOT: bool>(
 }
 
 /// [`closest_walk`] on `stack` (at least [`stack_needed`] entries). Two loops: the first
-/// descends to the first leaf the ray reaches, with no triangle test prepared, so that the
-/// most rays, which miss the mesh's triangles without reaching a leaf, never pay for the
-/// sheared ray (which the compiler would otherwise set up before the walk); the second
-/// goes on from that leaf with it.
+/// descends to the first leaf the ray reaches, with no triangle test yet, so that the most
+/// rays, which miss the mesh's triangles without reaching a leaf, leave before the sheared
+/// ray is set up (one level below the root); the second goes on from that leaf with it.
 #[inline(always)]
 fn closest_walk_in<B: BoxTest>(
     bvh: &WideBvh,
@@ -924,22 +923,37 @@ fn closest_walk_in<B: BoxTest>(
         return None;
     }
     nodes += 1;
-    // Down to the first leaf. No hit yet, so every pushed child (entered within `t_max`)
-    // is still in front.
-    while cur & LEAF == 0 {
-        nodes += 1;
-        cur = visit_node::<B, false>(&br, bvh.node(cur), t_min, t_max, stack, &mut len);
-        if cur == NONE {
-            if len == 0 {
-                stats.bvh_nodes += nodes;
-                return None;
+    // One step down (a macro: a closure would not inherit the walk's target feature):
+    // the nearest child the ray enters, else the nearest pending one; where there is none
+    // the ray misses.
+    macro_rules! descend {
+        () => {{
+            nodes += 1;
+            cur = visit_node::<B, false>(&br, bvh.node(cur), t_min, t_max, stack, &mut len);
+            if cur == NONE {
+                if len == 0 {
+                    stats.bvh_nodes += nodes;
+                    return None;
+                }
+                len -= 1;
+                // SAFETY: entries below the old `len` were written by a push.
+                cur = unsafe { stack[len].assume_init() } as u32;
             }
-            len -= 1;
-            // SAFETY: entries below the old `len` were written by a push.
-            cur = unsafe { stack[len].assume_init() } as u32;
-        }
+        }};
     }
-    let sheared = ShearedRay::new(origin, dir);
+    // Down to the first leaf. No hit yet, so every pushed child (entered within `t_max`)
+    // is still in front. The sheared ray is set up one level below the root, where most
+    // rays that miss have left, and pinned there with `black_box`: left to the compiler,
+    // its setup (a division and a chain of selects) sinks to the first leaf, right onto
+    // the critical path of every ray that hits (measured on the bunny: hit rays 157 ns
+    // there, 151 ns pinned here; rays that miss 16.1 ns against 16.4).
+    if cur & LEAF == 0 {
+        descend!();
+    }
+    let sheared = std::hint::black_box(ShearedRay::new(origin, dir));
+    while cur & LEAF == 0 {
+        descend!();
+    }
     let mut best = None;
     let mut tests = 0u64;
     // `order_key(t_max)`, to compare with the distance keys of stack entries.
