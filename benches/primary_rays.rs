@@ -6,9 +6,9 @@
 //!   tiles: BVH build time (median of 3), bytes, Mrays/s (median, min and max of 5 frames
 //!   after a warm-up), BVH nodes and triangle tests per ray; where the CPU has AVX2, also
 //!   the same BVH walked with the portable box test (two SSE halves per node).
-//! * A sweep of obvhs build presets and leaf sizes (1 thread; each Bvh2 is collapsed
-//!   into the 8-wide BVH `MeshGeometry` traces) to choose `MeshGeometry::BUILD_PARAMS`
-//!   by measurement. Nodes per ray count 8-wide nodes visited, tests per ray triangles.
+//! * A sweep of obvhs build presets, leaf sizes and reinsertion ratios (1 thread; each
+//!   Bvh2 is collapsed into the 8-wide BVH `MeshGeometry` traces) to choose
+//!   `MeshGeometry::BUILD_PARAMS` by measurement. Nodes per ray count 8-wide nodes visited, tests per ray triangles.
 //! * With `--features embree` (Debian's `libembree-dev`, Embree 3), the same frames
 //!   traced by Embree one ray at a time (`rtcIntersect1`), in packets of 8
 //!   (`rtcIntersect8`), as a coherent stream of one tile (`rtcIntersect1M`) and one ray

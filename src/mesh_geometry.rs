@@ -44,10 +44,11 @@ impl MeshGeometry {
     /// (obvhs tries to move half of the BVH2's nodes to where they cost less by the surface
     /// area heuristic, rather than 2%). The presets, as they are, and leaves of one to three
     /// triangles traced within 1% of the fast preset; reinsertion is what made a better
-    /// tree: on the bunny, hit rays visit 6.1 nodes instead of 6.5 and primary rays trace
-    /// 2.5% faster, as fast as with a ratio of 1 (in twice the build time), for a build
-    /// four times longer than the fast preset's (71 against 18 ms for the bunny, 108
-    /// against 33 for the armadillo: see the report for this run's numbers).
+    /// tree: on the bunny, hit rays visit 6.1 nodes instead of 6.5, and primary rays trace
+    /// 2% faster (15.9 against 15.6 Mrays/s on one thread; 1.7% on the armadillo), within
+    /// 0.5% of a ratio of 1 in half its build time, for a build four times the fast
+    /// preset's (72 against 17 ms for the bunny, 106 against 32 for the armadillo; see the
+    /// report for the latest run).
     pub const BUILD_PARAMS: BvhBuildParams = BvhBuildParams {
         max_prims_per_leaf: 4,
         reinsertion_batch_ratio: 0.5,

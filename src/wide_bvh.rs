@@ -36,6 +36,7 @@ const LEAF: u32 = 1 << 31;
 /// Bits of a leaf reference that hold its triangle count less one.
 const LEAF_SHIFT: u32 = 5;
 const _: () = assert!(LEAF_MAX * LEAF_PACKETS <= 1 << LEAF_SHIFT);
+// Node references are byte offsets, and `WideBvh::node` checks them as such.
 const _: () = assert!(size_of::<Node>() == 256);
 /// Cost of a leaf test (one or two packets, one eight-lane test) relative to a node test
 /// in the surface area heuristic that groups the BVH2 into wide nodes
@@ -676,9 +677,9 @@ impl WideBvh {
     #[inline(always)]
     fn node(&self, r: u32) -> &Node {
         let at = r as usize;
-        const { assert!(size_of::<Node>() == 1 << 8) };
         assert!(at.rotate_right(8) < self.nodes.len(), "node reference out of range");
-        // SAFETY: `at` is the byte offset of a whole, aligned node inside `nodes`.
+        // SAFETY: by the check, `at` is 256 (the size of a node, asserted at compile time)
+        // times an index below `nodes.len()`: the offset of a whole, aligned node.
         unsafe { &*self.nodes.as_ptr().byte_add(at) }
     }
 
