@@ -1,4 +1,4 @@
-//! SDF -> grid -> triangle mesh (issue 4, item 7): our extraction (`sdfmesh::extract`,
+//! SDF -> grid -> triangle mesh (issue 4, item 7): our extraction (`sdfmesh::convert::extract`,
 //! marching cubes, marching tetrahedra and dual contouring) against `fast-surface-nets`
 //! (naive surface nets) and `mcubes` (classic Lorensen marching cubes, Bourke's tables).
 //!
@@ -44,11 +44,11 @@ use std::time::Instant;
 use glam::{DVec3, Vec3};
 use rayon::ThreadPool;
 use rayon::prelude::*;
-use sdfmesh::extract::{ExtractMethod, Field, SampleGrid, extract_sampled, sample_grid};
+use sdfmesh::convert::extract::{ExtractMethod, Field, SampleGrid, extract_sampled, sample_grid};
+use sdfmesh::geometry::sdf::SdfTree;
 use sdfmesh::geometry::{Aabb, aabb};
 use sdfmesh::mesh::TriangleMesh;
 use sdfmesh::scene::load_scene;
-use sdfmesh::sdf::SdfTree;
 
 /// What one run measures.
 #[derive(Clone, Copy, Debug)]

@@ -1,10 +1,10 @@
-//! Mesh -> signed distance grid: our exact sampler (`sdfmesh::grid::sample_mesh`) side by
+//! Mesh -> signed distance grid: our exact sampler (`sdfmesh::geometry::grid::sample_mesh`) side by
 //! side with the `mesh_to_sdf` crate (`generate_grid_sdf`), and our voxelizer
-//! (`sdfmesh::grid::voxelize::voxelize_mesh`) against our exact samples.
+//! (`sdfmesh::geometry::grid::voxelize::voxelize_mesh`) against our exact samples.
 //!
 //! * Meshes: the Stanford bunny (open: holes in its base) and the armadillo (closed), from
 //!   `../shared/meshes`, at 128 cells along the longest axis plus
-//!   `sdfmesh::repr::GRID_MARGIN_CELLS` on every side.
+//!   `sdfmesh::plan::GRID_MARGIN_CELLS` on every side.
 //! * Both tools fill the same grid points: `mesh_to_sdf`'s `Grid` gets our grid's origin as
 //!   its first cell centre, our spacing and our sample counts (our samples sit at cell
 //!   corners, its at cell centres, so the points coincide), and its x-slowest output is
@@ -44,11 +44,11 @@ use std::time::Instant;
 use glam::{DVec3, Vec3, Vec3A};
 use rayon::ThreadPool;
 use rayon::prelude::*;
-use sdfmesh::grid::closest::closest_point_on_triangle;
-use sdfmesh::grid::voxelize::voxelize_mesh;
-use sdfmesh::grid::{SdfGrid, sample_mesh_with_stats};
+use sdfmesh::geometry::grid::closest::closest_point_on_triangle;
+use sdfmesh::geometry::grid::voxelize::voxelize_mesh;
+use sdfmesh::geometry::grid::{SdfGrid, sample_mesh_with_stats};
 use sdfmesh::mesh::{TriangleMesh, load_mesh};
-use sdfmesh::repr::GRID_MARGIN_CELLS;
+use sdfmesh::plan::GRID_MARGIN_CELLS;
 
 /// What one run measures.
 #[derive(Clone, Copy, Debug)]
@@ -156,7 +156,7 @@ fn brute_distance(tris: &[[Vec3A; 3]], p: Vec3) -> f32 {
 }
 
 /// Exact generalized winding number of `p` (Van Oosterom and Strackee in `f64`, summed
-/// over every triangle), written independently of `sdfmesh::grid::winding`.
+/// over every triangle), written independently of `sdfmesh::geometry::grid::winding`.
 fn brute_winding(tris: &[[DVec3; 3]], p: Vec3) -> f64 {
     let q = p.as_dvec3();
     let mut omega = 0.0;
@@ -249,7 +249,7 @@ impl Accuracy {
 #[cfg(feature = "peers")]
 mod peer {
     use mesh_to_sdf::{Grid, SignMethod, Topology, generate_grid_sdf};
-    use sdfmesh::grid::SdfGrid;
+    use sdfmesh::geometry::grid::SdfGrid;
     use sdfmesh::mesh::TriangleMesh;
 
     /// `mesh_to_sdf`'s input: vertices and a flat index list.
@@ -303,7 +303,7 @@ mod peer {
 fn bench_mesh(out: &mut Out, pool: &ThreadPool, name: &str, mesh: &TriangleMesh, plan: &Plan) {
     let res = plan.res;
     let margin = GRID_MARGIN_CELLS;
-    let closed = sdfmesh::grid::winding::is_closed(mesh);
+    let closed = sdfmesh::geometry::grid::winding::is_closed(mesh);
     out.line(format!(
         "\n== {name}: {} triangles, {} vertices, {}; grid {res} cells along the longest axis + {margin} margin",
         mesh.triangles.len(),

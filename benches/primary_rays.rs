@@ -33,12 +33,12 @@ use std::time::Instant;
 use obvhs::BvhBuildParams;
 use rayon::ThreadPool;
 use rayon::prelude::*;
-use sdfmesh::camera::RayGenerator;
+use sdfmesh::geometry::mesh::{MeshGeometry, Shading};
 use sdfmesh::geometry::{Geometry, RayStats};
 use sdfmesh::mesh::{TriangleMesh, load_mesh};
-use sdfmesh::mesh_geometry::{MeshGeometry, Shading};
+use sdfmesh::scene::camera::RayGenerator;
 use sdfmesh::scene::mesh_preview_scene;
-use sdfmesh::transform::Transform;
+use sdfmesh::scene::transform::Transform;
 
 /// Side of a square tile of rays.
 const TILE: u32 = 16;

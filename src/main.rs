@@ -4,12 +4,12 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
-use sdfmesh::budget::MemoryBudget;
-use sdfmesh::commands::{self, ConvertTarget, Overrides};
-use sdfmesh::extract::ExtractMethod;
-use sdfmesh::march::MarchParams;
-use sdfmesh::repr::{GridFill, GridStorage, MeshMethod, Representation};
-use sdfmesh::shape::Shading;
+use sdfmesh::cli::commands::{self, ConvertTarget, Overrides};
+use sdfmesh::convert::extract::ExtractMethod;
+use sdfmesh::geometry::march::MarchParams;
+use sdfmesh::plan::budget::MemoryBudget;
+use sdfmesh::plan::{GridFill, GridStorage, MeshMethod, Representation};
+use sdfmesh::scene::shape::Shading;
 
 #[derive(Parser)]
 #[command(
@@ -380,16 +380,18 @@ fn main() -> ExitCode {
                     .map(|t| print!("{t}"))
             }
         }
-        Command::Hard { manifest, table } => match sdfmesh::hard::hard_command(&manifest, table.as_deref()) {
-            Ok((text, as_expected)) => {
-                print!("{text}");
-                if !as_expected {
-                    return ExitCode::from(1);
+        Command::Hard { manifest, table } => {
+            match sdfmesh::compare::hard::hard_command(&manifest, table.as_deref()) {
+                Ok((text, as_expected)) => {
+                    print!("{text}");
+                    if !as_expected {
+                        return ExitCode::from(1);
+                    }
+                    Ok(())
                 }
-                Ok(())
+                Err(e) => Err(e),
             }
-            Err(e) => Err(e),
-        },
+        }
         Command::Gallery { scenes, output, mesh, settings, march } => {
             let reprs: Vec<Representation> = [Repr::Analytic, Repr::Sdf, Repr::Mesh, Repr::Grid]
                 .map(|r| representation(r, &mesh, march.params()))

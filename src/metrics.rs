@@ -12,9 +12,9 @@ use glam::DVec3;
 use image::RgbImage;
 use rayon::prelude::*;
 
-use crate::camera::RayGenerator;
 use crate::geometry::{Geometry, RayStats};
 use crate::scene::Camera;
+use crate::scene::camera::RayGenerator;
 
 /// Mean squared error of two equally sized RGB images on a [0, 1] scale, over all
 /// channels.

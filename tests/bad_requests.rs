@@ -41,7 +41,7 @@ radius = 1
 
 const TETRA: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
 
-/// A `.sdf` header (see `sdfmesh::grid::io`) with the given fields, then `samples`.
+/// A `.sdf` header (see `sdfmesh::geometry::grid::io`) with the given fields, then `samples`.
 fn sdf_file(magic: &[u8; 8], version: u32, dims: [u32; 3], voxel: f32, samples: &[f32]) -> Vec<u8> {
     let mut b = magic.to_vec();
     b.extend(version.to_le_bytes());

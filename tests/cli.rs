@@ -164,7 +164,7 @@ fn convert_mesh_to_grid_and_scene_to_mesh() {
         grid.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let g = sdfmesh::grid::io::load_grid(&grid).unwrap();
+    let g = sdfmesh::geometry::grid::io::load_grid(&grid).unwrap();
     // Inside the tetrahedron the distance is negative, far outside positive.
     let (lo, hi) = g.bounds();
     assert!(g.trilinear(glam::Vec3::splat(0.15)) < 0.0);

@@ -11,10 +11,10 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use sdfmesh::compare::{COLUMNS, Row, read_rows};
-use sdfmesh::march::MarchParams;
+use sdfmesh::geometry::march::MarchParams;
 use sdfmesh::metrics::{probe, surface_distance};
-use sdfmesh::repr::{Representation, build_scene};
-use sdfmesh::shape::Primitive;
+use sdfmesh::plan::{Representation, build_scene};
+use sdfmesh::scene::shape::Primitive;
 
 fn temp_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("sdfmesh-compare-{name}-{}", std::process::id()));

@@ -6,11 +6,11 @@ use std::time::Instant;
 
 use glam::{DMat3, DVec3, Vec3, Vec3A};
 use proptest::prelude::*;
-use sdfmesh::extract::{ExtractMethod, Field, extract, extract_object, sample_grid};
+use sdfmesh::convert::extract::{ExtractMethod, Field, extract, extract_object, sample_grid};
 use sdfmesh::geometry::Aabb;
 use sdfmesh::mesh::{TriangleMesh, is_degenerate};
-use sdfmesh::shape::{CsgOp, Object, ObjectKind, Primitive};
-use sdfmesh::transform::TransformDesc;
+use sdfmesh::scene::shape::{CsgOp, Object, ObjectKind, Primitive};
+use sdfmesh::scene::transform::TransformDesc;
 
 #[path = "common/mesh_checks.rs"]
 mod mesh_checks;

@@ -3,7 +3,7 @@
 //! marching cubes' at the same resolution, measured densely over each triangle's area.
 
 use glam::{DVec3, Vec3A};
-use sdfmesh::extract::{ExtractMethod, Field, extract};
+use sdfmesh::convert::extract::{ExtractMethod, Field, extract};
 use sdfmesh::geometry::Aabb;
 use sdfmesh::mesh::TriangleMesh;
 

@@ -9,7 +9,7 @@ use std::process::Command;
 
 use glam::{DVec3, Vec3};
 use proptest::prelude::*;
-use sdfmesh::extract::{ExtractMethod, Field, extract, extract_sampled, sample_grid};
+use sdfmesh::convert::extract::{ExtractMethod, Field, extract, extract_sampled, sample_grid};
 use sdfmesh::geometry::Aabb;
 use sdfmesh::mesh::{TriangleMesh, is_degenerate};
 

@@ -96,7 +96,7 @@ fn fuzz_seeds_are_valid_inputs() {
     }
     for target in ["grid_sdf", "grid_npy"] {
         for f in files(target) {
-            let g = sdfmesh::grid::io::load_grid(&f).unwrap_or_else(|e| panic!("{e}"));
+            let g = sdfmesh::geometry::grid::io::load_grid(&f).unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(g.values.len(), (g.dims.x * g.dims.y * g.dims.z) as usize);
         }
     }
@@ -118,7 +118,11 @@ fn fuzz_seeds_are_valid_inputs() {
 #[test]
 fn npy_error_quoting_the_header_stays_on_one_line() {
     let p = committed("npy_header_newline.npy");
-    let msg = fails(&p, sdfmesh::grid::io::load_grid(&p), &["has no 'descr' entry: hape': (2, 2,", "..."]);
+    let msg = fails(
+        &p,
+        sdfmesh::geometry::grid::io::load_grid(&p),
+        &["has no 'descr' entry: hape': (2, 2,", "..."],
+    );
     assert!(msg.len() < p.display().to_string().len() + 150, "{msg}");
     // Values quoted from the dictionary are escaped too.
     let dir = tempfile::tempdir().unwrap();
@@ -129,9 +133,9 @@ fn npy_error_quoting_the_header_stays_on_one_line() {
         b
     };
     let p = put(dir.path(), "d.npy", npy("{'descr': '<f\n8', 'fortran_order': False, 'shape': (2, 2, 2), }"));
-    fails(&p, sdfmesh::grid::io::load_grid(&p), &["unsupported .npy dtype '<f\\n8'"]);
+    fails(&p, sdfmesh::geometry::grid::io::load_grid(&p), &["unsupported .npy dtype '<f\\n8'"]);
     let p = put(dir.path(), "s.npy", npy("{'descr': '<f4', 'fortran_order': False, 'shape': (2,\r2\x0b), }"));
-    fails(&p, sdfmesh::grid::io::load_grid(&p), &["has shape (2,\\r2\\u{b}); a grid needs 3 axes"]);
+    fails(&p, sdfmesh::geometry::grid::io::load_grid(&p), &["has shape (2,\\r2\\u{b}); a grid needs 3 axes"]);
 }
 
 /// fuzz target obj, campaign 1 (minimised): `vt<VT>1 2` (a vertical tab after the keyword).

@@ -8,17 +8,17 @@ use std::sync::Arc;
 use common::{fraction_within, lit_scene, object};
 use glam::{DVec3, UVec3, Vec3};
 use proptest::prelude::*;
-use sdfmesh::commands::render_scene;
+use sdfmesh::cli::commands::render_scene;
+use sdfmesh::convert::tessellate::tessellate;
 use sdfmesh::geometry::Geometry;
-use sdfmesh::grid::band::{BandGrid, band_from_function, band_from_mesh};
-use sdfmesh::grid::voxelize::voxelize_mesh;
-use sdfmesh::grid::{SdfGrid, sample_function, sample_mesh};
-use sdfmesh::grid_geometry::GridObject;
-use sdfmesh::march::MarchParams;
-use sdfmesh::repr::{GridFill, GridStorage, Representation};
-use sdfmesh::shape::{Object, ObjectKind, Primitive, Shading};
-use sdfmesh::tessellate::tessellate;
-use sdfmesh::transform::TransformDesc;
+use sdfmesh::geometry::grid::band::{BandGrid, band_from_function, band_from_mesh};
+use sdfmesh::geometry::grid::object::GridObject;
+use sdfmesh::geometry::grid::voxelize::voxelize_mesh;
+use sdfmesh::geometry::grid::{SdfGrid, sample_function, sample_mesh};
+use sdfmesh::geometry::march::MarchParams;
+use sdfmesh::plan::{GridFill, GridStorage, Representation};
+use sdfmesh::scene::shape::{Object, ObjectKind, Primitive, Shading};
+use sdfmesh::scene::transform::TransformDesc;
 
 const R: f64 = 1.0;
 
@@ -207,9 +207,10 @@ fn view_clipping_grids_only_the_seen_part_of_a_huge_ground() {
     // The ground sphere (radius 5000) unclipped would take a grid over its whole box.
     let ground = scene.objects.iter().find(|o| o.bounds().is_some_and(|b| b.diagonal().x > 1000.0)).unwrap();
     let b = ground.bounds().unwrap();
-    let (_, _, dims) = sdfmesh::grid::grid_layout(b.min.into(), b.max.into(), resolution, 2).unwrap();
+    let (_, _, dims) =
+        sdfmesh::geometry::grid::grid_layout(b.min.into(), b.max.into(), resolution, 2).unwrap();
     let unclipped = dims.x as u64 * dims.y as u64 * dims.z as u64;
-    let geometry = sdfmesh::repr::build_scene(
+    let geometry = sdfmesh::plan::build_scene(
         &scene,
         Representation::Grid { resolution, fill: GridFill::Sample, storage: GridStorage::Dense, march },
     );

@@ -6,10 +6,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use glam::Vec3;
-use sdfmesh::grid::io::load_grid;
+use sdfmesh::convert::tessellate::tessellate;
+use sdfmesh::geometry::grid::io::load_grid;
 use sdfmesh::mesh::{TriangleMesh, save_mesh};
-use sdfmesh::shape::Primitive;
-use sdfmesh::tessellate::tessellate;
+use sdfmesh::scene::shape::Primitive;
 
 fn toolkit(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_toolkit")).args(args).output().expect("run toolkit")

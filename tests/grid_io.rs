@@ -8,8 +8,8 @@ use std::time::Instant;
 
 use glam::{UVec3, Vec3};
 use sdfmesh::error::Error;
-use sdfmesh::grid::SdfGrid;
-use sdfmesh::grid::io::{SDF_HEADER_LEN, load_grid, save_grid};
+use sdfmesh::geometry::grid::SdfGrid;
+use sdfmesh::geometry::grid::io::{SDF_HEADER_LEN, load_grid, save_grid};
 
 /// A small non-cubic grid with distinct values, including `-0.0` and infinities.
 fn sample_grid() -> SdfGrid {

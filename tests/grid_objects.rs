@@ -8,15 +8,15 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use sdfmesh::commands::render_scene;
-use sdfmesh::extract::ExtractMethod;
-use sdfmesh::grid::io::save_grid;
-use sdfmesh::grid::sample_mesh;
-use sdfmesh::march::MarchParams;
-use sdfmesh::repr::{GridFill, GridStorage, MeshMethod, Representation};
+use sdfmesh::cli::commands::render_scene;
+use sdfmesh::convert::extract::ExtractMethod;
+use sdfmesh::convert::tessellate::tessellate;
+use sdfmesh::geometry::grid::io::save_grid;
+use sdfmesh::geometry::grid::sample_mesh;
+use sdfmesh::geometry::march::MarchParams;
+use sdfmesh::plan::{GridFill, GridStorage, MeshMethod, Representation};
 use sdfmesh::scene::parse_scene;
-use sdfmesh::shape::Primitive;
-use sdfmesh::tessellate::tessellate;
+use sdfmesh::scene::shape::Primitive;
 
 fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("sdfmesh-grid-objects-{name}-{}", std::process::id()));
@@ -74,7 +74,7 @@ fn reprs() -> [(&'static str, Representation); 4] {
             "mesh",
             Representation::Mesh {
                 resolution: 48,
-                shading: sdfmesh::shape::Shading::Flat,
+                shading: sdfmesh::scene::shape::Shading::Flat,
                 method: MeshMethod::Extracted(ExtractMethod::DualContouring),
                 march: MarchParams::default(),
             },
@@ -171,7 +171,7 @@ fn toolkit_previews_a_grid_file_and_extracts_grid_objects() {
     assert!(out.contains("closed: true"), "{out}");
     let (mesh, _) = sdfmesh::mesh::load_mesh(&obj).unwrap();
     // The box's corners are placed by the transform: a vertex lies near the rotated corner.
-    let t = sdfmesh::transform::Transform::new(&sdfmesh::transform::TransformDesc {
+    let t = sdfmesh::scene::transform::Transform::new(&sdfmesh::scene::transform::TransformDesc {
         translate: glam::Vec3::new(0.3, 0.0, 0.0),
         rotate_deg: glam::Vec3::new(0.0, 30.0, 10.0),
         scale: glam::Vec3::ONE,

@@ -7,9 +7,11 @@ use std::time::Instant;
 use glam::{DVec3, UVec3, Vec3, Vec3A};
 use proptest::prelude::*;
 use sdfmesh::error::Error;
-use sdfmesh::grid::closest::{NodeStack, TriangleBvh, closest_point_on_triangle};
-use sdfmesh::grid::winding::{BETA, FastWinding, REFINE_BETA, exact_winding_number, is_closed};
-use sdfmesh::grid::{DEFAULT_MAX_GRID_BYTES, SdfGrid, check_size, sample_mesh, sample_mesh_with_stats};
+use sdfmesh::geometry::grid::closest::{NodeStack, TriangleBvh, closest_point_on_triangle};
+use sdfmesh::geometry::grid::winding::{BETA, FastWinding, REFINE_BETA, exact_winding_number, is_closed};
+use sdfmesh::geometry::grid::{
+    DEFAULT_MAX_GRID_BYTES, SdfGrid, check_size, sample_mesh, sample_mesh_with_stats,
+};
 use sdfmesh::mesh::{TriangleMesh, load_mesh};
 
 // ---------------------------------------------------------------- test meshes

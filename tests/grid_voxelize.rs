@@ -5,12 +5,12 @@ use std::path::Path;
 use std::time::Instant;
 
 use glam::Vec3;
+use sdfmesh::convert::tessellate::tessellate;
 use sdfmesh::error::Error;
-use sdfmesh::grid::voxelize::{voxelize_mesh, voxelize_mesh_with_stats};
-use sdfmesh::grid::{SdfGrid, sample_mesh};
+use sdfmesh::geometry::grid::voxelize::{voxelize_mesh, voxelize_mesh_with_stats};
+use sdfmesh::geometry::grid::{SdfGrid, sample_mesh};
 use sdfmesh::mesh::{TriangleMesh, load_mesh};
-use sdfmesh::shape::Primitive;
-use sdfmesh::tessellate::tessellate;
+use sdfmesh::scene::shape::Primitive;
 
 fn sphere_mesh(r: f32) -> TriangleMesh {
     tessellate(&Primitive::Sphere { radius: r }, 256, None)

@@ -7,13 +7,13 @@ mod common;
 use common::{fraction_within, lit_scene, object};
 use glam::Vec3;
 use image::RgbImage;
-use sdfmesh::commands::render_scene;
+use sdfmesh::cli::commands::render_scene;
+use sdfmesh::geometry::march::MarchParams;
+use sdfmesh::geometry::sdf::SdfTree;
 use sdfmesh::geometry::{Geometry, Ray, RayStats};
-use sdfmesh::march::MarchParams;
-use sdfmesh::repr::{Representation, build_scene};
+use sdfmesh::plan::{Representation, build_scene};
 use sdfmesh::scene::Scene;
-use sdfmesh::sdf::SdfTree;
-use sdfmesh::shape::Primitive;
+use sdfmesh::scene::shape::Primitive;
 
 fn reprs() -> [Representation; 4] {
     let m = MarchParams::default();
@@ -23,8 +23,8 @@ fn reprs() -> [Representation; 4] {
         Representation::Sdf { march: MarchParams { relaxation: 1.6, ..m } },
         Representation::Mesh {
             resolution: 512,
-            shading: sdfmesh::shape::Shading::Smooth,
-            method: sdfmesh::repr::MeshMethod::Parametric,
+            shading: sdfmesh::scene::shape::Shading::Smooth,
+            method: sdfmesh::plan::MeshMethod::Parametric,
             march: m,
         },
     ]
@@ -234,8 +234,8 @@ fn mirror_and_glass_spheres_have_no_speckles_in_any_representation() {
     // A coarse smooth mesh too: its shading normals lean far from its facets.
     let coarse = Representation::Mesh {
         resolution: 24,
-        shading: sdfmesh::shape::Shading::Smooth,
-        method: sdfmesh::repr::MeshMethod::Parametric,
+        shading: sdfmesh::scene::shape::Shading::Smooth,
+        method: sdfmesh::plan::MeshMethod::Parametric,
         march: MarchParams::default(),
     };
     for repr in reprs().into_iter().chain([coarse]) {

@@ -1,11 +1,11 @@
-//! The hard-case suite of `data/hard` (see `sdfmesh::hard` and `data/hard/README.md`):
+//! The hard-case suite of `data/hard` (see `sdfmesh::compare::hard` and `data/hard/README.md`):
 //! every case in every representation meets its stated tolerance, or misses it where the
 //! manifest records a known limit; an outcome that differs from the manifest fails here.
 //! Cases whose input is a shared mesh that is not on this machine are skipped (and listed).
 
 use std::path::Path;
 
-use sdfmesh::hard::{Expect, hard_command, load_cases};
+use sdfmesh::compare::hard::{Expect, hard_command, load_cases};
 
 #[test]
 fn every_hard_case_has_its_expected_outcome() {
@@ -70,7 +70,7 @@ fn broken_meshes_convert_and_compare_cleanly() {
         let sdf = dir.path().join(format!("{name}.sdf"));
         let o = toolkit(&["convert", mesh, "--to", "grid", "--res", "16", "-o", sdf.to_str().unwrap()]);
         assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));
-        assert!(sdfmesh::grid::io::load_grid(&sdf).is_ok(), "{name}");
+        assert!(sdfmesh::geometry::grid::io::load_grid(&sdf).is_ok(), "{name}");
         let vox = dir.path().join(format!("{name}.vox.sdf"));
         let o = toolkit(&[
             "convert",

@@ -55,8 +55,8 @@ fn fails(path: &Path, needles: &[&str]) -> Error {
 /// A closed icosphere of radius `r` around `c` with unit normals (the tessellator's; more
 /// `subdivisions` give finer spheres).
 fn icosphere(subdivisions: usize, c: Vec3, r: f32) -> TriangleMesh {
-    let sphere = sdfmesh::shape::Primitive::Sphere { radius: r };
-    let mut m = sdfmesh::tessellate::tessellate(&sphere, 6 << subdivisions, None);
+    let sphere = sdfmesh::scene::shape::Primitive::Sphere { radius: r };
+    let mut m = sdfmesh::convert::tessellate::tessellate(&sphere, 6 << subdivisions, None);
     m.transform(&glam::Affine3A::from_translation(c));
     assert!(m.normals.is_some());
     m

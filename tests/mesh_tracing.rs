@@ -4,16 +4,16 @@
 
 use glam::Vec3;
 use proptest::prelude::*;
+use sdfmesh::geometry::mesh::triangle::ShearedRay;
+use sdfmesh::geometry::mesh::{MeshGeometry, Shading};
 use sdfmesh::geometry::{Geometry, Ray, RayStats};
 use sdfmesh::mesh::TriangleMesh;
-use sdfmesh::mesh_geometry::{MeshGeometry, Shading};
-use sdfmesh::shape::Primitive;
-use sdfmesh::transform::{Transform, TransformDesc};
-use sdfmesh::triangle::ShearedRay;
+use sdfmesh::scene::shape::Primitive;
+use sdfmesh::scene::transform::{Transform, TransformDesc};
 
 /// A closed icosphere of radius 1 (the tessellator's), finer with more `levels`.
 fn icosphere(levels: u32) -> TriangleMesh {
-    sdfmesh::tessellate::tessellate(&Primitive::Sphere { radius: 1.0 }, 6 << levels, None)
+    sdfmesh::convert::tessellate::tessellate(&Primitive::Sphere { radius: 1.0 }, 6 << levels, None)
 }
 
 fn geometry(mesh: &TriangleMesh, transform: Transform) -> MeshGeometry {

@@ -5,10 +5,10 @@ mod common;
 
 use common::{covered, fraction_within, lit_scene, object};
 use glam::Vec3;
-use sdfmesh::commands::render_scene;
-use sdfmesh::march::MarchParams;
-use sdfmesh::repr::Representation;
-use sdfmesh::shape::Primitive;
+use sdfmesh::cli::commands::render_scene;
+use sdfmesh::geometry::march::MarchParams;
+use sdfmesh::plan::Representation;
+use sdfmesh::scene::shape::Primitive;
 
 fn primitives() -> Vec<(Primitive, Vec3, Vec3)> {
     let r = Vec3::new(20.0, 35.0, 10.0);
@@ -61,8 +61,8 @@ fn closed_form_and_sphere_traced_renders_agree_for_every_primitive() {
         // Finely tessellated, the polygon representation agrees too (a little less: facets).
         let mesh = Representation::Mesh {
             resolution: 512,
-            shading: sdfmesh::shape::Shading::Smooth,
-            method: sdfmesh::repr::MeshMethod::Parametric,
+            shading: sdfmesh::scene::shape::Shading::Smooth,
+            method: sdfmesh::plan::MeshMethod::Parametric,
             march,
         };
         let m = render_scene(&scene, mesh);
@@ -77,8 +77,8 @@ fn closed_form_and_sphere_traced_renders_agree_for_every_primitive() {
                 &scene,
                 Representation::Grid {
                     resolution: 128,
-                    fill: sdfmesh::repr::GridFill::Sample,
-                    storage: sdfmesh::repr::GridStorage::Dense,
+                    fill: sdfmesh::plan::GridFill::Sample,
+                    storage: sdfmesh::plan::GridStorage::Dense,
                     march,
                 },
             );
@@ -148,8 +148,8 @@ fn finely_tessellated_sphere_renders_like_the_closed_form_sphere() {
     for resolution in [32, 128, 512] {
         let mesh = Representation::Mesh {
             resolution,
-            shading: sdfmesh::shape::Shading::Smooth,
-            method: sdfmesh::repr::MeshMethod::Parametric,
+            shading: sdfmesh::scene::shape::Shading::Smooth,
+            method: sdfmesh::plan::MeshMethod::Parametric,
             march,
         };
         let m = render_scene(&scene, mesh);

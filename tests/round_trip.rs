@@ -4,9 +4,9 @@
 //! every sample farther than a cell from the surface has the right sign.
 
 use glam::{DVec3, Vec3};
-use sdfmesh::extract::{ExtractMethod, Field, extract};
+use sdfmesh::convert::extract::{ExtractMethod, Field, extract};
 use sdfmesh::geometry::Aabb;
-use sdfmesh::grid::sample_mesh;
+use sdfmesh::geometry::grid::sample_mesh;
 
 fn cube(h: f32) -> Aabb {
     Aabb::new(Vec3::splat(-h).into(), Vec3::splat(h).into())

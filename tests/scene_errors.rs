@@ -6,9 +6,9 @@ use std::path::Path;
 
 use glam::{UVec3, Vec3};
 use sdfmesh::error::Error;
+use sdfmesh::scene::shape::{CsgOp, ObjectKind, Primitive};
+use sdfmesh::scene::transform::TransformDesc;
 use sdfmesh::scene::{Camera, Light, Material, Settings, load_scene, parse_scene};
-use sdfmesh::shape::{CsgOp, ObjectKind, Primitive};
-use sdfmesh::transform::TransformDesc;
 
 /// Parses `text` as `bad.toml` and checks that it fails at `line:column` with a message
 /// containing `needle`, on one line, with exit code 2.
@@ -955,7 +955,7 @@ fn mesh_objects_load_relative_to_the_scene_and_fail_cleanly() {
     match &scene.objects[0].kind {
         ObjectKind::Mesh { mesh, shading, .. } => {
             assert_eq!(mesh.triangles.len(), 4);
-            assert_eq!(*shading, sdfmesh::shape::Shading::Smooth);
+            assert_eq!(*shading, sdfmesh::scene::shape::Shading::Smooth);
         }
         other => panic!("{other:?}"),
     }

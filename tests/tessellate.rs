@@ -7,12 +7,12 @@ use std::f64::consts::PI;
 use std::sync::Arc;
 
 use glam::{DVec3, Vec3};
+use sdfmesh::convert::tessellate::{tessellate, tessellate_object, tessellate_with};
+use sdfmesh::geometry::sdf::{primitive_distance, primitive_distance_f64};
 use sdfmesh::geometry::{Aabb, aabb};
 use sdfmesh::mesh::{TriangleMesh, is_degenerate};
-use sdfmesh::sdf::{primitive_distance, primitive_distance_f64};
-use sdfmesh::shape::{CsgOp, Object, ObjectKind, Primitive, Shading};
-use sdfmesh::tessellate::{tessellate, tessellate_object, tessellate_with};
-use sdfmesh::transform::TransformDesc;
+use sdfmesh::scene::shape::{CsgOp, Object, ObjectKind, Primitive, Shading};
+use sdfmesh::scene::transform::TransformDesc;
 
 #[path = "common/mesh_checks.rs"]
 mod mesh_checks;

@@ -1,4 +1,4 @@
-//! Fuzz target: the grid reader `sdfmesh::grid::io::load_grid` on a `.sdf` file (the input
+//! Fuzz target: the grid reader `sdfmesh::geometry::grid::io::load_grid` on a `.sdf` file (the input
 //! is written to a scratch file first). Any input must give a consistent grid or a one-line
 //! error naming the file (see `sdfmesh_fuzz::check_grid_result`).
 

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use sdfmesh::error::Error;
-use sdfmesh::grid::SdfGrid;
+use sdfmesh::geometry::grid::SdfGrid;
 use sdfmesh::mesh::{LoadReport, MeshFormat, TriangleMesh, is_degenerate, load_mesh_bytes};
 
 /// A folder of this process's own (created once, empty at first, removed by nobody: the
@@ -97,9 +97,9 @@ pub fn check_grid_result(path: &Path, result: &sdfmesh::error::Result<SdfGrid>) 
 }
 
 /// Writes `data` to a scratch file with extension `ext`, loads it with
-/// [`sdfmesh::grid::io::load_grid`] and checks the result.
+/// [`sdfmesh::geometry::grid::io::load_grid`] and checks the result.
 pub fn fuzz_grid(data: &[u8], ext: &str) {
     let path = scratch_file(ext, data);
-    let result = sdfmesh::grid::io::load_grid(&path);
+    let result = sdfmesh::geometry::grid::io::load_grid(&path);
     check_grid_result(&path, &result);
 }

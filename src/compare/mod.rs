@@ -9,6 +9,7 @@
 //! threshold, which representation is fastest and which is smallest; [`scaling`] is the
 //! coursework's frame time against primitive count experiment.
 
+pub mod hard;
 pub mod scaling;
 pub mod summary;
 
@@ -23,19 +24,19 @@ use glam::DVec3;
 use image::RgbImage;
 use serde::{Deserialize, Serialize};
 
-use crate::budget::{MemoryBudget, extraction_bytes, mesh_to_grid_bytes, scene_bytes};
-use crate::commands::{Overrides, check_repr, load_scene_or_mesh};
+use crate::cli::commands::{Overrides, check_repr, load_scene_or_mesh};
+use crate::convert::extract::{ExtractMethod, Field, extract};
 use crate::error::{Error, Result};
-use crate::extract::{ExtractMethod, Field, extract};
+use crate::geometry::grid::{SdfGrid, sample_mesh};
+use crate::geometry::march::MarchParams;
 use crate::geometry::{Geometry, aabb};
-use crate::grid::{SdfGrid, sample_mesh};
-use crate::march::MarchParams;
 use crate::mesh::{TriangleMesh, save_mesh};
 use crate::metrics::{self, Probe};
+use crate::plan::budget::{MemoryBudget, extraction_bytes, mesh_to_grid_bytes, scene_bytes};
+use crate::plan::{GridFill, GridStorage, MeshMethod, Representation, SceneGeometry, build_scene};
 use crate::render::{Frame, render, write_png};
-use crate::repr::{GridFill, GridStorage, MeshMethod, Representation, SceneGeometry, build_scene};
 use crate::scene::Scene;
-use crate::shape::{ObjectKind, Shading};
+use crate::scene::shape::{ObjectKind, Shading};
 
 /// Version of the CSV schema; bumped whenever a column changes meaning or order.
 pub const SCHEMA_VERSION: u32 = 1;
@@ -363,7 +364,7 @@ fn build(scene: &Scene, b: Build, budget: &MemoryBudget) -> Result<Built> {
     let need = match b {
         Build::Scene(repr) => scene_bytes(scene, repr),
         Build::Reextract { fill, resolution } => {
-            let dims = glam::UVec3::splat(resolution + 1 + 2 * crate::repr::GRID_MARGIN_CELLS);
+            let dims = glam::UVec3::splat(resolution + 1 + 2 * crate::plan::GRID_MARGIN_CELLS);
             let triangles = mesh_input(scene).map_or(0, |m| m.triangles.len());
             mesh_to_grid_bytes(triangles, dims, fill)
                 .saturating_add(extraction_bytes(resolution, ExtractMethod::MarchingCubes))
@@ -379,11 +380,11 @@ fn build(scene: &Scene, b: Build, budget: &MemoryBudget) -> Result<Built> {
         Build::Reextract { fill, resolution } => {
             let original = mesh_input(scene).ok_or_else(|| Error::Usage("not a mesh input".into()))?;
             let grid = match fill {
-                GridFill::Sample => sample_mesh(original, resolution, crate::repr::GRID_MARGIN_CELLS)?,
-                GridFill::Voxelize => crate::grid::voxelize::voxelize_mesh(
+                GridFill::Sample => sample_mesh(original, resolution, crate::plan::GRID_MARGIN_CELLS)?,
+                GridFill::Voxelize => crate::geometry::grid::voxelize::voxelize_mesh(
                     original,
                     resolution,
-                    crate::repr::GRID_MARGIN_CELLS,
+                    crate::plan::GRID_MARGIN_CELLS,
                 )?,
             };
             let (lo, hi) = grid.bounds();
@@ -797,13 +798,13 @@ fn save_artifacts(
     }
     if run.resolution.is_some_and(|r| r <= ARTIFACT_MAX_RES) {
         let mesh = built.mesh.clone().or_else(|| {
-            (run.repr == "mesh").then(|| crate::repr::scene_mesh(scene, run_repr(run))).flatten()
+            (run.repr == "mesh").then(|| crate::plan::scene_mesh(scene, run_repr(run))).flatten()
         });
         if let Some(mesh) = mesh.filter(|m| !m.triangles.is_empty()) {
             save_mesh(&mesh, &dir.join(format!("{base}.ply")))?;
         }
         if let Some(grid) = &built.grid {
-            crate::grid::io::save_grid(
+            crate::geometry::grid::io::save_grid(
                 grid,
                 &dir.join(format!("{}-{}-grid-{}.vti", run.repr, run.method, run.resolution.unwrap_or(0))),
             )?;

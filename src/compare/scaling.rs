@@ -8,14 +8,14 @@ use std::time::Instant;
 use glam::Vec3;
 use serde::Serialize;
 
-use crate::commands::Overrides;
+use crate::cli::commands::Overrides;
 use crate::error::{Error, Result};
 use crate::geometry::Geometry;
-use crate::march::MarchParams;
-use crate::repr::{GridFill, GridStorage, MeshMethod, Representation, build_scene};
+use crate::geometry::march::MarchParams;
+use crate::plan::{GridFill, GridStorage, MeshMethod, Representation, build_scene};
+use crate::scene::shape::{Object, ObjectKind, Primitive, Shading};
+use crate::scene::transform::TransformDesc;
 use crate::scene::{Camera, Light, Material, Scene, Settings};
-use crate::shape::{Object, ObjectKind, Primitive, Shading};
-use crate::transform::TransformDesc;
 
 use super::{SCHEMA_VERSION, commit_id};
 
@@ -211,7 +211,7 @@ pub fn scaling_command(opts: &ScalingOptions, csv_path: &Path) -> Result<String>
         ),
     ];
     for (_, _, r) in &reprs {
-        crate::commands::check_repr(r)?;
+        crate::cli::commands::check_repr(r)?;
     }
     let commit = commit_id();
     let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(Vec::new());

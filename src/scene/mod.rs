@@ -2,11 +2,14 @@
 //! object trees. Built from a TOML scene file by [`file`]; independent of the
 //! representation each object is rendered with.
 
+pub mod camera;
 pub mod file;
+pub mod shape;
+pub mod transform;
 
 use glam::Vec3;
 
-use crate::shape::Object;
+use crate::scene::shape::Object;
 
 pub use file::{load_scene, parse_scene};
 
@@ -129,21 +132,24 @@ pub struct Scene {
 pub fn mesh_preview_scene(
     mesh: std::sync::Arc<crate::mesh::TriangleMesh>,
     source: std::path::PathBuf,
-    shading: crate::shape::Shading,
+    shading: crate::scene::shape::Shading,
 ) -> Scene {
     let (lo, hi) = mesh.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::ONE));
-    preview_scene(crate::shape::ObjectKind::Mesh { mesh, source, shading }, lo, hi)
+    preview_scene(crate::scene::shape::ObjectKind::Mesh { mesh, source, shading }, lo, hi)
 }
 
 /// The preview scene of [`mesh_preview_scene`] for a signed distance grid file (`toolkit
 /// render GRID_FILE`), framing the grid's box.
-pub fn grid_preview_scene(grid: std::sync::Arc<crate::grid::SdfGrid>, source: std::path::PathBuf) -> Scene {
+pub fn grid_preview_scene(
+    grid: std::sync::Arc<crate::geometry::grid::SdfGrid>,
+    source: std::path::PathBuf,
+) -> Scene {
     let (lo, hi) = grid.bounds();
-    preview_scene(crate::shape::ObjectKind::Grid { grid, source }, lo, hi)
+    preview_scene(crate::scene::shape::ObjectKind::Grid { grid, source }, lo, hi)
 }
 
 /// One object of `kind` within `lo..hi`, seen by the preview camera and lights.
-fn preview_scene(kind: crate::shape::ObjectKind, lo: Vec3, hi: Vec3) -> Scene {
+fn preview_scene(kind: crate::scene::shape::ObjectKind, lo: Vec3, hi: Vec3) -> Scene {
     let centre = 0.5 * (lo + hi);
     let radius = (0.5 * (hi - lo).length()).max(1e-6);
     let fov_y_deg: f32 = 40.0;
@@ -151,9 +157,8 @@ fn preview_scene(kind: crate::shape::ObjectKind, lo: Vec3, hi: Vec3) -> Scene {
     let view = Vec3::new(0.35, 0.3, 1.0).normalize();
     let position = centre + view * distance;
     let source = match &kind {
-        crate::shape::ObjectKind::Mesh { source, .. } | crate::shape::ObjectKind::Grid { source, .. } => {
-            Some(source)
-        }
+        crate::scene::shape::ObjectKind::Mesh { source, .. }
+        | crate::scene::shape::ObjectKind::Grid { source, .. } => Some(source),
         _ => None,
     };
     let label = source
@@ -184,7 +189,7 @@ fn preview_scene(kind: crate::shape::ObjectKind, lo: Vec3, hi: Vec3) -> Scene {
         }],
         objects: vec![Object {
             kind,
-            transform: crate::transform::TransformDesc::default(),
+            transform: crate::scene::transform::TransformDesc::default(),
             material: 0,
             label,
         }],

@@ -3,9 +3,9 @@
 
 use glam::Vec3;
 use image::RgbImage;
+use sdfmesh::scene::shape::{Object, ObjectKind, Primitive};
+use sdfmesh::scene::transform::TransformDesc;
 use sdfmesh::scene::{Camera, Light, Material, Scene, Settings};
-use sdfmesh::shape::{Object, ObjectKind, Primitive};
-use sdfmesh::transform::TransformDesc;
 
 /// A primitive object with a transform and material 1 (material 0 is the grey default).
 pub fn object(prim: Primitive, translate: Vec3, rotate_deg: Vec3, scale: Vec3) -> Object {

@@ -2,6 +2,8 @@
 //! frame statistics (time, rays per second, steps and nodes per ray), and PNG writing
 //! through a temporary file so a failed write never leaves a partial image.
 
+pub mod tracer;
+
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -9,11 +11,11 @@ use glam::Vec3;
 use image::RgbImage;
 use rayon::prelude::*;
 
-use crate::camera::RayGenerator;
 use crate::error::{Error, Result};
 use crate::geometry::{Geometry, RayStats};
+use crate::render::tracer::Tracer;
 use crate::scene::Scene;
-use crate::tracer::Tracer;
+use crate::scene::camera::RayGenerator;
 
 /// Tile edge, pixels.
 const TILE: u32 = 16;

@@ -81,9 +81,9 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 use crate::geometry::Aabb;
+use crate::geometry::sdf::SdfTree;
 use crate::mesh::{TriangleMesh, is_degenerate};
-use crate::sdf::SdfTree;
-use crate::shape::Object;
+use crate::scene::shape::Object;
 
 /// How [`extract`] turns samples into triangles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -316,7 +316,7 @@ impl SampleGrid {
                         outside(&mut row[nn[0] - 1]);
                     }
                 }
-                crate::progress::advance(1);
+                crate::cli::progress::advance(1);
             },
         );
         Some(grid)

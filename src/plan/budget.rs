@@ -13,11 +13,11 @@ use std::str::FromStr;
 use bytesize::ByteSize;
 use glam::UVec3;
 
+use crate::convert::extract::ExtractMethod;
 use crate::error::{Error, Result};
-use crate::extract::ExtractMethod;
-use crate::repr::{GRID_MARGIN_CELLS, GridFill, MAX_EXTRACT_RESOLUTION, MeshMethod, Representation};
+use crate::plan::{GRID_MARGIN_CELLS, GridFill, MAX_EXTRACT_RESOLUTION, MeshMethod, Representation};
 use crate::scene::Scene;
-use crate::shape::{ObjectKind, Primitive};
+use crate::scene::shape::{ObjectKind, Primitive};
 
 /// Used when the machine's memory cannot be read: 8 GiB.
 pub const FALLBACK_BYTES: u64 = 8 << 30;
@@ -31,12 +31,12 @@ pub const DEFAULT_FRACTION: f64 = 0.5;
 pub const BYTES_PER_TRACED_TRIANGLE: u64 = 100;
 
 /// Bytes per grid sample while extracting a surface (f32 sample plus working memory, see
-/// [`crate::extract::extract`]): marching cubes.
+/// [`crate::convert::extract::extract`]): marching cubes.
 pub const EXTRACT_BYTES_PER_SAMPLE_MC: u64 = 9;
 /// As [`EXTRACT_BYTES_PER_SAMPLE_MC`], for dual contouring.
 pub const EXTRACT_BYTES_PER_SAMPLE_DC: u64 = 13;
 /// Bytes per sample while voxelizing (the f32 result, the voxel labels and the distance
-/// transform's working rows: see [`crate::grid::voxelize`]).
+/// transform's working rows: see [`crate::geometry::grid::voxelize`]).
 pub const VOXELIZE_BYTES_PER_SAMPLE: u64 = 13;
 /// Bytes per triangle of the closest-point BVH and the fast winding number tree used when
 /// sampling a mesh exactly (an upper estimate).

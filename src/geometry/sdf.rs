@@ -6,8 +6,8 @@
 use glam::{DVec2, DVec3, UVec3, Vec3};
 
 use crate::geometry::MaterialId;
-use crate::shape::{CsgOp, Object, ObjectKind, Primitive};
-use crate::transform::Transform;
+use crate::scene::shape::{CsgOp, Object, ObjectKind, Primitive};
+use crate::scene::transform::Transform;
 
 /// Signed distance from local point `p` to `prim`: negative inside. Exact except for the
 /// ellipsoid (a Lipschitz-1 lower bound) and the triangle (unsigned, since it has no inside).
@@ -321,7 +321,7 @@ fn eval_repeat(period: Vec3, count: Option<UVec3>, child: &SdfNode, q: DVec3) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::transform::TransformDesc;
+    use crate::scene::transform::TransformDesc;
 
     fn obj(kind: ObjectKind) -> Object {
         Object { kind, transform: TransformDesc::default(), material: 0, label: "t".into() }

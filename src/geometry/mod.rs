@@ -2,6 +2,13 @@
 //! [`Geometry`] trait that every representation (closed form, analytic SDF, SDF grid,
 //! triangle mesh) implements. The tracer never learns which representation it traces.
 
+pub mod analytic;
+pub mod bvh2;
+pub mod grid;
+pub mod march;
+pub mod mesh;
+pub mod sdf;
+
 use glam::{DVec3, Vec3, Vec3A};
 pub use obvhs::aabb::Aabb;
 

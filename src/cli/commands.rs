@@ -10,21 +10,21 @@ use std::time::Instant;
 
 use glam::UVec3;
 
-use crate::budget::{MemoryBudget, extraction_bytes, mesh_to_grid_bytes, scene_bytes};
+use crate::cli::progress::Stage;
+use crate::convert::extract::{ExtractMethod, extract_object};
 use crate::error::{Error, Result};
-use crate::extract::{ExtractMethod, extract_object};
 use crate::geometry::Geometry;
-use crate::grid::band::{BRICK, BandGrid};
-use crate::grid::io::{load_grid, save_grid};
-use crate::grid::voxelize::voxelize_mesh;
-use crate::grid::{DEFAULT_MAX_GRID_BYTES, check_size, grid_layout, sample_mesh};
+use crate::geometry::grid::band::{BRICK, BandGrid};
+use crate::geometry::grid::io::{load_grid, save_grid};
+use crate::geometry::grid::voxelize::voxelize_mesh;
+use crate::geometry::grid::{DEFAULT_MAX_GRID_BYTES, check_size, grid_layout, sample_mesh};
 use crate::mesh::{MeshFormat, TriangleMesh, load_mesh, save_mesh};
-use crate::progress::Stage;
+use crate::plan::GridFill;
+use crate::plan::budget::{MemoryBudget, extraction_bytes, mesh_to_grid_bytes, scene_bytes};
+use crate::plan::{MeshMethod, Representation, build_scene, grid_file_mesh};
 use crate::render::{Frame, render, write_png};
-use crate::repr::GridFill;
-use crate::repr::{MeshMethod, Representation, build_scene, grid_file_mesh};
+use crate::scene::shape::Shading;
 use crate::scene::{Scene, grid_preview_scene, load_scene, mesh_preview_scene};
-use crate::shape::Shading;
 
 /// Overrides of a scene's settings from the command line.
 #[derive(Clone, Copy, Debug, Default)]
@@ -84,7 +84,7 @@ pub fn check_repr(repr: &Representation) -> Result<()> {
                 )));
             }
             check_size(
-                UVec3::splat(resolution + 1 + 2 * crate::repr::GRID_MARGIN_CELLS),
+                UVec3::splat(resolution + 1 + 2 * crate::plan::GRID_MARGIN_CELLS),
                 DEFAULT_MAX_GRID_BYTES,
             )?;
             march
@@ -367,7 +367,7 @@ pub fn convert_command(
                 true,
             );
             for (done, o) in scene.objects.iter().enumerate() {
-                crate::progress::set(per_object * done as u64);
+                crate::cli::progress::set(per_object * done as u64);
                 let extracted = extract_object(o, res, method)
                     .or_else(|| grid_file_mesh(o, res, MeshMethod::Extracted(method)));
                 match extracted {

@@ -14,7 +14,7 @@
 
 use glam::{DVec3, Vec3};
 
-use crate::shape::Primitive;
+use crate::scene::shape::Primitive;
 
 const INF: f64 = f64::INFINITY;
 
@@ -621,8 +621,8 @@ fn bracketed_root(f: impl Fn(f64) -> (f64, f64), mut a: f64, mut b: f64, fa: f64
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::sdf::{primitive_distance, primitive_distance_f64};
     use crate::geometry::{Ray, aabb};
-    use crate::sdf::{primitive_distance, primitive_distance_f64};
     use glam::Vec3Swizzles;
     use proptest::prelude::*;
 

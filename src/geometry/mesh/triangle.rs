@@ -10,7 +10,7 @@ use std::ops::{Add, Div, Mul, Sub};
 
 use glam::{DVec3, Vec3};
 
-use crate::wide_bvh::F4;
+use crate::geometry::mesh::wide_bvh::F4;
 
 /// Per-ray precomputation of the shear that maps the ray to the +z axis.
 #[derive(Clone, Copy, Debug)]
@@ -151,7 +151,7 @@ impl ShearedRay {
     /// [`ShearedRay::intersect4`] on two packets at once, `a` in lanes 0..4 and `b` in
     /// lanes 4..8 of 256-bit registers: the same operations in the same order, so every
     /// lane's `t` and hit bit equal the four-lane test's. Only inlined into functions
-    /// compiled with AVX (the AVX2 walks of [`crate::wide_bvh`]).
+    /// compiled with AVX (the AVX2 walks of [`crate::geometry::mesh::wide_bvh`]).
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     pub(crate) fn intersect8_avx(&self, a: &Tri4, b: &Tri4, t_min: f32, t_max: f32) -> ([f32; 8], u32) {

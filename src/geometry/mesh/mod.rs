@@ -5,21 +5,24 @@
 //! CPU has AVX2 a closest hit runs whole (ray setup, walk, hit record) in one function
 //! compiled for it, with no call in between.
 
+pub mod triangle;
+pub mod wide_bvh;
+
 use std::time::{Duration, Instant};
 
 use glam::{DVec3, Vec3};
 use obvhs::BvhBuildParams;
 
-use crate::bvh;
-use crate::geometry::{Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, aabb, f32_error, max_abs};
-use crate::grid::closest::closest_point_on_triangle;
-use crate::mesh::TriangleMesh;
-pub use crate::shape::Shading;
-use crate::transform::Transform;
-use crate::triangle::ShearedRay;
+use crate::geometry::bvh2;
+use crate::geometry::grid::closest::closest_point_on_triangle;
+use crate::geometry::mesh::triangle::ShearedRay;
 #[cfg(target_arch = "x86_64")]
-use crate::wide_bvh::BoxRayAvx2;
-use crate::wide_bvh::{BoxRay, BoxTest, LeafHit, WideBvh, closest_walk};
+use crate::geometry::mesh::wide_bvh::BoxRayAvx2;
+use crate::geometry::mesh::wide_bvh::{BoxRay, BoxTest, LeafHit, WideBvh, closest_walk};
+use crate::geometry::{Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, aabb, f32_error, max_abs};
+use crate::mesh::TriangleMesh;
+pub use crate::scene::shape::Shading;
+use crate::scene::transform::Transform;
 
 /// A triangle mesh ready for tracing.
 pub struct MeshGeometry {
@@ -94,7 +97,7 @@ impl MeshGeometry {
                 aabb(a.min(b).min(c) - pad, a.max(b).max(c) + pad)
             })
             .collect();
-        let mut bvh2 = bvh::build(&boxes, params);
+        let mut bvh2 = bvh2::build(&boxes, params);
         // Reorder the triangles (and their boxes) into leaf order.
         let triangles: Vec<[u32; 3]> =
             bvh2.primitive_indices.iter().map(|&i| triangles[i as usize]).collect();

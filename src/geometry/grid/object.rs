@@ -9,16 +9,16 @@
 
 use glam::{DVec3, Vec3};
 
+use crate::geometry::grid::SdfGrid;
+use crate::geometry::grid::band::BandGrid;
+use crate::geometry::march::{MarchHit, MarchParams, gradient_normal, march_ray};
 use crate::geometry::{
     Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, aabb, box_distance, distance_by_projection,
     f32_error, max_abs,
 };
-use crate::grid::SdfGrid;
-use crate::grid::band::BandGrid;
-use crate::march::{MarchHit, MarchParams, gradient_normal, march_ray};
 use crate::scene::Scene;
-use crate::shape::Object;
-use crate::transform::Transform;
+use crate::scene::shape::Object;
+use crate::scene::transform::Transform;
 
 /// Steps are scaled by this factor: the trilinear interpolation of exact distance samples
 /// can be slightly steeper than 1 between samples, so a full step could overshoot.

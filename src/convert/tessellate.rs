@@ -35,7 +35,7 @@
 //!
 //! Flat and ruled regions (caps, cylinder and cone sides, the capsule's body) carry no
 //! geometric error, so how they are split is a matter of triangle shape only, and long
-//! slivers cost a BVH dearly: measured with [`crate::mesh_geometry::MeshGeometry`] on a
+//! slivers cost a BVH dearly: measured with [`crate::geometry::mesh::MeshGeometry`] on a
 //! unit cylinder at resolution 1024 tilted by (30, 45, 0) degrees, fan caps and one side band (4096 triangles) cost
 //! 160-340 triangle tests per ray, against 4-5 when no triangle there is longer than 4
 //! ring segments (252k triangles) and 3.3 for the icosphere (655k). [`tessellate`]
@@ -57,7 +57,7 @@ use glam::{DVec2, DVec3, Vec3};
 
 use crate::geometry::Aabb;
 use crate::mesh::TriangleMesh;
-use crate::shape::{Object, ObjectKind, Primitive};
+use crate::scene::shape::{Object, ObjectKind, Primitive};
 
 /// The smallest resolution; smaller requests are raised to it.
 pub const MIN_RESOLUTION: u32 = 3;

@@ -32,11 +32,11 @@ use std::path::{Path, PathBuf};
 use image::RgbImage;
 use serde::Deserialize;
 
-use crate::commands::{load_scene_or_mesh, render_scene};
+use crate::cli::commands::{load_scene_or_mesh, render_scene};
 use crate::error::{Error, Result};
-use crate::march::MarchParams;
-use crate::repr::{GridFill, GridStorage, MeshMethod, Representation};
-use crate::shape::Shading;
+use crate::geometry::march::MarchParams;
+use crate::plan::{GridFill, GridStorage, MeshMethod, Representation};
+use crate::scene::shape::Shading;
 
 /// Largest difference per channel (0..255) for a pixel to agree under the `pixels` metric.
 pub const PIXEL_TOLERANCE: u8 = 16;

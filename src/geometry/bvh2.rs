@@ -1,7 +1,7 @@
 //! BVH traversal over obvhs's `Bvh2` with work counting: closest-hit and any-hit walks
 //! that call back for each primitive in a visited leaf, visiting near children first.
 //! Used for the scene's top-level BVH over objects; meshes trace the 4-wide BVH of
-//! [`crate::wide_bvh`], collapsed from a BVH2 built here.
+//! [`crate::geometry::mesh::wide_bvh`], collapsed from a BVH2 built here.
 
 use std::time::Duration;
 

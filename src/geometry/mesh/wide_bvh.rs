@@ -7,7 +7,7 @@
 //! CPU has it, else one [`ShearedRay::intersect4`] after the other). Owns the closest-hit,
 //! any-hit and nearest-point walks over it and their work counting, and [`F4`], the
 //! four-lane f32 vector the box and triangle tests use (SSE on x86_64, plain arrays
-//! elsewhere). The scene's top-level BVH over objects stays in [`crate::bvh`].
+//! elsewhere). The scene's top-level BVH over objects stays in [`crate::geometry::bvh2`].
 
 use std::mem::MaybeUninit;
 use std::ops::{Mul, Sub};
@@ -15,8 +15,8 @@ use std::ops::{Mul, Sub};
 use glam::{DVec3, Vec3};
 use obvhs::bvh2::Bvh2;
 
+use crate::geometry::mesh::triangle::{ShearedRay, Tri4};
 use crate::geometry::{Aabb, RayStats, box_distance};
-use crate::triangle::{ShearedRay, Tri4};
 
 /// Children per node. Eight rather than four (benches/primary_rays.rs, armadillo) cuts the
 /// nodes a primary ray visits from 3.4 to 2.5 and the depth from 11 to 7, and raised
@@ -1242,7 +1242,7 @@ mod tests {
         let boxes: Vec<Aabb> =
             tris.iter().map(|[a, b, c]| aabb(a.min(*b).min(*c), a.max(*b).max(*c))).collect();
         for leaf in [1, 4, 8, 40] {
-            let mut bvh2 = crate::bvh::build(
+            let mut bvh2 = crate::geometry::bvh2::build(
                 &boxes,
                 BvhBuildParams { max_prims_per_leaf: leaf, ..BvhBuildParams::fast_build() },
             );

@@ -2,29 +2,31 @@
 //! primitives, sphere-traced analytic SDFs, and the scene's top-level BVH over objects
 //! (itself a `Geometry`, so the tracer sees one geometry whatever the representation).
 
+pub mod budget;
+
 use glam::{DVec3, Vec3};
 use obvhs::BvhBuildParams;
 use obvhs::bvh2::Bvh2;
 
-use crate::analytic;
-use crate::bvh;
-use crate::extract::{ExtractMethod, Field, extract_object};
+use crate::convert::extract::{ExtractMethod, Field, extract_object};
+use crate::convert::tessellate::tessellate;
+use crate::geometry::analytic;
+use crate::geometry::bvh2;
+use crate::geometry::grid::band::{BandGrid, band_from_function, band_from_mesh};
+use crate::geometry::grid::object::{ClippedGrid, GridObject, GridStore, VIEW_CLIP_FRACTION, view_region};
+use crate::geometry::grid::voxelize::voxelize_mesh;
+use crate::geometry::grid::{SdfGrid, sample_function, sample_mesh};
+use crate::geometry::march::{MarchHit, MarchParams, gradient_normal, march_ray};
+use crate::geometry::mesh::MeshGeometry;
+use crate::geometry::sdf::SdfTree;
 use crate::geometry::{
     Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, box_distance, distance_by_projection, f32_error,
     max_abs,
 };
-use crate::grid::band::{BandGrid, band_from_function, band_from_mesh};
-use crate::grid::voxelize::voxelize_mesh;
-use crate::grid::{SdfGrid, sample_function, sample_mesh};
-use crate::grid_geometry::{ClippedGrid, GridObject, GridStore, VIEW_CLIP_FRACTION, view_region};
-use crate::march::{MarchHit, MarchParams, gradient_normal, march_ray};
 use crate::mesh::TriangleMesh;
-use crate::mesh_geometry::MeshGeometry;
 use crate::scene::Scene;
-use crate::sdf::SdfTree;
-use crate::shape::{Object, ObjectKind, Primitive, Shading, grow};
-use crate::tessellate::tessellate;
-use crate::transform::Transform;
+use crate::scene::shape::{Object, ObjectKind, Primitive, Shading, grow};
+use crate::scene::transform::Transform;
 
 /// How the scene's objects are represented for tracing.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -154,8 +156,9 @@ impl Geometry for AnalyticObject {
     }
 
     fn surface_distance(&self, p: DVec3) -> f64 {
-        let f =
-            |q: DVec3| crate::sdf::primitive_distance_f64(&self.prim, self.transform.point_to_local_f64(q));
+        let f = |q: DVec3| {
+            crate::geometry::sdf::primitive_distance_f64(&self.prim, self.transform.point_to_local_f64(q))
+        };
         let scale = self.bounds.map_or(1.0, |b| b.diagonal().length() as f64).max(1e-30);
         distance_by_projection(&f, p, 1e-7 * scale.max(p.abs().max_element()), 1e-9 * scale)
     }
@@ -278,7 +281,7 @@ impl SceneGeometry {
                 None => unbounded.push(i as u32),
             }
         }
-        let bvh = bvh::build(&boxes, BvhBuildParams::medium_build());
+        let bvh = bvh2::build(&boxes, BvhBuildParams::medium_build());
         SceneGeometry { objects, bvh, unbounded, bounded }
     }
 
@@ -305,7 +308,7 @@ impl Geometry for SceneGeometry {
                 best = Some(h);
             }
         }
-        bvh::traverse(&self.bvh, ray, t_min, t_best, stats, |prim, t_max, stats| {
+        bvh2::traverse(&self.bvh, ray, t_min, t_best, stats, |prim, t_max, stats| {
             let obj = &self.objects[self.bounded[prim as usize] as usize];
             Ok(obj.closest_hit(ray, t_min, t_max, stats).map(|h| {
                 let t = h.t;
@@ -320,7 +323,7 @@ impl Geometry for SceneGeometry {
         if self.unbounded.iter().any(|&i| self.objects[i as usize].any_hit(ray, t_min, t_max, stats)) {
             return true;
         }
-        bvh::traverse_any(&self.bvh, ray, t_min, t_max, stats, |prim, t_max, stats| {
+        bvh2::traverse_any(&self.bvh, ray, t_min, t_max, stats, |prim, t_max, stats| {
             self.objects[self.bounded[prim as usize] as usize].any_hit(ray, t_min, t_max, stats)
         })
     }
@@ -332,7 +335,7 @@ impl Geometry for SceneGeometry {
                 .iter()
                 .map(|o| o.bytes_used() + std::mem::size_of::<Box<dyn Geometry>>())
                 .sum::<usize>()
-            + bvh::bytes_used(&self.bvh)
+            + bvh2::bytes_used(&self.bvh)
             + 4 * (self.unbounded.len() + self.bounded.len())
     }
 
@@ -342,7 +345,7 @@ impl Geometry for SceneGeometry {
 
     fn census(&self) -> Census {
         let own = Census {
-            accel_bytes: (bvh::bytes_used(&self.bvh) + 4 * (self.unbounded.len() + self.bounded.len()))
+            accel_bytes: (bvh2::bytes_used(&self.bvh) + 4 * (self.unbounded.len() + self.bounded.len()))
                 as u64,
             ..Census::default()
         };
@@ -492,8 +495,13 @@ pub fn grid_file_mesh(o: &Object, resolution: u32, method: MeshMethod) -> Option
     let (to_local, scale) = (t.to_local_f64, t.min_scale as f64);
     let f = |p: DVec3| grid.trilinear(to_local.transform_point3(p).as_vec3()) as f64 * scale;
     let bounds = o.bounds()?;
-    let mesh =
-        crate::extract::extract(&f, Field::Arbitrary, &bounds, resolution.min(MAX_EXTRACT_RESOLUTION), how);
+    let mesh = crate::convert::extract::extract(
+        &f,
+        Field::Arbitrary,
+        &bounds,
+        resolution.min(MAX_EXTRACT_RESOLUTION),
+        how,
+    );
     (!mesh.triangles.is_empty()).then_some(mesh)
 }
 
@@ -633,11 +641,11 @@ pub const GRID_MARGIN_CELLS: u32 = 2;
 /// unsigned (holds a triangle primitive) or its grid cannot be built.
 ///
 /// `fill` applies to mesh objects only: [`GridFill::Voxelize`] voxelizes them
-/// ([`crate::grid::voxelize`], about one voxel of error; a mesh that voxelizing finds open
+/// ([`crate::geometry::grid::voxelize`], about one voxel of error; a mesh that voxelizing finds open
 /// falls back to exact sampling and its label says so). Analytic objects (primitives, CSG,
 /// repetition) are always sampled exactly from their SDF. `storage`
 /// [`GridStorage::Band`] keeps only the bricks near the surface
-/// ([`crate::grid::band`]); it is built without a dense grid except for voxelized meshes
+/// ([`crate::geometry::grid::band`]); it is built without a dense grid except for voxelized meshes
 /// (the distance transform needs the whole grid).
 ///
 /// View clipping: an analytic object whose box is much larger than the region the camera

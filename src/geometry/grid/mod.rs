@@ -26,6 +26,7 @@
 pub mod band;
 pub mod closest;
 pub mod io;
+pub mod object;
 pub mod voxelize;
 pub mod winding;
 
@@ -333,7 +334,7 @@ fn fill(grid: &mut SdfGrid, tree: &TriangleBvh, wind: &FastWinding, closed: bool
                     out[i as usize + nx as usize * j as usize] = sampler.sample(p);
                 }
             }
-            crate::progress::advance(1);
+            crate::cli::progress::advance(1);
             sampler.stats
         })
         .reduce(SampleStats::default, |a, b| SampleStats {
@@ -395,7 +396,7 @@ fn fill_by_regions(grid: &mut SdfGrid, tree: &TriangleBvh, wind: &FastWinding, c
         .enumerate()
         .map_init(GroupStack::default, |stack, (k, out)| {
             let mut stats = unsigned_slice(tree, out, nx, ny, |i, j| position(i, j, k), stack);
-            crate::progress::advance(1);
+            crate::cli::progress::advance(1);
             stats.samples = slice as u64;
             stats
         })

@@ -34,7 +34,7 @@ use glam::{BVec4A, DVec3, Vec3, Vec3A, Vec4};
 use obvhs::BvhBuildParams;
 use obvhs::bvh2::Bvh2;
 
-use crate::bvh;
+use crate::geometry::bvh2;
 use crate::geometry::{Aabb, aabb};
 use crate::mesh::TriangleMesh;
 
@@ -930,7 +930,7 @@ impl TriangleBvh {
                 avx2: false,
             };
         }
-        let mut bvh = bvh::build(&boxes, params);
+        let mut bvh = bvh2::build(&boxes, params);
         let original = std::mem::take(&mut bvh.primitive_indices);
         let corners: Vec<[Vec3A; 3]> = original.iter().map(|&i| tri(&mesh.triangles[i as usize])).collect();
         bvh.primitive_indices = (0..original.len() as u32).collect();
@@ -1299,7 +1299,7 @@ impl TriangleBvh {
 
     /// Bytes held: the BVH and the corner and index arrays.
     pub fn bytes_used(&self) -> usize {
-        bvh::bytes_used(&self.bvh)
+        bvh2::bytes_used(&self.bvh)
             + self.corners.capacity() * std::mem::size_of::<[Vec3A; 3]>()
             + self.original.capacity() * 4
             + self.wide.capacity() * std::mem::size_of::<Node4>()
