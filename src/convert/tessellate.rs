@@ -658,6 +658,50 @@ fn plane_quad(normal: Vec3, offset: f32, clip: &Aabb) -> TriangleMesh {
     }
 }
 
+/// The part of the plane `normal . p = offset` within `radius` of `eye`, as a disc of
+/// rings around the eye's foot point whose radii grow geometrically (by 1.25), so the
+/// triangles near the camera are small (precise hits in f32) and far ones large (few
+/// triangles). Flat, so the rings lose nothing: the disc is exactly the plane out to its
+/// polygonal rim, which circumscribes the circle of `radius`. Oriented with `normal` out.
+pub fn plane_view_mesh(normal: Vec3, offset: f32, eye: Vec3, radius: f32) -> TriangleMesh {
+    const SEGMENTS: u32 = 16;
+    let n = normal.normalize();
+    let height = n.dot(eye) - offset;
+    let foot = eye - n * height;
+    let (u, v) = n.any_orthonormal_pair();
+    // u x v = n keeps the winding counter-clockwise seen from +n.
+    let (u, v) = if u.cross(v).dot(n) > 0.0 { (u, v) } else { (v, u) };
+    let mut positions = vec![foot];
+    let mut triangles = Vec::new();
+    let mut r = 0.25 * height.abs().max(1e-3);
+    let mut ring = 0u32;
+    loop {
+        let last = r >= radius;
+        let r_ring = r.min(radius) / (std::f32::consts::PI / SEGMENTS as f32).cos();
+        for i in 0..SEGMENTS {
+            let a = i as f32 * std::f32::consts::TAU / SEGMENTS as f32;
+            positions.push(foot + (u * a.cos() + v * a.sin()) * r_ring);
+        }
+        let base = 1 + ring * SEGMENTS;
+        for i in 0..SEGMENTS {
+            let j = (i + 1) % SEGMENTS;
+            if ring == 0 {
+                triangles.push([0, base + i, base + j]);
+            } else {
+                let inner = base - SEGMENTS;
+                triangles.push([inner + i, base + i, base + j]);
+                triangles.push([inner + i, base + j, inner + j]);
+            }
+        }
+        if last {
+            break;
+        }
+        ring += 1;
+        r *= 1.25;
+    }
+    TriangleMesh { positions, triangles, normals: None }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -12,6 +12,11 @@
 //! it. Normals are unit length and point out of the solid (a triangle has a fixed side,
 //! `(b - a) x (c - a)`); they are never flipped toward the ray.
 
+use crate::geometry::{
+    Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, distance_by_projection, f32_error, max_abs,
+};
+use crate::scene::shape::Object;
+use crate::scene::transform::Transform;
 use glam::{DVec3, Vec3};
 
 use crate::scene::shape::Primitive;
@@ -616,6 +621,77 @@ fn bracketed_root(f: impl Fn(f64) -> (f64, f64), mut a: f64, mut b: f64, fa: f64
         x = next;
     }
     x
+}
+
+/// A closed-form primitive under a transform.
+pub struct AnalyticObject {
+    prim: Primitive,
+    transform: Transform,
+    material: MaterialId,
+    bounds: Option<Aabb>,
+    label: String,
+}
+
+impl AnalyticObject {
+    /// A closed-form object for `prim` with the object's transform and material.
+    pub fn new(prim: Primitive, object: &Object) -> Self {
+        AnalyticObject {
+            prim,
+            transform: object.compiled_transform(),
+            material: object.material,
+            bounds: object.bounds(),
+            label: object.label.clone(),
+        }
+    }
+}
+
+impl Geometry for AnalyticObject {
+    fn bounds(&self) -> Option<Aabb> {
+        self.bounds
+    }
+
+    fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
+        stats.prim_tests += 1;
+        // f64 local rays: a radius-5000 sphere centred 5001 away has no f32 precision left
+        // for the small offsets that keep shadow rays off its surface.
+        let (o, d) = self.transform.ray_to_local_f64(ray);
+        let (t, n) = intersect_f64(&self.prim, o, d, t_min, t_max)?;
+        let point = ray.at(t);
+        Some(Hit {
+            t,
+            point,
+            normal: self.transform.normal_to_world(n),
+            shading_normal: self.transform.normal_to_world(n),
+            material: self.material,
+            error: f32_error(max_abs(point).max(max_abs(ray.origin))),
+        })
+    }
+
+    fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
+        stats.prim_tests += 1;
+        let (o, d) = self.transform.ray_to_local_f64(ray);
+        occluded_f64(&self.prim, o, d, t_min, t_max)
+    }
+
+    fn bytes_used(&self) -> usize {
+        std::mem::size_of::<Self>() + self.label.capacity()
+    }
+
+    fn describe(&self) -> String {
+        format!("{} '{}': closed form", self.prim.kind_name(), self.label)
+    }
+
+    fn census(&self) -> Census {
+        Census::default()
+    }
+
+    fn surface_distance(&self, p: DVec3) -> f64 {
+        let f = |q: DVec3| {
+            crate::geometry::sdf::primitive_distance_f64(&self.prim, self.transform.point_to_local_f64(q))
+        };
+        let scale = self.bounds.map_or(1.0, |b| b.diagonal().length() as f64).max(1e-30);
+        distance_by_projection(&f, p, 1e-7 * scale.max(p.abs().max_element()), 1e-9 * scale)
+    }
 }
 
 #[cfg(test)]

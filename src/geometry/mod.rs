@@ -7,6 +7,7 @@ pub mod bvh2;
 pub mod grid;
 pub mod march;
 pub mod mesh;
+pub mod scene;
 pub mod sdf;
 
 use glam::{DVec3, Vec3, Vec3A};

@@ -5,27 +5,24 @@
 pub mod budget;
 
 use glam::{DVec3, Vec3};
-use obvhs::BvhBuildParams;
-use obvhs::bvh2::Bvh2;
 
 use crate::convert::extract::{ExtractMethod, Field, extract_object};
+use crate::convert::tessellate::plane_view_mesh;
 use crate::convert::tessellate::tessellate;
-use crate::geometry::analytic;
-use crate::geometry::bvh2;
+use crate::geometry::Geometry;
+use crate::geometry::analytic::AnalyticObject;
 use crate::geometry::grid::band::{BandGrid, band_from_function, band_from_mesh};
 use crate::geometry::grid::object::{ClippedGrid, GridObject, GridStore, VIEW_CLIP_FRACTION, view_region};
 use crate::geometry::grid::voxelize::voxelize_mesh;
 use crate::geometry::grid::{SdfGrid, sample_function, sample_mesh};
-use crate::geometry::march::{MarchHit, MarchParams, gradient_normal, march_ray};
+use crate::geometry::march::MarchParams;
 use crate::geometry::mesh::MeshGeometry;
+use crate::geometry::scene::SceneGeometry;
+use crate::geometry::sdf::SdfObject;
 use crate::geometry::sdf::SdfTree;
-use crate::geometry::{
-    Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, box_distance, distance_by_projection, f32_error,
-    max_abs,
-};
 use crate::mesh::TriangleMesh;
 use crate::scene::Scene;
-use crate::scene::shape::{Object, ObjectKind, Primitive, Shading, grow};
+use crate::scene::shape::{Object, ObjectKind, Primitive, Shading};
 use crate::scene::transform::Transform;
 
 /// How the scene's objects are represented for tracing.
@@ -90,287 +87,6 @@ impl Representation {
             Representation::Mesh { .. } => "mesh",
             Representation::Grid { .. } => "grid",
         }
-    }
-}
-
-/// A closed-form primitive under a transform.
-pub struct AnalyticObject {
-    prim: Primitive,
-    transform: Transform,
-    material: MaterialId,
-    bounds: Option<Aabb>,
-    label: String,
-}
-
-impl AnalyticObject {
-    /// A closed-form object for `prim` with the object's transform and material.
-    pub fn new(prim: Primitive, object: &Object) -> Self {
-        AnalyticObject {
-            prim,
-            transform: object.compiled_transform(),
-            material: object.material,
-            bounds: object.bounds(),
-            label: object.label.clone(),
-        }
-    }
-}
-
-impl Geometry for AnalyticObject {
-    fn bounds(&self) -> Option<Aabb> {
-        self.bounds
-    }
-
-    fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
-        stats.prim_tests += 1;
-        // f64 local rays: a radius-5000 sphere centred 5001 away has no f32 precision left
-        // for the small offsets that keep shadow rays off its surface.
-        let (o, d) = self.transform.ray_to_local_f64(ray);
-        let (t, n) = analytic::intersect_f64(&self.prim, o, d, t_min, t_max)?;
-        let point = ray.at(t);
-        Some(Hit {
-            t,
-            point,
-            normal: self.transform.normal_to_world(n),
-            shading_normal: self.transform.normal_to_world(n),
-            material: self.material,
-            error: f32_error(max_abs(point).max(max_abs(ray.origin))),
-        })
-    }
-
-    fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
-        stats.prim_tests += 1;
-        let (o, d) = self.transform.ray_to_local_f64(ray);
-        analytic::occluded_f64(&self.prim, o, d, t_min, t_max)
-    }
-
-    fn bytes_used(&self) -> usize {
-        std::mem::size_of::<Self>() + self.label.capacity()
-    }
-
-    fn describe(&self) -> String {
-        format!("{} '{}': closed form", self.prim.kind_name(), self.label)
-    }
-
-    fn census(&self) -> Census {
-        Census::default()
-    }
-
-    fn surface_distance(&self, p: DVec3) -> f64 {
-        let f = |q: DVec3| {
-            crate::geometry::sdf::primitive_distance_f64(&self.prim, self.transform.point_to_local_f64(q))
-        };
-        let scale = self.bounds.map_or(1.0, |b| b.diagonal().length() as f64).max(1e-30);
-        distance_by_projection(&f, p, 1e-7 * scale.max(p.abs().max_element()), 1e-9 * scale)
-    }
-}
-
-/// An object tree rendered by sphere tracing its signed distance function.
-pub struct SdfObject {
-    tree: SdfTree,
-    bounds: Option<Aabb>,
-    /// Characteristic size (bounds diagonal, or 1 when unbounded) for tolerances.
-    size: f64,
-    march: MarchParams,
-    why: String,
-}
-
-impl SdfObject {
-    /// Compiles `object` for sphere tracing; `why` says why it is sphere traced. `None`
-    /// when the object holds a mesh.
-    pub fn new(object: &Object, march: MarchParams, why: String) -> Option<Self> {
-        let tree = SdfTree::new(object)?;
-        let bounds = object.bounds();
-        let size = bounds.map_or(1.0, |b| b.diagonal().length() as f64);
-        // March a little beyond the bounds so a hit on the box face is not lost.
-        let bounds = bounds.map(|b| {
-            grow(
-                &b,
-                (march.tolerance(0.0, size) * 4.0) as f32
-                    + f32_error(max_abs(b.max.into()).max(max_abs(b.min.into()))),
-            )
-        });
-        Some(SdfObject { tree, bounds, size, march, why })
-    }
-
-    /// Whether the distance is exact (false: a Lipschitz-1 bound).
-    pub fn is_exact(&self) -> bool {
-        self.tree.exact
-    }
-
-    fn march(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<MarchHit> {
-        let f = |p: DVec3| self.tree.distance(p);
-        let b = self.bounds.as_ref();
-        march_ray(&f, ray, b, t_min, t_max, self.size, &self.march, self.tree.signed, stats)
-    }
-}
-
-impl Geometry for SdfObject {
-    fn bounds(&self) -> Option<Aabb> {
-        self.bounds
-    }
-
-    fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
-        let MarchHit { t, residual } = self.march(ray, t_min, t_max, stats)?;
-        let p = ray.origin.as_dvec3() + ray.dir.as_dvec3() * t;
-        let eps = self.march.tolerance(t, self.size).max(residual);
-        let f = |q: DVec3| self.tree.distance(q);
-        let floor = 1e-9 * (1.0 + p.abs().max_element());
-        // An unsigned field (a triangle) has no gradient on the surface: sample closer than
-        // the point's own distance so every sample lies on the ray's side.
-        let h = if self.tree.signed { 0.5 * eps } else { (0.25 * f(p).abs()).min(0.5 * eps) }.max(floor);
-        let normal = gradient_normal(&f, p, h, stats).as_vec3();
-        let material = self.tree.distance_material(p).1;
-        let point: Vec3 = p.as_vec3();
-        Some(Hit {
-            t: t as f32,
-            point,
-            normal,
-            shading_normal: normal,
-            material,
-            error: 4.0 * eps as f32 + f32_error(max_abs(point)),
-        })
-    }
-
-    fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
-        self.march(ray, t_min, t_max, stats).is_some()
-    }
-
-    fn bytes_used(&self) -> usize {
-        std::mem::size_of::<Self>() + self.tree.bytes_used() - std::mem::size_of::<SdfTree>()
-            + self.why.capacity()
-    }
-
-    fn describe(&self) -> String {
-        let bound = if self.tree.exact { "exact distance" } else { "Lipschitz bound" };
-        format!("{} ({bound})", self.why)
-    }
-
-    fn census(&self) -> Census {
-        Census::default()
-    }
-
-    fn surface_distance(&self, p: DVec3) -> f64 {
-        let f = |q: DVec3| self.tree.distance(q);
-        distance_by_projection(&f, p, 1e-7 * self.size.max(p.abs().max_element()), 1e-9 * self.size)
-    }
-}
-
-/// The whole scene as one geometry: a top-level BVH over the bounded objects plus a list of
-/// unbounded ones (infinite planes, unbounded repetition) that every ray tests.
-pub struct SceneGeometry {
-    objects: Vec<Box<dyn Geometry>>,
-    bvh: Bvh2,
-    /// Indices into `objects` of unbounded objects.
-    unbounded: Vec<u32>,
-    /// For each BVH primitive, the index into `objects`.
-    bounded: Vec<u32>,
-}
-
-impl SceneGeometry {
-    /// Builds the top-level BVH over `objects`.
-    pub fn new(objects: Vec<Box<dyn Geometry>>) -> Self {
-        let mut boxes = Vec::new();
-        let mut bounded = Vec::new();
-        let mut unbounded = Vec::new();
-        for (i, o) in objects.iter().enumerate() {
-            match o.bounds() {
-                Some(b) => {
-                    boxes.push(b);
-                    bounded.push(i as u32);
-                }
-                None => unbounded.push(i as u32),
-            }
-        }
-        let bvh = bvh2::build(&boxes, BvhBuildParams::medium_build());
-        SceneGeometry { objects, bvh, unbounded, bounded }
-    }
-
-    /// The objects, in scene order.
-    pub fn objects(&self) -> &[Box<dyn Geometry>] {
-        &self.objects
-    }
-}
-
-impl Geometry for SceneGeometry {
-    fn bounds(&self) -> Option<Aabb> {
-        if !self.unbounded.is_empty() {
-            return None;
-        }
-        self.objects.iter().filter_map(|o| o.bounds()).reduce(|a, b| a.union(&b))
-    }
-
-    fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
-        let mut best: Option<Hit> = None;
-        let mut t_best = t_max;
-        for &i in &self.unbounded {
-            if let Some(h) = self.objects[i as usize].closest_hit(ray, t_min, t_best, stats) {
-                t_best = h.t;
-                best = Some(h);
-            }
-        }
-        bvh2::traverse(&self.bvh, ray, t_min, t_best, stats, |prim, t_max, stats| {
-            let obj = &self.objects[self.bounded[prim as usize] as usize];
-            Ok(obj.closest_hit(ray, t_min, t_max, stats).map(|h| {
-                let t = h.t;
-                best = Some(h);
-                t
-            }))
-        });
-        best
-    }
-
-    fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
-        if self.unbounded.iter().any(|&i| self.objects[i as usize].any_hit(ray, t_min, t_max, stats)) {
-            return true;
-        }
-        bvh2::traverse_any(&self.bvh, ray, t_min, t_max, stats, |prim, t_max, stats| {
-            self.objects[self.bounded[prim as usize] as usize].any_hit(ray, t_min, t_max, stats)
-        })
-    }
-
-    fn bytes_used(&self) -> usize {
-        std::mem::size_of::<Self>()
-            + self
-                .objects
-                .iter()
-                .map(|o| o.bytes_used() + std::mem::size_of::<Box<dyn Geometry>>())
-                .sum::<usize>()
-            + bvh2::bytes_used(&self.bvh)
-            + 4 * (self.unbounded.len() + self.bounded.len())
-    }
-
-    fn describe(&self) -> String {
-        format!("{} objects, top-level BVH of {} nodes", self.objects.len(), self.bvh.nodes.len())
-    }
-
-    fn census(&self) -> Census {
-        let own = Census {
-            accel_bytes: (bvh2::bytes_used(&self.bvh) + 4 * (self.unbounded.len() + self.bounded.len()))
-                as u64,
-            ..Census::default()
-        };
-        self.objects.iter().fold(own, |c, o| c + o.census())
-    }
-
-    fn surface_distance(&self, p: DVec3) -> f64 {
-        let mut best = f64::INFINITY;
-        for &i in &self.unbounded {
-            best = best.min(self.objects[i as usize].surface_distance(p));
-        }
-        // Objects nearest first by their boxes; a box farther than the best is skipped.
-        let mut order: Vec<(f64, u32)> = self
-            .bounded
-            .iter()
-            .map(|&i| (self.objects[i as usize].bounds().map_or(0.0, |b| box_distance(&b, p)), i))
-            .collect();
-        order.sort_by(|a, b| a.0.total_cmp(&b.0));
-        for (d, i) in order {
-            if d >= best {
-                break;
-            }
-            best = best.min(self.objects[i as usize].surface_distance(p));
-        }
-        best
     }
 }
 
@@ -558,50 +274,6 @@ fn tessellated(
     // shading is asked for (averaged normals would round their edges off).
     let shading = if mesh.normals.is_some() { shading } else { Shading::Flat };
     Some(MeshGeometry::new(mesh, shading, o.compiled_transform(), o.material, label))
-}
-
-/// The part of the plane `normal . p = offset` within `radius` of `eye`, as a disc of
-/// rings around the eye's foot point whose radii grow geometrically (by 1.25), so the
-/// triangles near the camera are small (precise hits in f32) and far ones large (few
-/// triangles). Flat, so the rings lose nothing: the disc is exactly the plane out to its
-/// polygonal rim, which circumscribes the circle of `radius`. Oriented with `normal` out.
-pub fn plane_view_mesh(normal: Vec3, offset: f32, eye: Vec3, radius: f32) -> TriangleMesh {
-    const SEGMENTS: u32 = 16;
-    let n = normal.normalize();
-    let height = n.dot(eye) - offset;
-    let foot = eye - n * height;
-    let (u, v) = n.any_orthonormal_pair();
-    // u x v = n keeps the winding counter-clockwise seen from +n.
-    let (u, v) = if u.cross(v).dot(n) > 0.0 { (u, v) } else { (v, u) };
-    let mut positions = vec![foot];
-    let mut triangles = Vec::new();
-    let mut r = 0.25 * height.abs().max(1e-3);
-    let mut ring = 0u32;
-    loop {
-        let last = r >= radius;
-        let r_ring = r.min(radius) / (std::f32::consts::PI / SEGMENTS as f32).cos();
-        for i in 0..SEGMENTS {
-            let a = i as f32 * std::f32::consts::TAU / SEGMENTS as f32;
-            positions.push(foot + (u * a.cos() + v * a.sin()) * r_ring);
-        }
-        let base = 1 + ring * SEGMENTS;
-        for i in 0..SEGMENTS {
-            let j = (i + 1) % SEGMENTS;
-            if ring == 0 {
-                triangles.push([0, base + i, base + j]);
-            } else {
-                let inner = base - SEGMENTS;
-                triangles.push([inner + i, base + i, base + j]);
-                triangles.push([inner + i, base + j, inner + j]);
-            }
-        }
-        if last {
-            break;
-        }
-        ring += 1;
-        r *= 1.25;
-    }
-    TriangleMesh { positions, triangles, normals: None }
 }
 
 /// Every object of `scene` that the mesh representation `repr` turns into triangles, in
