@@ -19,7 +19,7 @@ use mesh_checks::{cube, non_manifold_edges, signed_volume};
 
 /// The methods that are closed and manifold by construction (dual contouring is only
 /// checked on smoother fields, in `tests/extract.rs`: on this noise a dual edge between two
-/// cells can be used four times, see `src/extract.rs`).
+/// cells can be used four times, see `src/convert/extract/mod.rs`).
 const PROVEN: [ExtractMethod; 2] = [ExtractMethod::MarchingCubes, ExtractMethod::MarchingTetrahedra];
 
 /// Closed, edge-manifold, valid, no duplicate positions, no degenerate triangles.
