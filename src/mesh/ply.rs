@@ -1,9 +1,15 @@
 //! PLY (Stanford polygon file), ASCII and binary in both byte orders; hand-written.
 //!
 //! Reads the `vertex` element's `x`, `y`, `z` (and `nx`, `ny`, `nz` when all three are
-//! present) of any scalar type, and the `face` element's `vertex_indices` (or
-//! `vertex_index`, or its only list) as polygons of any length, fan-triangulated. Every
-//! other property and element is read past and ignored. Before anything is allocated the
+//! present) of any scalar type, the `face` element's `vertex_indices` (or `vertex_index`,
+//! or its only list) as polygons of any length, fan-triangulated, and the `tristrips`
+//! element (as the Stanford and Georgia Tech archives and many scanners write it): each
+//! entry's list is a sequence of triangle strips separated by `-1`, triangle `j` of a
+//! strip taking vertices `j, j+1, j+2` with every other triangle's winding flipped so the
+//! whole strip keeps one orientation; stitching triangles that repeat a vertex are
+//! left out. Lists may have any integer count type and any index
+//! type. A file may hold both elements. Every other property and element is read past and
+//! ignored. Before anything is allocated the
 //! header's element counts are checked against the bytes that follow the header, so an
 //! absurd count fails at once. In ASCII files each element is one line.
 
@@ -322,6 +328,68 @@ impl Source<'_> {
     }
 }
 
+/// How an element's index list becomes triangles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Assembly {
+    /// One polygon per entry, fan-triangulated (`face`).
+    Fan,
+    /// Triangle strips separated by `-1` (`tristrips`).
+    Strips,
+}
+
+/// Marks a `-1` (strip restart) in a `tristrips` index list.
+const STRIP_RESTART: u32 = u32::MAX;
+
+/// The index of `e`'s list property that holds vertex indices: `vertex_indices` or
+/// `vertex_index`, else its only list.
+fn index_list(path: &Path, e: &Element) -> Result<usize> {
+    let lists: Vec<usize> =
+        (0..e.props.len()).filter(|&i| matches!(e.props[i].kind, Kind::List { .. })).collect();
+    e.props
+        .iter()
+        .position(|p| {
+            matches!(p.kind, Kind::List { .. }) && (p.name == "vertex_indices" || p.name == "vertex_index")
+        })
+        .or(if lists.len() == 1 { Some(lists[0]) } else { None })
+        .ok_or_else(|| {
+            Error::input(
+                path,
+                Some(Location { line: e.line, column: 1 }),
+                format!("element '{}' has no list property 'vertex_indices'", e.name),
+            )
+        })
+}
+
+/// Appends the triangles of the strips in `indices` (separated by [`STRIP_RESTART`]) to
+/// `out`: triangle `j` of a strip is `(s[j], s[j+1], s[j+2])`, its first two vertices
+/// swapped for odd `j` so every triangle keeps the strip's orientation. Triangles that
+/// repeat a vertex are the stitches that join strips, not geometry: they are left out.
+/// Returns how many strips were too short to hold a triangle.
+fn strip_triangles(indices: &[u32], out: &mut Vec<[u32; 3]>) -> usize {
+    let mut skipped = 0;
+    for strip in indices.split(|&i| i == STRIP_RESTART) {
+        if strip.is_empty() {
+            continue;
+        }
+        if strip.len() < 3 {
+            skipped += 1;
+            continue;
+        }
+        for (j, w) in strip.windows(3).enumerate() {
+            let [a, b, c] = [w[0], w[1], w[2]];
+            if a == b || b == c || a == c {
+                continue;
+            }
+            if j % 2 == 0 {
+                out.push([a, b, c]);
+            } else {
+                out.push([b, a, c]);
+            }
+        }
+    }
+    skipped
+}
+
 pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
     let header = parse_header(path, data)?;
     let ascii = header.encoding == Encoding::Ascii;
@@ -365,25 +433,17 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
     };
     let n_vertices = vertex.count;
     check_vertex_count(path, n_vertices.min(usize::MAX as u64) as usize)?;
-    let Some(face) = header.elements.iter().find(|e| e.name == "face") else {
+    let face = header.elements.iter().find(|e| e.name == "face");
+    let strips = header.elements.iter().find(|e| e.name == "tristrips");
+    if face.is_none() && strips.is_none() {
         return Err(Error::input(
             path,
             None,
-            "no triangles: the file has no 'face' element (a point cloud?)",
+            "no triangles: the file has neither a 'face' nor a 'tristrips' element (a point cloud?)",
         ));
-    };
-    let list_props: Vec<usize> =
-        (0..face.props.len()).filter(|&i| matches!(face.props[i].kind, Kind::List { .. })).collect();
-    let face_list = face
-        .props
-        .iter()
-        .position(|p| {
-            matches!(p.kind, Kind::List { .. }) && (p.name == "vertex_indices" || p.name == "vertex_index")
-        })
-        .or(if list_props.len() == 1 { Some(list_props[0]) } else { None })
-        .ok_or_else(|| {
-            Error::input(path, at(face.line), "element 'face' has no list property 'vertex_indices'")
-        })?;
+    }
+    let face_list = face.map(|e| index_list(path, e)).transpose()?;
+    let strip_list = strips.map(|e| index_list(path, e)).transpose()?;
 
     let mut raw = RawMesh::default();
     raw.report.notes.extend(header.notes.iter().cloned());
@@ -392,7 +452,7 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
     if nxyz.is_some() {
         raw.normals = Some(Vec::with_capacity(n_vertices as usize));
     }
-    raw.triangles.reserve(face.count as usize);
+    raw.triangles.reserve(face.map_or(0, |f| f.count as usize));
 
     let mut src = match header.encoding {
         Encoding::Ascii => Source::Ascii(Tokens::new(data, header.data_start, header.data_line)),
@@ -405,8 +465,13 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
             continue;
         }
         let is_vertex = std::ptr::eq(e, vertex);
-        let is_face = std::ptr::eq(e, face);
-        if !is_vertex && !is_face {
+        // The list property that holds the element's vertex indices, and how they connect.
+        let indices = match (face, strips) {
+            (Some(f), _) if std::ptr::eq(e, f) => face_list.map(|k| (k, Assembly::Fan)),
+            (_, Some(t)) if std::ptr::eq(e, t) => strip_list.map(|k| (k, Assembly::Strips)),
+            _ => None,
+        };
+        if !is_vertex && indices.is_none() {
             raw.report.notes.push(format!("element '{}' ({} entries) ignored", e.name, e.count));
         }
         values.clear();
@@ -455,13 +520,18 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
                         if !src.fits(c, item) {
                             return Err(fail(Fail::End, &src, &what));
                         }
-                        let keep = is_face && k == face_list;
+                        let assembly = indices.filter(|&(list, _)| list == k).map(|(_, a)| a);
+                        let keep = assembly.is_some();
                         if keep {
                             polygon.clear();
                         }
                         for _ in 0..c {
                             let (v, loc) = src.value_at(item).map_err(|f| fail(f, &src, &what))?;
                             if keep {
+                                if v == -1.0 && assembly == Some(Assembly::Strips) {
+                                    polygon.push(STRIP_RESTART);
+                                    continue;
+                                }
                                 if !(v >= 0.0 && v < n_vertices as f64 && v.fract() == 0.0) {
                                     let shown = if v.fract() == 0.0 {
                                         format!("{v}")
@@ -481,13 +551,20 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
                                 polygon.push(v as u32);
                             }
                         }
-                        if keep {
-                            if polygon.len() < 3 {
-                                raw.report.skipped_primitives += 1;
+                        match assembly {
+                            Some(Assembly::Fan) => {
+                                if polygon.len() < 3 {
+                                    raw.report.skipped_primitives += 1;
+                                }
+                                for j in 2..polygon.len() {
+                                    raw.triangles.push([polygon[0], polygon[j - 1], polygon[j]]);
+                                }
                             }
-                            for j in 2..polygon.len() {
-                                raw.triangles.push([polygon[0], polygon[j - 1], polygon[j]]);
+                            Some(Assembly::Strips) => {
+                                raw.report.skipped_primitives +=
+                                    strip_triangles(&polygon, &mut raw.triangles);
                             }
+                            None => {}
                         }
                     }
                 }
@@ -559,5 +636,75 @@ mod tests {
         assert!(err("ply\nformat utf8 1.0\nend_header\n").contains("unknown format 'utf8'"));
         let h = parse_header(p, b"ply\r\nformat ascii 1.0\r\nend_header\r\n1 2").unwrap();
         assert_eq!((h.data_start, h.data_line), (35, 4));
+    }
+
+    #[test]
+    fn strips_keep_one_orientation_and_drop_stitches() {
+        let mut out = Vec::new();
+        // Strip 0 1 2 3 4, then a restart, then a strip with a stitching repeat.
+        let r = STRIP_RESTART;
+        let skipped = strip_triangles(&[0, 1, 2, 3, 4, r, 5, 6, 7, 7, 8, r, 9, 10], &mut out);
+        assert_eq!(out, vec![[0, 1, 2], [2, 1, 3], [2, 3, 4], [5, 6, 7]]);
+        // (6, 7, 7) and (7, 7, 8) repeat a vertex (stitches, left out); the strip 9 10
+        // holds no triangle.
+        assert_eq!(skipped, 1);
+    }
+
+    /// A unit square split into two triangles by one strip 0 1 2 3, plus a second strip
+    /// after a restart: the Stanford `tristrips` layout.
+    fn strips_header(format: &str, index: &str) -> String {
+        format!(
+            "ply\nformat {format} 1.0\nelement vertex 5\nproperty float x\nproperty float y\n\
+             property float z\nelement tristrips 1\nproperty list int {index} vertex_indices\nend_header\n"
+        )
+    }
+
+    #[test]
+    fn reads_tristrips_in_ascii_and_binary() {
+        let verts = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let strip: [i32; 8] = [0, 1, 2, 3, -1, 0, 2, 4];
+        let want = vec![[0, 1, 2], [2, 1, 3], [0, 2, 4]];
+        let mut ascii = strips_header("ascii", "int");
+        for v in verts {
+            ascii += &format!("{} {} {}\n", v[0], v[1], v[2]);
+        }
+        ascii += &format!("{} {}\n", strip.len(), strip.map(|i| i.to_string()).join(" "));
+        let raw = read(Path::new("a.ply"), ascii.as_bytes()).unwrap();
+        assert_eq!(raw.triangles, want);
+        assert_eq!(raw.positions.len(), 5);
+        for big in [false, true] {
+            let mut bin =
+                strips_header(if big { "binary_big_endian" } else { "binary_little_endian" }, "int")
+                    .into_bytes();
+            let put = |b: &mut Vec<u8>, x: [u8; 4], y: [u8; 4]| b.extend(if big { x } else { y });
+            for v in verts {
+                for c in v {
+                    put(&mut bin, c.to_be_bytes(), c.to_le_bytes());
+                }
+            }
+            put(&mut bin, (strip.len() as i32).to_be_bytes(), (strip.len() as i32).to_le_bytes());
+            for i in strip {
+                put(&mut bin, i.to_be_bytes(), i.to_le_bytes());
+            }
+            let raw = read(Path::new("b.ply"), &bin).unwrap();
+            assert_eq!(raw.triangles, want, "big endian {big}");
+        }
+    }
+
+    #[test]
+    fn tristrips_reject_bad_indices_and_faces_still_reject_minus_one() {
+        let mut text = strips_header("ascii", "int");
+        text += "0 0 0\n1 0 0\n0 1 0\n1 1 0\n0 0 1\n4 0 1 -2 3\n";
+        let e = read(Path::new("c.ply"), text.as_bytes()).unwrap_err().to_string();
+        assert!(e.contains("c.ply") && e.contains("index -2 out of range"), "{e}");
+        let face = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+                    property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n\
+                    0 0 0\n1 0 0\n0 1 0\n3 0 1 -1\n";
+        let e = read(Path::new("d.ply"), face.as_bytes()).unwrap_err().to_string();
+        assert!(e.contains("index -1 out of range"), "{e}");
+        let none = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
+                    property float z\nend_header\n0 0 0\n";
+        let e = read(Path::new("e.ply"), none.as_bytes()).unwrap_err().to_string();
+        assert!(e.contains("neither a 'face' nor a 'tristrips' element"), "{e}");
     }
 }
