@@ -59,8 +59,8 @@ pub struct Marched<F> {
     field: F,
     /// World-space box the march is clipped to when `bounded` ([`Aabb::INFINITY`]
     /// otherwise). A box and a flag rather than an `Option<Aabb>`: the flag fits in the
-    /// struct's padding, so every marched object is as large as before the marcher was
-    /// shared and [`Geometry::bytes_used`] reports the same sizes.
+    /// struct's padding, where an `Option`'s tag would add 16 bytes to every object's
+    /// [`Geometry::bytes_used`].
     bounds: Aabb,
     /// False for an unbounded field, which is marched over the whole ray interval.
     bounded: bool,
