@@ -1,10 +1,12 @@
 //! Sphere tracing of distance functions: plain and over-relaxed ("enhanced", Keinert et
 //! al. 2014), with a hit tolerance relative to the distance travelled, a step limit that is
 //! counted rather than hidden, a refinement step, and normals from the distance gradient.
+//! These are the loops; [`crate::geometry::marched::Marched`] is the one geometry that
+//! runs them on every marched field (analytic SDFs, SDF grids).
 
 use glam::DVec3;
 
-use crate::geometry::{Aabb, Ray, RayStats};
+use crate::geometry::RayStats;
 
 /// Sphere-tracing parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -45,25 +47,37 @@ impl MarchParams {
     }
 }
 
-/// Sphere traces the ray `origin + t * dir` (`dir` unit length) through the distance
-/// function `f` (exact or a Lipschitz-1 lower bound) for `t` in `[t0, t1]`. Returns the
-/// hit, or `None` for a miss. A march that exhausts its step budget reports its last point
-/// if that is within the pixel footprint of the surface, else a miss. A ray that
+/// A piece of a ray to march: `origin + t * dir` (`dir` unit length) for `t` in
+/// `[t0, t1]`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Segment {
+    /// Start of the ray (`t = 0`), scene units.
+    pub origin: DVec3,
+    /// Unit direction.
+    pub dir: DVec3,
+    /// First ray parameter marched, scene units.
+    pub t0: f64,
+    /// Last ray parameter marched (`>= t0` for a non-empty segment), scene units.
+    pub t1: f64,
+}
+
+/// Sphere traces the ray segment `seg` through the distance function `f` (exact or a
+/// Lipschitz-1 lower bound) with tolerances for an object of characteristic `size`.
+/// Returns the hit, or `None` for a miss. A march that exhausts its step budget reports its
+/// last point if that is within the pixel footprint of the surface, else a miss. A ray that
 /// starts inside the solid marches `|f|` and finds the exit. With `refine`, a converged
 /// march takes one more step onto the surface (not for unsigned fields, whose gradient is
-/// undefined there).
-#[allow(clippy::too_many_arguments)]
+/// undefined there). [`crate::geometry::marched::Marched`] calls it for every marched
+/// representation.
 pub fn sphere_trace(
     f: &impl Fn(DVec3) -> f64,
-    origin: DVec3,
-    dir: DVec3,
-    t0: f64,
-    t1: f64,
+    seg: &Segment,
     size: f64,
     params: &MarchParams,
     refine: bool,
     stats: &mut RayStats,
 ) -> Option<MarchHit> {
+    let Segment { origin, dir, t0, t1 } = *seg;
     stats.marched_rays += 1;
     let mut omega = params.relaxation;
     let mut t = t0;
@@ -120,30 +134,6 @@ pub fn sphere_trace(
     (t > 0.0 && r < params.pixel_footprint * t).then_some(MarchHit { t, residual: r })
 }
 
-/// Sphere traces the world ray `ray` (unit direction) through `f`, only inside `bounds`
-/// when given (unbounded fields march the whole interval), and keeps hits with `t` in
-/// `[t_min, t_max]`. The shared entry point of every marched representation.
-#[allow(clippy::too_many_arguments)]
-pub fn march_ray(
-    f: &impl Fn(DVec3) -> f64,
-    ray: &Ray,
-    bounds: Option<&Aabb>,
-    t_min: f32,
-    t_max: f32,
-    size: f64,
-    params: &MarchParams,
-    refine: bool,
-    stats: &mut RayStats,
-) -> Option<MarchHit> {
-    let (t0, t1) = match bounds {
-        Some(b) => ray.clip_to_box(b, t_min, t_max)?,
-        None => (t_min, t_max),
-    };
-    let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
-    let hit = sphere_trace(f, o, d, t0 as f64, t1 as f64, size, params, refine, stats)?;
-    (hit.t >= t_min as f64 && hit.t <= t_max as f64).then_some(hit)
-}
-
 /// Where a march stopped.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MarchHit {
@@ -171,6 +161,10 @@ pub fn gradient_normal(f: &impl Fn(DVec3) -> f64, p: DVec3, h: f64, stats: &mut 
 mod tests {
     use super::*;
 
+    fn seg(origin: DVec3, dir: DVec3, t0: f64, t1: f64) -> Segment {
+        Segment { origin, dir, t0, t1 }
+    }
+
     fn sphere(p: DVec3) -> f64 {
         (p - DVec3::new(0.0, 0.0, 5.0)).length() - 1.0
     }
@@ -179,13 +173,20 @@ mod tests {
     fn hits_sphere_front_and_exits_from_inside() {
         let mut stats = RayStats::default();
         let p = MarchParams::default();
-        let t =
-            sphere_trace(&sphere, DVec3::ZERO, DVec3::Z, 0.0, 100.0, 2.0, &p, true, &mut stats).unwrap().t;
+        let t = sphere_trace(&sphere, &seg(DVec3::ZERO, DVec3::Z, 0.0, 100.0), 2.0, &p, true, &mut stats)
+            .unwrap()
+            .t;
         assert!((t - 4.0).abs() < 1e-3, "{t}");
-        let t =
-            sphere_trace(&sphere, DVec3::new(0.0, 0.0, 5.0), DVec3::Z, 0.0, 100.0, 2.0, &p, true, &mut stats)
-                .unwrap()
-                .t;
+        let t = sphere_trace(
+            &sphere,
+            &seg(DVec3::new(0.0, 0.0, 5.0), DVec3::Z, 0.0, 100.0),
+            2.0,
+            &p,
+            true,
+            &mut stats,
+        )
+        .unwrap()
+        .t;
         assert!((t - 1.0).abs() < 1e-3, "{t}");
         assert!(stats.march_steps > 0);
     }
@@ -194,11 +195,11 @@ mod tests {
     fn misses_and_step_limit_are_reported() {
         let mut stats = RayStats::default();
         let p = MarchParams { max_steps: 4, pixel_footprint: 1e-6, ..Default::default() };
-        let miss = sphere_trace(&sphere, DVec3::ZERO, DVec3::Y, 0.0, 10.0, 2.0, &p, true, &mut stats);
+        let miss = sphere_trace(&sphere, &seg(DVec3::ZERO, DVec3::Y, 0.0, 10.0), 2.0, &p, true, &mut stats);
         assert_eq!(miss, None);
         // Grazing: the ray passes at distance 1.0001 from the centre; 4 steps are not enough.
         let dir = DVec3::new(1.0001 / 5.0, 0.0, 1.0).normalize();
-        let r = sphere_trace(&sphere, DVec3::ZERO, dir, 0.0, 100.0, 2.0, &p, true, &mut stats);
+        let r = sphere_trace(&sphere, &seg(DVec3::ZERO, dir, 0.0, 100.0), 2.0, &p, true, &mut stats);
         assert_eq!(r, None);
         assert_eq!(stats.step_limit_hits, 1);
     }
@@ -211,9 +212,10 @@ mod tests {
         let (mut a, mut b) = (RayStats::default(), RayStats::default());
         let plain = MarchParams::default();
         let relaxed = MarchParams { relaxation: 1.6, ..plain };
-        let t_plain = sphere_trace(&plane, DVec3::ZERO, dir, 0.0, 1e3, 1.0, &plain, true, &mut a).unwrap().t;
+        let t_plain =
+            sphere_trace(&plane, &seg(DVec3::ZERO, dir, 0.0, 1e3), 1.0, &plain, true, &mut a).unwrap().t;
         let t_relax =
-            sphere_trace(&plane, DVec3::ZERO, dir, 0.0, 1e3, 1.0, &relaxed, true, &mut b).unwrap().t;
+            sphere_trace(&plane, &seg(DVec3::ZERO, dir, 0.0, 1e3), 1.0, &relaxed, true, &mut b).unwrap().t;
         assert!((t_plain - t_relax).abs() < 1e-4 * t_plain);
         assert!(b.march_steps < a.march_steps, "{} vs {}", b.march_steps, a.march_steps);
     }
@@ -224,7 +226,8 @@ mod tests {
         let f = |p: DVec3| (p.z - 3.0).abs() - 0.01;
         let relaxed = MarchParams { relaxation: 1.9, ..Default::default() };
         let mut s = RayStats::default();
-        let t = sphere_trace(&f, DVec3::ZERO, DVec3::Z, 0.0, 10.0, 1.0, &relaxed, true, &mut s).unwrap().t;
+        let t =
+            sphere_trace(&f, &seg(DVec3::ZERO, DVec3::Z, 0.0, 10.0), 1.0, &relaxed, true, &mut s).unwrap().t;
         assert!((t - 2.99).abs() < 1e-3, "{t}");
     }
 }

@@ -6,6 +6,7 @@ pub mod analytic;
 pub mod bvh2;
 pub mod grid;
 pub mod march;
+pub mod marched;
 pub mod mesh;
 pub mod scene;
 pub mod sdf;

@@ -3,10 +3,9 @@
 //! that is evaluated without allocating. Each node knows whether it returns the exact
 //! Euclidean distance or only a Lipschitz-1 lower bound (safe for sphere tracing).
 
-use crate::geometry::march::{MarchHit, MarchParams, gradient_normal, march_ray};
-use crate::geometry::{
-    Aabb, Census, Geometry, Hit, Ray, RayStats, distance_by_projection, f32_error, max_abs,
-};
+use crate::geometry::march::MarchParams;
+use crate::geometry::marched::{DistanceField, Marched};
+use crate::geometry::{Census, distance_by_projection, f32_error, max_abs};
 use crate::scene::shape::grow;
 use glam::{DVec2, DVec3, UVec3, Vec3};
 
@@ -323,19 +322,14 @@ fn eval_repeat(period: Vec3, count: Option<UVec3>, child: &SdfNode, q: DVec3) ->
     best
 }
 
-/// An object tree rendered by sphere tracing its signed distance function.
-pub struct SdfObject {
-    tree: SdfTree,
-    bounds: Option<Aabb>,
-    /// Characteristic size (bounds diagonal, or 1 when unbounded) for tolerances.
-    size: f64,
-    march: MarchParams,
-    why: String,
-}
+/// An object tree rendered by sphere tracing its signed distance function: the one
+/// marcher over an [`SdfTree`], whose label says why the object is sphere traced.
+pub type SdfObject = Marched<SdfTree>;
 
 impl SdfObject {
     /// Compiles `object` for sphere tracing; `why` says why it is sphere traced. `None`
-    /// when the object holds a mesh.
+    /// when the object holds a mesh. Tolerances scale with the diagonal of the object's
+    /// bounds (1 when unbounded); the march runs a little beyond them.
     pub fn new(object: &Object, march: MarchParams, why: String) -> Option<Self> {
         let tree = SdfTree::new(object)?;
         let bounds = object.bounds();
@@ -348,69 +342,54 @@ impl SdfObject {
                     + f32_error(max_abs(b.max.into()).max(max_abs(b.min.into()))),
             )
         });
-        Some(SdfObject { tree, bounds, size, march, why })
-    }
-
-    /// Whether the distance is exact (false: a Lipschitz-1 bound).
-    pub fn is_exact(&self) -> bool {
-        self.tree.exact
-    }
-
-    fn march(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<MarchHit> {
-        let f = |p: DVec3| self.tree.distance(p);
-        let b = self.bounds.as_ref();
-        march_ray(&f, ray, b, t_min, t_max, self.size, &self.march, self.tree.signed, stats)
+        Some(Marched::from_field(tree, bounds, size, march, why))
     }
 }
 
-impl Geometry for SdfObject {
-    fn bounds(&self) -> Option<Aabb> {
-        self.bounds
+/// The analytic field: distances from the tree (exact or Lipschitz-1 bounds, marched as
+/// they are), the material of the nearest surface at a hit.
+impl DistanceField for SdfTree {
+    #[inline]
+    fn distance(&self, p: DVec3) -> f64 {
+        SdfTree::distance(self, p)
     }
 
-    fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
-        let MarchHit { t, residual } = self.march(ray, t_min, t_max, stats)?;
-        let p = ray.origin.as_dvec3() + ray.dir.as_dvec3() * t;
-        let eps = self.march.tolerance(t, self.size).max(residual);
-        let f = |q: DVec3| self.tree.distance(q);
+    fn is_signed(&self) -> bool {
+        self.signed
+    }
+
+    fn is_exact(&self) -> bool {
+        self.exact
+    }
+
+    fn normal_step(&self, p: DVec3, eps: f64) -> f64 {
         let floor = 1e-9 * (1.0 + p.abs().max_element());
         // An unsigned field (a triangle) has no gradient on the surface: sample closer than
         // the point's own distance so every sample lies on the ray's side.
-        let h = if self.tree.signed { 0.5 * eps } else { (0.25 * f(p).abs()).min(0.5 * eps) }.max(floor);
-        let normal = gradient_normal(&f, p, h, stats).as_vec3();
-        let material = self.tree.distance_material(p).1;
-        let point: Vec3 = p.as_vec3();
-        Some(Hit {
-            t: t as f32,
-            point,
-            normal,
-            shading_normal: normal,
-            material,
-            error: 4.0 * eps as f32 + f32_error(max_abs(point)),
-        })
+        if self.signed { 0.5 * eps } else { (0.25 * SdfTree::distance(self, p).abs()).min(0.5 * eps) }
+            .max(floor)
     }
 
-    fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
-        self.march(ray, t_min, t_max, stats).is_some()
+    fn material(&self, p: DVec3) -> MaterialId {
+        self.distance_material(p).1
     }
 
-    fn bytes_used(&self) -> usize {
-        std::mem::size_of::<Self>() + self.tree.bytes_used() - std::mem::size_of::<SdfTree>()
-            + self.why.capacity()
-    }
-
-    fn describe(&self) -> String {
-        let bound = if self.tree.exact { "exact distance" } else { "Lipschitz bound" };
-        format!("{} ({bound})", self.why)
+    fn heap_bytes(&self) -> usize {
+        self.bytes_used() - std::mem::size_of::<SdfTree>()
     }
 
     fn census(&self) -> Census {
         Census::default()
     }
 
-    fn surface_distance(&self, p: DVec3) -> f64 {
-        let f = |q: DVec3| self.tree.distance(q);
-        distance_by_projection(&f, p, 1e-7 * self.size.max(p.abs().max_element()), 1e-9 * self.size)
+    fn surface_distance(&self, p: DVec3, size: f64) -> f64 {
+        let f = |q: DVec3| SdfTree::distance(self, q);
+        distance_by_projection(&f, p, 1e-7 * size.max(p.abs().max_element()), 1e-9 * size)
+    }
+
+    fn describe(&self, why: &str) -> String {
+        let bound = if self.exact { "exact distance" } else { "Lipschitz bound" };
+        format!("{why} ({bound})")
     }
 }
 

@@ -11,10 +11,10 @@ use glam::{DVec3, Vec3};
 
 use crate::geometry::grid::SdfGrid;
 use crate::geometry::grid::band::BandGrid;
-use crate::geometry::march::{MarchHit, MarchParams, gradient_normal, march_ray};
+use crate::geometry::march::MarchParams;
+use crate::geometry::marched::{DistanceField, Marched};
 use crate::geometry::{
     Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, aabb, box_distance, distance_by_projection,
-    f32_error, max_abs,
 };
 use crate::scene::Scene;
 use crate::scene::shape::Object;
@@ -97,19 +97,18 @@ impl From<BandGrid> for GridStore {
     }
 }
 
-/// A signed distance grid ready for tracing.
-pub struct GridObject {
+/// A signed distance grid ready for tracing: the one marcher over a [`GridField`],
+/// bounded by the grid's world-space box, with tolerances scaled by its diagonal.
+pub type GridObject = Marched<GridField>;
+
+/// The field of a [`GridObject`]: the trilinear interpolation of the samples, placed in
+/// the world, with steps scaled by [`GRID_STEP_SCALE`] and one material.
+pub struct GridField {
     grid: GridStore,
-    /// World-space bounds.
-    bounds: Aabb,
-    /// Diagonal of `bounds`, scene units.
-    size: f64,
     /// Where the grid's local frame sits in the world; `None` when the samples are in
     /// world space.
     placement: Option<Placement>,
     material: MaterialId,
-    march: MarchParams,
-    label: String,
 }
 
 /// A rigid transform with uniform scale from a grid's frame to the world.
@@ -127,7 +126,8 @@ impl GridObject {
         let grid = grid.into();
         let (lo, hi) = grid.bounds();
         let size = (hi - lo).length() as f64;
-        GridObject { bounds: aabb(lo, hi), grid, size, placement: None, material, march, label }
+        let field = GridField { grid, placement: None, material };
+        Marched::from_field(field, Some(aabb(lo, hi)), size, march, label)
     }
 
     /// Wraps `grid` whose samples are in a local frame placed in the world by `transform`,
@@ -140,21 +140,25 @@ impl GridObject {
         march: MarchParams,
         label: String,
     ) -> Self {
-        let mut g = Self::new(grid, material, march, label);
-        if !transform.identity {
-            g.bounds = transform.box_to_world(&g.bounds);
-            g.size = (g.bounds.max - g.bounds.min).length() as f64;
-            g.placement =
-                Some(Placement { to_local: transform.to_local_f64, scale: transform.min_scale as f64 });
+        if transform.identity {
+            return Self::new(grid, material, march, label);
         }
-        g
+        let grid = grid.into();
+        let (lo, hi) = grid.bounds();
+        let bounds = transform.box_to_world(&aabb(lo, hi));
+        let size = (bounds.max - bounds.min).length() as f64;
+        let placement =
+            Some(Placement { to_local: transform.to_local_f64, scale: transform.min_scale as f64 });
+        Marched::from_field(GridField { grid, placement, material }, Some(bounds), size, march, label)
     }
 
     /// The grid.
     pub fn grid(&self) -> &GridStore {
-        &self.grid
+        &self.field().grid
     }
+}
 
+impl GridField {
     /// The interpolated field at world point `p`, world units (outside the grid's box it is
     /// continued as a distance bound, see [`SdfGrid::trilinear`]).
     fn field(&self, p: DVec3) -> f64 {
@@ -163,55 +167,42 @@ impl GridObject {
             Some(m) => self.grid.trilinear(m.to_local.transform_point3(p).as_vec3()) as f64 * m.scale,
         }
     }
+}
 
+impl DistanceField for GridField {
+    #[inline]
     fn distance(&self, p: DVec3) -> f64 {
         self.field(p) * GRID_STEP_SCALE
     }
 
-    fn march(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<MarchHit> {
-        let f = |p: DVec3| self.distance(p);
-        march_ray(&f, ray, Some(&self.bounds), t_min, t_max, self.size, &self.march, true, stats)
-    }
-}
-
-impl Geometry for GridObject {
-    fn bounds(&self) -> Option<Aabb> {
-        Some(self.bounds)
+    fn is_signed(&self) -> bool {
+        true
     }
 
-    fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
-        let MarchHit { t, residual } = self.march(ray, t_min, t_max, stats)?;
-        let p = ray.origin.as_dvec3() + ray.dir.as_dvec3() * t;
-        let eps = self.march.tolerance(t, self.size).max(residual);
+    /// False: the interpolation of exact samples is not itself a distance.
+    fn is_exact(&self) -> bool {
+        false
+    }
+
+    fn normal_step(&self, _p: DVec3, _eps: f64) -> f64 {
         // Half a voxel: the interpolant is piecewise, so smaller steps see cell seams.
-        let f = |q: DVec3| self.distance(q);
         let voxel = self.grid.voxel() as f64 * self.placement.map_or(1.0, |m| m.scale);
-        let normal = gradient_normal(&f, p, 0.5 * voxel, stats).as_vec3();
-        let point: Vec3 = p.as_vec3();
-        Some(Hit {
-            t: t as f32,
-            point,
-            normal,
-            shading_normal: normal,
-            material: self.material,
-            error: 4.0 * eps as f32 + f32_error(max_abs(point)),
-        })
+        0.5 * voxel
     }
 
-    fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
-        self.march(ray, t_min, t_max, stats).is_some()
+    fn material(&self, _p: DVec3) -> MaterialId {
+        self.material
     }
 
-    fn bytes_used(&self) -> usize {
-        std::mem::size_of::<Self>() + self.grid.bytes_used() - std::mem::size_of::<GridStore>()
-            + self.label.capacity()
+    fn heap_bytes(&self) -> usize {
+        self.grid.bytes_used() - std::mem::size_of::<GridStore>()
     }
 
     fn census(&self) -> Census {
         Census { triangles: 0, grid_samples: self.grid.stored_values(), accel_bytes: 0 }
     }
 
-    fn surface_distance(&self, p: DVec3) -> f64 {
+    fn surface_distance(&self, p: DVec3, _size: f64) -> f64 {
         // Outside the box the field is undefined: measure from the nearest box point. In a
         // narrow band's empty bricks the field is a constant bound (no gradient): there the
         // projection gives up and this returns that bound, a lower bound, not an upper
@@ -231,7 +222,7 @@ impl Geometry for GridObject {
         scale * (outside + distance_by_projection(&f, q, h, 1e-6 * size))
     }
 
-    fn describe(&self) -> String {
+    fn describe(&self, label: &str) -> String {
         let d = self.grid.dims();
         let storage = match &self.grid {
             GridStore::Dense(_) => String::new(),
@@ -244,7 +235,7 @@ impl Geometry for GridObject {
         };
         format!(
             "{}: grid {}x{}x{} samples{storage}, voxel {:.5}, ray marched",
-            self.label,
+            label,
             d.x,
             d.y,
             d.z,
@@ -318,7 +309,7 @@ impl ClippedGrid {
     /// `grid` covers part of the object whose whole analytic geometry is `outside` (its
     /// `bounds()` are the object's).
     pub fn new(grid: GridObject, outside: Box<dyn Geometry>) -> Self {
-        let inner = grid.bounds;
+        let inner = grid.bounds().expect("a grid object is bounded");
         ClippedGrid { grid, inner, outside }
     }
 

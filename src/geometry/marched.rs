@@ -1,0 +1,155 @@
+//! One marcher for every ray-marched representation. A [`DistanceField`] says what is
+//! marched: the distance at a point (already scaled to be a safe step), whether it is
+//! signed and exact, the gradient step for normals, the material at a hit, and how the
+//! object measures, describes and counts itself. [`Marched`] owns everything else, once:
+//! the bounds the march is clipped to, the characteristic size that tolerances scale with,
+//! the [`MarchParams`], sphere tracing ([`sphere_trace`]) with its refinement step, the
+//! normal by [`gradient_normal`], the [`Hit`] record and its error bound, and the work
+//! counters. Analytic SDFs ([`crate::geometry::sdf::SdfObject`], a [`Marched`] over an
+//! [`SdfTree`](crate::geometry::sdf::SdfTree)) and SDF grids
+//! ([`crate::geometry::grid::object::GridObject`], a [`Marched`] over a
+//! [`GridField`](crate::geometry::grid::object::GridField)) are the two fields plugged in
+//! today; a new marched representation is a new field, not a new marcher.
+
+use glam::{DVec3, Vec3};
+
+use crate::geometry::march::{MarchHit, MarchParams, Segment, gradient_normal, sphere_trace};
+use crate::geometry::{Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, f32_error, max_abs};
+
+/// A distance field that [`Marched`] sphere traces, in world space.
+pub trait DistanceField: Send + Sync {
+    /// The distance marched at world point `p`: signed (negative inside) or unsigned, and
+    /// already scaled so that a step of this length never crosses the surface (an exact
+    /// distance, a Lipschitz-1 lower bound, or a field times a safety factor).
+    fn distance(&self, p: DVec3) -> f64;
+
+    /// Whether [`Self::distance`] is signed. An unsigned field (a triangle, which has no
+    /// inside) has no gradient on the surface itself: its march takes no refinement step
+    /// onto the surface, and its normal is sampled closer than the hit's own distance.
+    fn is_signed(&self) -> bool;
+
+    /// Whether the field is the exact Euclidean distance everywhere (false: a bound).
+    fn is_exact(&self) -> bool;
+
+    /// The step of the tetrahedron gradient ([`gradient_normal`]) at hit point `p`, whose
+    /// error bound is `eps` (the march tolerance at the hit, or its residual if larger),
+    /// scene units.
+    fn normal_step(&self, p: DVec3, eps: f64) -> f64;
+
+    /// The material of the surface at hit point `p`.
+    fn material(&self, p: DVec3) -> MaterialId;
+
+    /// Bytes the field holds beyond its own struct (which [`Marched`] counts as part of
+    /// itself).
+    fn heap_bytes(&self) -> usize;
+
+    /// What the field stores, for measurement tables ([`Geometry::census`]).
+    fn census(&self) -> Census;
+
+    /// Unsigned distance from `p` to the field's surface, for measuring error
+    /// ([`Geometry::surface_distance`]); `size` is the object's characteristic size.
+    fn surface_distance(&self, p: DVec3, size: f64) -> f64;
+
+    /// How the object is traced ([`Geometry::describe`]), given its label.
+    fn describe(&self, label: &str) -> String;
+}
+
+/// A distance field ray marched inside its bounds: the one marched [`Geometry`].
+pub struct Marched<F> {
+    field: F,
+    /// World-space box the march is clipped to when `bounded` ([`Aabb::INFINITY`]
+    /// otherwise). A box and a flag rather than an `Option<Aabb>`: the flag fits in the
+    /// struct's padding, where an `Option`'s tag would add 16 bytes to every object's
+    /// [`Geometry::bytes_used`].
+    bounds: Aabb,
+    /// False for an unbounded field, which is marched over the whole ray interval.
+    bounded: bool,
+    /// Characteristic size of the object (scene units, > 0) that the hit tolerance's floor
+    /// scales with ([`MarchParams::tolerance`]).
+    size: f64,
+    march: MarchParams,
+    /// Label or reason given to [`DistanceField::describe`].
+    label: String,
+}
+
+impl<F: DistanceField> Marched<F> {
+    /// Marches `field` inside `bounds` (`None`: unbounded) with tolerances for an object of
+    /// characteristic `size` (scene units); `label` names the object in
+    /// [`Geometry::describe`].
+    pub fn from_field(field: F, bounds: Option<Aabb>, size: f64, march: MarchParams, label: String) -> Self {
+        Marched {
+            field,
+            bounded: bounds.is_some(),
+            bounds: bounds.unwrap_or(Aabb::INFINITY),
+            size,
+            march,
+            label,
+        }
+    }
+
+    /// The field marched.
+    pub fn field(&self) -> &F {
+        &self.field
+    }
+
+    /// Whether the distance is exact (false: a bound).
+    pub fn is_exact(&self) -> bool {
+        self.field.is_exact()
+    }
+
+    /// Sphere traces the world ray `ray` (unit direction) through the field, only inside
+    /// the bounds when there are any, and keeps hits with `t` in `[t_min, t_max]`.
+    fn march(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<MarchHit> {
+        let (t0, t1) =
+            if self.bounded { ray.clip_to_box(&self.bounds, t_min, t_max)? } else { (t_min, t_max) };
+        let f = |p: DVec3| self.field.distance(p);
+        let segment =
+            Segment { origin: ray.origin.as_dvec3(), dir: ray.dir.as_dvec3(), t0: t0 as f64, t1: t1 as f64 };
+        let hit = sphere_trace(&f, &segment, self.size, &self.march, self.field.is_signed(), stats)?;
+        (hit.t >= t_min as f64 && hit.t <= t_max as f64).then_some(hit)
+    }
+}
+
+impl<F: DistanceField> Geometry for Marched<F> {
+    fn bounds(&self) -> Option<Aabb> {
+        self.bounded.then_some(self.bounds)
+    }
+
+    fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
+        let MarchHit { t, residual } = self.march(ray, t_min, t_max, stats)?;
+        let p = ray.origin.as_dvec3() + ray.dir.as_dvec3() * t;
+        let eps = self.march.tolerance(t, self.size).max(residual);
+        let f = |q: DVec3| self.field.distance(q);
+        let normal = gradient_normal(&f, p, self.field.normal_step(p, eps), stats).as_vec3();
+        let material = self.field.material(p);
+        let point: Vec3 = p.as_vec3();
+        Some(Hit {
+            t: t as f32,
+            point,
+            normal,
+            shading_normal: normal,
+            material,
+            error: 4.0 * eps as f32 + f32_error(max_abs(point)),
+        })
+    }
+
+    fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
+        self.march(ray, t_min, t_max, stats).is_some()
+    }
+
+    fn bytes_used(&self) -> usize {
+        std::mem::size_of::<Self>() + self.field.heap_bytes() + self.label.capacity()
+    }
+
+    fn describe(&self) -> String {
+        self.field.describe(&self.label)
+    }
+
+    fn census(&self) -> Census {
+        self.field.census()
+    }
+
+    fn surface_distance(&self, p: DVec3) -> f64 {
+        self.field.surface_distance(p, self.size)
+    }
+}
