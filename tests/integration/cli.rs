@@ -2,19 +2,8 @@
 //! input gives one clear line, exit code 2, and no output file; an existing file is
 //! never overwritten by a failed run.
 
+use crate::util::{temp_dir, toolkit};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn toolkit(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_toolkit")).args(args).output().expect("run toolkit")
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sdfmesh-cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
 
 fn scene(dir: &Path, name: &str, text: &str) -> PathBuf {
     let p = dir.join(name);

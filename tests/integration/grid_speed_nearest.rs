@@ -4,6 +4,7 @@
 //! cylinders prune most) with points on, near, inside and far from the surface, hints that
 //! are right, wrong or out of range, and coordinates far from the origin.
 
+use crate::util::Lcg;
 use glam::{DVec3, Vec3};
 use proptest::prelude::*;
 use sdfmesh::geometry::grid::closest::{GROUP_MAX, GroupStack, Nearest, NodeStack, TriangleBvh};
@@ -93,23 +94,6 @@ fn tolerance(mesh: &TriangleMesh, p: Vec3) -> f64 {
     let size = (hi - lo).max_element() as f64;
     let scale = p.abs().max_element().max(lo.abs().max(hi.abs()).max_element()) as f64;
     1e-6 * size + 8.0 * f32::EPSILON as f64 * scale
-}
-
-/// A tiny deterministic generator.
-struct Lcg(u64);
-impl Lcg {
-    fn unit(&mut self) -> f32 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (self.0 >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn dir(&mut self) -> Vec3 {
-        loop {
-            let v = Vec3::new(self.unit(), self.unit(), self.unit()) * 2.0 - 1.0;
-            if v.length_squared() > 0.01 && v.length_squared() <= 1.0 {
-                return v.normalize();
-            }
-        }
-    }
 }
 
 /// Query points for `mesh`: on triangles, just off them, inside, and up to 60 radii away.

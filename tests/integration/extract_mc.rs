@@ -13,9 +13,7 @@ use sdfmesh::convert::extract::{ExtractMethod, Field, extract, extract_sampled, 
 use sdfmesh::geometry::Aabb;
 use sdfmesh::mesh::{TriangleMesh, is_degenerate};
 
-#[path = "common/mesh_checks.rs"]
-mod mesh_checks;
-use mesh_checks::{cube, non_manifold_edges, signed_volume};
+use crate::util::{cube, non_manifold_edges, signed_volume};
 
 /// The methods that are closed and manifold by construction (dual contouring is only
 /// checked on smoother fields, in `tests/extract.rs`: on this noise a dual edge between two
