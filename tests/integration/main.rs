@@ -1,8 +1,9 @@
 //! The integration tests, linked as one test binary (`cargo test --test integration`):
 //! each module was a test binary of its own. Shared helpers live in [`util`], each defined
 //! once; [`contract`] checks the `Geometry` contract for every representation.
-//! Proptest regression files sit next to the module they belong to
-//! (`extract.rs` -> `extract.proptest-regressions`).
+//! Proptest keeps the failing cases of a module's `proptest!` blocks in
+//! `tests/proptest-regressions/MODULE.txt` (its rule for a source file in a folder holding a
+//! `main.rs`: `tests/integration/extract.rs` -> `tests/proptest-regressions/extract.txt`).
 
 mod util;
 
