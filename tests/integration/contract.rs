@@ -10,7 +10,8 @@
 //!   in `bounds()` grown by `1e-4 * size + hit.error`;
 //! - `any_hit` agrees exactly with `closest_hit().is_some()` on the same interval;
 //! - `normal` and `shading_normal` are unit length within `1e-3`;
-//! - `surface_distance(hit.point)` is within the representation's accuracy (`accuracy`);
+//! - `surface_distance(hit.point)` is within the representation's accuracy (`accuracy`): f32
+//!   rounding for closed forms and meshes, plus the pixel footprint for marches;
 //! - `hit.point` is `ray.at(hit.t)` within `1e-4 * (1 + t + size)` (f32 rounding of a
 //!   point computed in an object's frame and transformed back);
 //! - an interval ending before a hit or starting after it never returns that hit;
@@ -189,15 +190,23 @@ children = [
 
 // ---------------------------------------------------------------- the contract
 
-/// How closely a hit point lies on the geometry's own surface (`surface_distance`), scene
-/// units, for a hit at `t` in a scene of size `size`, in every representation (objects
-/// without a closed form, such as CSG, are marched in all of them): f32 rounding, plus
-/// for marches stop within `epsilon * t` of the surface, or, when a march runs out
-/// of steps near a tangent, within the pixel footprint `2 tan(fov / 2) / height` times `t`
-/// (documented in `MarchParams::pixel_footprint`). Grids are marched the same way through
-/// their own trilinear field.
-fn accuracy(t: f32, size: f32) -> f64 {
-    1e-4 * (size + t) as f64 + footprint() * t as f64
+/// How closely a hit point of `g` lies on its own surface (`surface_distance`), scene
+/// units, for a hit at `t` in a scene of size `size`: f32 rounding (`1e-4 * (size + t)`)
+/// for closed forms and triangle meshes; for anything marched (analytic SDFs, grids
+/// through their trilinear field, and objects without a closed form, such as CSG, in
+/// every representation) also the pixel footprint times `t`: a march stops within
+/// `epsilon * t` of the surface, or, when it runs out of steps near a tangent, within
+/// `2 tan(fov / 2) / height` times `t` (documented in `MarchParams::pixel_footprint`).
+fn accuracy(g: &dyn Geometry, t: f32, size: f32) -> f64 {
+    let rounding = 1e-4 * (size + t) as f64;
+    if marched(g) { rounding + footprint() * t as f64 } else { rounding }
+}
+
+/// Whether `g` is (or holds something) marched rather than intersected in closed form or
+/// as triangles, from its description.
+fn marched(g: &dyn Geometry) -> bool {
+    let d = g.describe();
+    !(d.contains("closed form") || d.contains("triangles")) || d.contains("traced") || d.contains("marched")
 }
 
 fn footprint() -> f64 {
@@ -291,11 +300,11 @@ fn check_geometry(what: &str, g: &dyn Geometry, centre: Vec3, size: f32, seed: u
             assert_eq!(g.any_hit(&ray, t_min, before, &mut stats), h.is_some(), "{}: t_max {before}", ctx());
         }
         let after = hit.t + (1e-3 * size).max(hit.t.abs() * 1e-3);
-        if after < t_max {
-            if let Some(h) = g.closest_hit(&ray, after, t_max, &mut stats) {
-                assert!(h.t >= after && h.t <= t_max, "{}: t_min {after}: hit at {}", ctx(), h.t);
-                worst = worst.max(check_hit(&ctx(), g, &ray, after, t_max, &h, bounds.as_ref(), size));
-            }
+        if after < t_max
+            && let Some(h) = g.closest_hit(&ray, after, t_max, &mut stats)
+        {
+            assert!(h.t >= after && h.t <= t_max, "{}: t_min {after}: hit at {}", ctx(), h.t);
+            worst = worst.max(check_hit(&ctx(), g, &ray, after, t_max, &h, bounds.as_ref(), size));
         }
         // Grazing and inside rays from the first 60 primary hits.
         if i <= 300 && hits <= 60 {
@@ -345,7 +354,7 @@ fn check_hit(
         hit.point
     );
     let d = g.surface_distance(hit.point.as_dvec3());
-    let tol = accuracy(hit.t, size);
+    let tol = accuracy(g, hit.t, size);
     assert!(d <= tol, "{ctx}: hit at t {} is {d} from the surface (tolerance {tol})", hit.t);
     d / tol
 }
@@ -386,7 +395,7 @@ fn check(scene: Scene, repr: Representation) {
             .filter_map(|g| g.closest_hit(&ray, t_min, t_max, &mut stats).map(|h| h.t))
             .min_by(f32::total_cmp);
         let agree = match (all, nearest) {
-            (Some(a), Some(b)) => (a - b).abs() <= 1e-3 * size + accuracy(b, size) as f32,
+            (Some(a), Some(b)) => (a - b).abs() <= 1e-3 * size + accuracy(&aggregate, b, size) as f32,
             (None, None) => true,
             _ => false,
         };
