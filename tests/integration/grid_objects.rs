@@ -4,9 +4,8 @@
 //! render GRID_FILE` previews a grid and `toolkit convert SCENE --to mesh` extracts it.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
-use crate::util::temp_dir;
+use crate::util::{temp_dir, toolkit};
 use sdfmesh::cli::commands::render_scene;
 use sdfmesh::convert::extract::ExtractMethod;
 use sdfmesh::convert::tessellate::tessellate;
@@ -134,30 +133,25 @@ fn toolkit_previews_a_grid_file_and_extracts_grid_objects() {
     let dir = temp_dir("cli");
     let grid = box_grid(&dir);
     let png = dir.join("preview.png");
-    let o = Command::new(env!("CARGO_BIN_EXE_toolkit"))
-        .args([
-            "render",
-            grid.to_str().unwrap(),
-            "-o",
-            png.to_str().unwrap(),
-            "--width",
-            "64",
-            "--height",
-            "64",
-        ])
-        .output()
-        .unwrap();
+    let o = toolkit(&[
+        "render",
+        grid.to_str().unwrap(),
+        "-o",
+        png.to_str().unwrap(),
+        "--width",
+        "64",
+        "--height",
+        "64",
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let img = image::open(&png).unwrap().to_rgb8();
     assert!(crate::util::covered(&img, [0, 0, 0]) > 300, "the preview shows the box");
 
     std::fs::write(dir.join("scene.toml"), scene_text("type = \"grid\"\npath = \"box.sdf\"")).unwrap();
     let obj = dir.join("box.obj");
-    let o = Command::new(env!("CARGO_BIN_EXE_toolkit"))
-        .args(["convert", dir.join("scene.toml").to_str().unwrap(), "--to", "mesh", "--res", "24"])
-        .args(["--method", "dc", "-o", obj.to_str().unwrap()])
-        .output()
-        .unwrap();
+    let scene = dir.join("scene.toml");
+    let (scene, obj_arg) = (scene.to_str().unwrap(), obj.to_str().unwrap());
+    let o = toolkit(&["convert", scene, "--to", "mesh", "--res", "24", "--method", "dc", "-o", obj_arg]);
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(out.contains("closed: true"), "{out}");
