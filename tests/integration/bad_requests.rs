@@ -6,9 +6,10 @@
 //! file, no temporary file left behind, and an existing output file untouched. Each
 //! request must also fail fast (well under the time the work itself would take).
 
-use crate::util::{temp_dir, toolkit};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
+
+use crate::util::{temp_dir, toolkit};
 
 /// [`put`](crate::util::put), returning the path as a command-line argument.
 fn put(dir: &Path, name: &str, bytes: impl AsRef<[u8]>) -> String {

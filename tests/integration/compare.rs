@@ -7,13 +7,14 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use crate::util::{temp_dir, toolkit};
 use glam::Vec3;
 use sdfmesh::compare::{COLUMNS, Row, read_rows};
 use sdfmesh::geometry::march::MarchParams;
 use sdfmesh::metrics::{probe, surface_distance};
 use sdfmesh::plan::{Representation, build_scene};
 use sdfmesh::scene::shape::Primitive;
+
+use crate::util::{temp_dir, toolkit};
 
 const SCENE: &str = r#"
 [camera]

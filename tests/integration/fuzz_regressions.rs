@@ -6,9 +6,10 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::util::put;
 use sdfmesh::error::Error;
 use sdfmesh::mesh::{LoadReport, TriangleMesh, load_mesh};
+
+use crate::util::put;
 
 /// A committed input under `tests/fuzz_regressions/`.
 fn committed(name: &str) -> PathBuf {

@@ -3,7 +3,6 @@
 
 use std::sync::Arc;
 
-use crate::util::{fraction_within, lit_scene, object};
 use glam::{DVec3, UVec3, Vec3};
 use proptest::prelude::*;
 use sdfmesh::cli::commands::render_scene;
@@ -17,6 +16,8 @@ use sdfmesh::geometry::march::MarchParams;
 use sdfmesh::plan::{GridFill, GridStorage, Representation};
 use sdfmesh::scene::shape::{Object, ObjectKind, Primitive, Shading};
 use sdfmesh::scene::transform::TransformDesc;
+
+use crate::util::{fraction_within, lit_scene, object};
 
 const R: f64 = 1.0;
 

@@ -5,12 +5,13 @@
 use std::path::Path;
 use std::process::Output;
 
-use crate::util::{temp_dir, toolkit};
 use glam::Vec3;
 use sdfmesh::convert::tessellate::tessellate;
 use sdfmesh::geometry::grid::io::load_grid;
 use sdfmesh::mesh::{TriangleMesh, save_mesh};
 use sdfmesh::scene::shape::Primitive;
+
+use crate::util::{temp_dir, toolkit};
 
 fn write_mesh(dir: &Path, name: &str, mesh: &TriangleMesh) -> String {
     let p = dir.join(name);

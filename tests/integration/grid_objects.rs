@@ -5,7 +5,6 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::util::{temp_dir, toolkit};
 use sdfmesh::cli::commands::render_scene;
 use sdfmesh::convert::extract::ExtractMethod;
 use sdfmesh::convert::tessellate::tessellate;
@@ -15,6 +14,8 @@ use sdfmesh::geometry::march::MarchParams;
 use sdfmesh::plan::{GridFill, GridStorage, MeshMethod, Representation};
 use sdfmesh::scene::parse_scene;
 use sdfmesh::scene::shape::Primitive;
+
+use crate::util::{temp_dir, toolkit};
 
 /// A unit box (half size 0.5) sampled into `dir/box.sdf` at 40 cells.
 fn box_grid(dir: &Path) -> PathBuf {

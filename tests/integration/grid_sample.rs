@@ -4,7 +4,6 @@
 use std::path::Path;
 use std::time::Instant;
 
-use crate::util::{Lcg, box_sdf};
 use glam::{UVec3, Vec3, Vec3A};
 use proptest::prelude::*;
 use sdfmesh::error::Error;
@@ -14,6 +13,8 @@ use sdfmesh::geometry::grid::{
     DEFAULT_MAX_GRID_BYTES, SdfGrid, check_size, sample_mesh, sample_mesh_with_stats,
 };
 use sdfmesh::mesh::{TriangleMesh, load_mesh};
+
+use crate::util::{Lcg, box_sdf};
 
 // ---------------------------------------------------------------- test meshes
 

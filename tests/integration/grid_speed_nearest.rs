@@ -4,12 +4,13 @@
 //! cylinders prune most) with points on, near, inside and far from the surface, hints that
 //! are right, wrong or out of range, and coordinates far from the origin.
 
-use crate::util::Lcg;
 use glam::{DVec3, Vec3};
 use proptest::prelude::*;
 use sdfmesh::geometry::grid::closest::{GROUP_MAX, GroupStack, Nearest, NodeStack, TriangleBvh};
 use sdfmesh::geometry::grid::sample_mesh;
 use sdfmesh::mesh::TriangleMesh;
+
+use crate::util::Lcg;
 
 /// A bumpy UV sphere: radius `r * (1 + amp * sin(k theta) * sin(m phi))` around `centre`,
 /// `rings` x `2 rings` quads; with `open`, the bottom quarter of the rings is left out.

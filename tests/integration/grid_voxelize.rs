@@ -4,7 +4,6 @@
 use std::path::Path;
 use std::time::Instant;
 
-use crate::util::box_sdf;
 use glam::Vec3;
 use sdfmesh::convert::tessellate::tessellate;
 use sdfmesh::error::Error;
@@ -12,6 +11,8 @@ use sdfmesh::geometry::grid::voxelize::{voxelize_mesh, voxelize_mesh_with_stats}
 use sdfmesh::geometry::grid::{SdfGrid, sample_mesh};
 use sdfmesh::mesh::{TriangleMesh, load_mesh};
 use sdfmesh::scene::shape::Primitive;
+
+use crate::util::box_sdf;
 
 fn sphere_mesh(r: f32) -> TriangleMesh {
     tessellate(&Primitive::Sphere { radius: r }, 256, None)

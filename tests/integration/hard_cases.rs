@@ -2,7 +2,6 @@
 //! radius-5000 ground sphere, rays starting inside objects, rays along box faces, the cone
 //! apex, a torus seen edge-on, and self-shadowing speckles ("acne").
 
-use crate::util::{fraction_within, lit_scene, object};
 use glam::Vec3;
 use image::RgbImage;
 use sdfmesh::cli::commands::render_scene;
@@ -12,6 +11,8 @@ use sdfmesh::geometry::{Geometry, Ray, RayStats};
 use sdfmesh::plan::{GridFill, GridStorage, Representation, build_objects, build_scene};
 use sdfmesh::scene::Scene;
 use sdfmesh::scene::shape::Primitive;
+
+use crate::util::{fraction_within, lit_scene, object};
 
 /// Resolution of the grid representations here, as in the hard-case suite (`data/hard`).
 const GRID_RESOLUTION: u32 = 64;

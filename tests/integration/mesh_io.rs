@@ -9,10 +9,11 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use crate::util::{icosphere, put};
 use glam::{Affine3A, Vec3};
 use sdfmesh::error::Error;
 use sdfmesh::mesh::{LoadReport, TriangleMesh, load_mesh, save_mesh};
+
+use crate::util::{icosphere, put};
 
 // ---------------------------------------------------------------------------------------
 // Helpers

@@ -2,7 +2,6 @@
 //! triangles gives, closest hit and any hit agree, and rays aimed exactly at the shared
 //! edges and vertices of a closed mesh never slip through.
 
-use crate::util::icosphere;
 use glam::Vec3;
 use proptest::prelude::*;
 use sdfmesh::geometry::mesh::triangle::ShearedRay;
@@ -10,6 +9,8 @@ use sdfmesh::geometry::mesh::{MeshGeometry, Shading};
 use sdfmesh::geometry::{Geometry, Ray, RayStats};
 use sdfmesh::mesh::TriangleMesh;
 use sdfmesh::scene::transform::{Transform, TransformDesc};
+
+use crate::util::icosphere;
 
 fn geometry(mesh: &TriangleMesh, transform: Transform) -> MeshGeometry {
     MeshGeometry::new(mesh.clone(), Shading::Flat, transform, 0, "test".into())

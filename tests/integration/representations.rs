@@ -1,12 +1,13 @@
 //! One shared suite run against every representation: for each primitive, the closed-form
 //! and the sphere-traced renders agree pixel for pixel (silhouettes, shading, shadows).
 
-use crate::util::{covered, fraction_within, lit_scene, object};
 use glam::Vec3;
 use sdfmesh::cli::commands::render_scene;
 use sdfmesh::geometry::march::MarchParams;
 use sdfmesh::plan::Representation;
 use sdfmesh::scene::shape::Primitive;
+
+use crate::util::{covered, fraction_within, lit_scene, object};
 
 fn primitives() -> Vec<(Primitive, Vec3, Vec3)> {
     let r = Vec3::new(20.0, 35.0, 10.0);
