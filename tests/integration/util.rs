@@ -1,6 +1,6 @@
 //! Helpers shared by every module of the integration test binary, each defined once:
 //! running the `toolkit` binary, per-test temporary folders and files, scenes built in
-//! code, test meshes (icosphere, 12-triangle box), mesh checks (manifoldness, enclosed
+//! code, a tessellated sphere, mesh checks (manifoldness, enclosed
 //! volume), image comparison, and a small deterministic random generator.
 #![allow(dead_code)]
 
