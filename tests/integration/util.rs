@@ -1,7 +1,7 @@
 //! Helpers shared by every module of the integration test binary, each defined once:
 //! running the `toolkit` binary, per-test temporary folders and files, scenes built in
-//! code, a tessellated sphere, mesh checks (manifoldness, enclosed
-//! volume), image comparison, and a small deterministic random generator.
+//! code, a tessellated sphere, mesh checks (manifoldness, enclosed volume), image
+//! comparison, the exact box SDF and a small deterministic random generator.
 #![allow(dead_code)]
 
 use std::collections::HashMap;
