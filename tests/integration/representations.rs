@@ -1,14 +1,13 @@
 //! One shared suite run against every representation: for each primitive, the closed-form
 //! and the sphere-traced renders agree pixel for pixel (silhouettes, shading, shadows).
 
-mod common;
-
-use common::{covered, fraction_within, lit_scene, object};
 use glam::Vec3;
 use sdfmesh::cli::commands::render_scene;
 use sdfmesh::geometry::march::MarchParams;
 use sdfmesh::plan::Representation;
 use sdfmesh::scene::shape::Primitive;
+
+use crate::util::{covered, fraction_within, lit_scene, object};
 
 fn primitives() -> Vec<(Primitive, Vec3, Vec3)> {
     let r = Vec3::new(20.0, 35.0, 10.0);
@@ -56,7 +55,7 @@ fn closed_form_and_sphere_traced_renders_agree_for_every_primitive() {
         let a = render_scene(&scene, Representation::Analytic { march });
         let s = render_scene(&scene, Representation::Sdf { march });
         let agree = fraction_within(&a.frame.image, &s.frame.image, 2);
-        common::dump(&format!("{}-{}", prim.kind_name(), rot.x), &[&a.frame.image, &s.frame.image]);
+        crate::util::dump(&format!("{}-{}", prim.kind_name(), rot.x), &[&a.frame.image, &s.frame.image]);
         assert!(agree >= 0.995, "{}: only {:.3}% of pixels agree", prim.kind_name(), agree * 100.0);
         // Finely tessellated, the polygon representation agrees too (a little less: facets).
         let mesh = Representation::Mesh {
@@ -67,7 +66,7 @@ fn closed_form_and_sphere_traced_renders_agree_for_every_primitive() {
         };
         let m = render_scene(&scene, mesh);
         let agree = fraction_within(&a.frame.image, &m.frame.image, 2);
-        common::dump(&format!("{}-{}-mesh", prim.kind_name(), rot.x), &[&a.frame.image, &m.frame.image]);
+        crate::util::dump(&format!("{}-{}-mesh", prim.kind_name(), rot.x), &[&a.frame.image, &m.frame.image]);
         eprintln!("{}: mesh at 512 agrees on {:.3}% of pixels", prim.kind_name(), agree * 100.0);
         assert!(agree >= 0.99, "{} as a mesh: only {:.3}% of pixels agree", prim.kind_name(), agree * 100.0);
         // Sampled into a grid and ray marched: silhouettes and shading follow the trilinear
@@ -83,7 +82,10 @@ fn closed_form_and_sphere_traced_renders_agree_for_every_primitive() {
                 },
             );
             let agree = fraction_within(&a.frame.image, &g.frame.image, 8);
-            common::dump(&format!("{}-{}-grid", prim.kind_name(), rot.x), &[&a.frame.image, &g.frame.image]);
+            crate::util::dump(
+                &format!("{}-{}-grid", prim.kind_name(), rot.x),
+                &[&a.frame.image, &g.frame.image],
+            );
             eprintln!(
                 "{}: grid at 128 agrees within 8/255 on {:.3}% of pixels",
                 prim.kind_name(),
@@ -154,7 +156,10 @@ fn finely_tessellated_sphere_renders_like_the_closed_form_sphere() {
         };
         let m = render_scene(&scene, mesh);
         let agree = fraction_within(&reference.frame.image, &m.frame.image, 2);
-        common::dump(&format!("tessellated-sphere-{resolution}"), &[&reference.frame.image, &m.frame.image]);
+        crate::util::dump(
+            &format!("tessellated-sphere-{resolution}"),
+            &[&reference.frame.image, &m.frame.image],
+        );
         eprintln!("tessellated sphere at {resolution}: {:.3}% of pixels within 2/255", agree * 100.0);
         assert!(agree >= previous - 0.002, "agreement fell from {previous} to {agree} at {resolution}");
         previous = agree;

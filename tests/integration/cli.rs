@@ -2,25 +2,9 @@
 //! input gives one clear line, exit code 2, and no output file; an existing file is
 //! never overwritten by a failed run.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::PathBuf;
 
-fn toolkit(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_toolkit")).args(args).output().expect("run toolkit")
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sdfmesh-cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn scene(dir: &Path, name: &str, text: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, text).unwrap();
-    p
-}
+use crate::util::{put, temp_dir, toolkit};
 
 const GOOD: &str = r#"
 [camera]
@@ -50,7 +34,7 @@ material = "red"
 #[test]
 fn render_writes_png_and_reports_statistics() {
     let dir = temp_dir("ok");
-    let s = scene(&dir, "s.toml", GOOD);
+    let s = put(&dir, "s.toml", GOOD);
     let out = dir.join("out.png");
     for repr in ["analytic", "sdf", "mesh"] {
         let o = toolkit(&["render", s.to_str().unwrap(), "-o", out.to_str().unwrap(), "--repr", repr]);
@@ -71,10 +55,10 @@ fn bad_input_fails_cleanly_without_touching_the_output() {
     let out = dir.join("keep.png");
     std::fs::write(&out, b"precious").unwrap();
     let cases: Vec<(PathBuf, &str)> = vec![
-        (scene(&dir, "neg.toml", &GOOD.replace("radius = 1", "radius = -1")), "neg.toml:"),
-        (scene(&dir, "nan.toml", &GOOD.replace("radius = 1", "radius = nan")), "nan.toml:"),
-        (scene(&dir, "unknown.toml", &GOOD.replace("radius = 1", "radius = 1\ncolour = 3")), "unknown.toml:"),
-        (scene(&dir, "syntax.toml", "[camera\nposition = [0,0,0]"), "syntax.toml:"),
+        (put(&dir, "neg.toml", GOOD.replace("radius = 1", "radius = -1")), "neg.toml:"),
+        (put(&dir, "nan.toml", GOOD.replace("radius = 1", "radius = nan")), "nan.toml:"),
+        (put(&dir, "unknown.toml", GOOD.replace("radius = 1", "radius = 1\ncolour = 3")), "unknown.toml:"),
+        (put(&dir, "syntax.toml", "[camera\nposition = [0,0,0]"), "syntax.toml:"),
         (dir.join("missing.toml"), "missing.toml"),
     ];
     for (path, expect) in cases {
@@ -87,7 +71,7 @@ fn bad_input_fails_cleanly_without_touching_the_output() {
         assert_eq!(std::fs::read(&out).unwrap(), b"precious");
     }
     // Absurd options and an output folder that does not exist.
-    let good = scene(&dir, "good.toml", GOOD);
+    let good = put(&dir, "good.toml", GOOD);
     for args in [
         vec!["--width", "0"],
         vec!["--width", "100000"],
@@ -170,7 +154,7 @@ fn convert_mesh_to_grid_and_scene_to_mesh() {
     assert!(g.trilinear(glam::Vec3::splat(0.15)) < 0.0);
     assert!(g.trilinear(hi) > 0.0 && g.trilinear(lo) > 0.0);
 
-    let scene = scene(&dir, "s.toml", GOOD);
+    let scene = put(&dir, "s.toml", GOOD);
     let out = dir.join("sphere.obj");
     for method in ["mc", "dc"] {
         let o = toolkit(&[

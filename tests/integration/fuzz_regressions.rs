@@ -9,11 +9,7 @@ use std::path::{Path, PathBuf};
 use sdfmesh::error::Error;
 use sdfmesh::mesh::{LoadReport, TriangleMesh, load_mesh};
 
-fn put(dir: &Path, name: &str, bytes: impl AsRef<[u8]>) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, bytes).expect("write test input");
-    p
-}
+use crate::util::put;
 
 /// A committed input under `tests/fuzz_regressions/`.
 fn committed(name: &str) -> PathBuf {

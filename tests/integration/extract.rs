@@ -12,9 +12,7 @@ use sdfmesh::mesh::{TriangleMesh, is_degenerate};
 use sdfmesh::scene::shape::{CsgOp, Object, ObjectKind, Primitive};
 use sdfmesh::scene::transform::TransformDesc;
 
-#[path = "common/mesh_checks.rs"]
-mod mesh_checks;
-use mesh_checks::{cube, non_manifold_edges, signed_volume};
+use crate::util::{cube, non_manifold_edges, signed_volume};
 
 const METHODS: [ExtractMethod; 3] =
     [ExtractMethod::MarchingCubes, ExtractMethod::MarchingTetrahedra, ExtractMethod::DualContouring];

@@ -7,6 +7,8 @@ use std::path::Path;
 
 use sdfmesh::compare::hard::{Expect, hard_command, load_cases};
 
+use crate::util::toolkit;
+
 #[test]
 fn every_hard_case_has_its_expected_outcome() {
     let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/hard/cases.toml");
@@ -55,9 +57,6 @@ fn a_bad_manifest_is_a_clear_error() {
 fn broken_meshes_convert_and_compare_cleanly() {
     let shared = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes");
     let dir = tempfile::tempdir().unwrap();
-    let toolkit = |args: &[&str]| {
-        std::process::Command::new(env!("CARGO_BIN_EXE_toolkit")).args(args).output().unwrap()
-    };
     let mut ran = 0;
     for name in ["suzanne.obj", "trimesh_bunny.ply", "trimesh_soup.obj"] {
         let mesh = shared.join(name);

@@ -13,17 +13,13 @@ use glam::{Affine3A, Vec3};
 use sdfmesh::error::Error;
 use sdfmesh::mesh::{LoadReport, TriangleMesh, load_mesh, save_mesh};
 
+use crate::util::{icosphere, put};
+
 // ---------------------------------------------------------------------------------------
 // Helpers
 
 fn tmp() -> tempfile::TempDir {
     tempfile::tempdir().expect("temp dir")
-}
-
-fn put(dir: &Path, name: &str, bytes: impl AsRef<[u8]>) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, bytes).expect("write test file");
-    p
 }
 
 #[track_caller]
@@ -50,16 +46,6 @@ fn fails(path: &Path, needles: &[&str]) -> Error {
         assert!(msg.contains(n), "expected {n:?} in {msg:?}");
     }
     err
-}
-
-/// A closed icosphere of radius `r` around `c` with unit normals (the tessellator's; more
-/// `subdivisions` give finer spheres).
-fn icosphere(subdivisions: usize, c: Vec3, r: f32) -> TriangleMesh {
-    let sphere = sdfmesh::scene::shape::Primitive::Sphere { radius: r };
-    let mut m = sdfmesh::convert::tessellate::tessellate(&sphere, 6 << subdivisions, None);
-    m.transform(&glam::Affine3A::from_translation(c));
-    assert!(m.normals.is_some());
-    m
 }
 
 /// Same triangles (positions within 1e-6, same connectivity and winding) and normals.

@@ -12,6 +12,8 @@ use sdfmesh::geometry::grid::{SdfGrid, sample_mesh};
 use sdfmesh::mesh::{TriangleMesh, load_mesh};
 use sdfmesh::scene::shape::Primitive;
 
+use crate::util::box_sdf;
+
 fn sphere_mesh(r: f32) -> TriangleMesh {
     tessellate(&Primitive::Sphere { radius: r }, 256, None)
 }
@@ -75,25 +77,21 @@ fn voxelized_sphere_is_within_about_a_voxel_and_improves_with_resolution() {
     }
 }
 
-fn box_mesh(h: Vec3) -> TriangleMesh {
+/// A box of half-sides `h`, tessellated (8 segments).
+fn tessellated_box(h: Vec3) -> TriangleMesh {
     tessellate(&Primitive::Box { half: h }, 8, None)
-}
-
-fn box_sdf(h: Vec3, p: Vec3) -> f32 {
-    let q = p.abs() - h;
-    q.max(Vec3::ZERO).length() + q.max_element().min(0.0)
 }
 
 #[test]
 fn voxelized_boxes_have_the_right_signs_and_distances() {
     for (h, res) in [(Vec3::new(1.0, 0.5, 0.25), 40), (Vec3::new(0.3, 0.7, 0.45), 57)] {
-        let g = voxelize_mesh(&box_mesh(h), res, 3).unwrap();
+        let g = voxelize_mesh(&tessellated_box(h), res, 3).unwrap();
         let mut worst = 0.0f32;
         for k in 0..g.dims.z {
             for j in 0..g.dims.y {
                 for i in 0..g.dims.x {
                     let p = g.position(i, j, k);
-                    let e = box_sdf(h, p);
+                    let e = box_sdf(p.as_dvec3(), h.as_dvec3()) as f32;
                     let v = g.get(i, j, k);
                     worst = worst.max((v - e).abs());
                     if e.abs() > 1.0 * g.voxel {
@@ -114,12 +112,12 @@ fn open_meshes_and_bad_input_are_errors() {
     assert!(matches!(e, Error::Usage(_)));
     assert!(e.to_string().contains("open"), "{e}");
     // A box with one face missing leaks.
-    let mut open = box_mesh(Vec3::splat(0.5));
+    let mut open = tessellated_box(Vec3::splat(0.5));
     open.triangles.truncate(open.triangles.len() - 2);
     assert!(voxelize_mesh(&open, 16, 2).is_err());
     assert!(voxelize_mesh(&TriangleMesh::default(), 16, 2).is_err());
-    assert!(voxelize_mesh(&box_mesh(Vec3::ONE), 0, 2).is_err());
-    assert!(voxelize_mesh(&box_mesh(Vec3::ONE), u32::MAX, 2).is_err());
+    assert!(voxelize_mesh(&tessellated_box(Vec3::ONE), 0, 2).is_err());
+    assert!(voxelize_mesh(&tessellated_box(Vec3::ONE), u32::MAX, 2).is_err());
 }
 
 /// `sphere_mesh(r)` without the triangles whose centroid lies above `z` (a polar hole).

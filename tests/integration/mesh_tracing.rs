@@ -8,13 +8,9 @@ use sdfmesh::geometry::mesh::triangle::ShearedRay;
 use sdfmesh::geometry::mesh::{MeshGeometry, Shading};
 use sdfmesh::geometry::{Geometry, Ray, RayStats};
 use sdfmesh::mesh::TriangleMesh;
-use sdfmesh::scene::shape::Primitive;
 use sdfmesh::scene::transform::{Transform, TransformDesc};
 
-/// A closed icosphere of radius 1 (the tessellator's), finer with more `levels`.
-fn icosphere(levels: u32) -> TriangleMesh {
-    sdfmesh::convert::tessellate::tessellate(&Primitive::Sphere { radius: 1.0 }, 6 << levels, None)
-}
+use crate::util::icosphere;
 
 fn geometry(mesh: &TriangleMesh, transform: Transform) -> MeshGeometry {
     MeshGeometry::new(mesh.clone(), Shading::Flat, transform, 0, "test".into())
@@ -33,7 +29,7 @@ fn brute_force(mesh: &TriangleMesh, ray: &Ray, t_max: f32) -> Option<f32> {
 
 #[test]
 fn the_mesh_is_closed() {
-    let m = icosphere(3);
+    let m = icosphere(3, Vec3::ZERO, 1.0);
     assert!(m.is_closed());
     assert!(m.triangles.len() > 1000, "{}", m.triangles.len());
 }
@@ -57,7 +53,7 @@ fn rays_at_shared_edges_and_vertices_far_from_the_origin_all_hit() {
 /// by up to an ulp, which can take grazing ones off the sphere): each hits at the target
 /// (within that rounding), where the brute-force loop hits.
 fn crack_rays(centre: Vec3, facing: f32) {
-    let mut mesh = icosphere(3);
+    let mut mesh = icosphere(3, Vec3::ZERO, 1.0);
     for p in &mut mesh.positions {
         *p += centre;
     }
@@ -121,7 +117,7 @@ proptest! {
         dx in -100i32..=100, dy in -100i32..=100, dz in -100i32..=100,
         t_max in 0.5f32..10.0,
     ) {
-        let mesh = icosphere(2);
+        let mesh = icosphere(2, Vec3::ZERO, 1.0);
         let g = geometry(&mesh, Transform::IDENTITY);
         let origin = Vec3::new(ox as f32, oy as f32, oz as f32) * 0.9 + Vec3::new(0.013, 0.021, -0.017);
         let dir = Vec3::new(dx as f32, dy as f32, dz as f32 + 0.5).normalize();

@@ -1,11 +1,8 @@
 //! Narrow-band grids: equal to the dense grid inside the band, a conservative bound
 //! outside it, much smaller, and rendering like the dense grid.
 
-mod common;
-
 use std::sync::Arc;
 
-use common::{fraction_within, lit_scene, object};
 use glam::{DVec3, UVec3, Vec3};
 use proptest::prelude::*;
 use sdfmesh::cli::commands::render_scene;
@@ -19,6 +16,8 @@ use sdfmesh::geometry::march::MarchParams;
 use sdfmesh::plan::{GridFill, GridStorage, Representation};
 use sdfmesh::scene::shape::{Object, ObjectKind, Primitive, Shading};
 use sdfmesh::scene::transform::TransformDesc;
+
+use crate::util::{fraction_within, lit_scene, object};
 
 const R: f64 = 1.0;
 
@@ -179,7 +178,7 @@ fn band_renders_like_dense() {
             dense.geometry_bytes,
             agree * 100.0
         );
-        common::dump(&format!("band-{fill:?}"), &[&dense.frame.image, &band.frame.image]);
+        crate::util::dump(&format!("band-{fill:?}"), &[&dense.frame.image, &band.frame.image]);
         assert!(agree >= 0.995, "{fill:?}: only {:.2}% agree", agree * 100.0);
         assert!(band.geometry_bytes < dense.geometry_bytes);
         assert!(band.text.contains("narrow band"), "{}", band.text);
@@ -219,7 +218,7 @@ fn view_clipping_grids_only_the_seen_part_of_a_huge_ground() {
     eprintln!("ground samples: clipped {} vs unclipped {unclipped}", stored - spheres);
     assert!((stored - spheres) * 2 < unclipped, "{stored} samples");
     let agree = fraction_within(&analytic.frame.image, &grid.frame.image, 8);
-    common::dump("thesis-rt-clipped", &[&analytic.frame.image, &grid.frame.image]);
+    crate::util::dump("thesis-rt-clipped", &[&analytic.frame.image, &grid.frame.image]);
     eprintln!(
         "thesis_rt grid {resolution} clipped: {:.2}% of pixels within 8/255 of analytic",
         agree * 100.0
@@ -259,7 +258,7 @@ fn huge_boxes_are_clipped_to_the_view_or_left_analytic() {
     assert!(line("'behind'").contains("outside the view region: no grid"), "{}", grid.text);
     assert!(!line("'sphere'").contains("clipped"), "{}", grid.text);
     let agree = fraction_within(&analytic.frame.image, &grid.frame.image, 4);
-    common::dump("huge-boxes-clipped", &[&analytic.frame.image, &grid.frame.image]);
+    crate::util::dump("huge-boxes-clipped", &[&analytic.frame.image, &grid.frame.image]);
     eprintln!("{}\n{:.2}% within 4/255", grid.text, agree * 100.0);
     assert!(agree >= 0.98, "only {:.2}% agree", agree * 100.0);
 }

@@ -7,24 +7,13 @@
 //! request must also fail fast (well under the time the work itself would take).
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-fn toolkit(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_toolkit")).args(args).output().expect("run toolkit")
-}
+use crate::util::{temp_dir, toolkit};
 
-fn temp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sdfmesh-bad-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
+/// [`put`](crate::util::put), returning the path as a command-line argument.
 fn put(dir: &Path, name: &str, bytes: impl AsRef<[u8]>) -> String {
-    let p = dir.join(name);
-    std::fs::write(&p, bytes).unwrap();
-    p.to_str().unwrap().to_owned()
+    crate::util::put(dir, name, bytes).to_str().unwrap().to_owned()
 }
 
 const SCENE: &str = r#"

@@ -4,7 +4,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use glam::{DVec3, UVec3, Vec3, Vec3A};
+use glam::{UVec3, Vec3, Vec3A};
 use proptest::prelude::*;
 use sdfmesh::error::Error;
 use sdfmesh::geometry::grid::closest::{NodeStack, TriangleBvh, closest_point_on_triangle};
@@ -13,6 +13,8 @@ use sdfmesh::geometry::grid::{
     DEFAULT_MAX_GRID_BYTES, SdfGrid, check_size, sample_mesh, sample_mesh_with_stats,
 };
 use sdfmesh::mesh::{TriangleMesh, load_mesh};
+
+use crate::util::{Lcg, box_sdf};
 
 // ---------------------------------------------------------------- test meshes
 
@@ -116,25 +118,8 @@ fn brute_nearest(mesh: &TriangleMesh, p: Vec3) -> (f32, u32) {
     best
 }
 
-fn box_sdf(p: DVec3, h: DVec3) -> f64 {
-    let q = p.abs() - h;
-    q.max(DVec3::ZERO).length() + q.max_element().min(0.0)
-}
-
 fn grid_samples(g: &SdfGrid) -> impl Iterator<Item = (u32, u32, u32)> + '_ {
     (0..g.dims.z).flat_map(move |k| (0..g.dims.y).flat_map(move |j| (0..g.dims.x).map(move |i| (i, j, k))))
-}
-
-/// A tiny deterministic generator for sample picks.
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        self.0 >> 33
-    }
-    fn unit(&mut self) -> f32 {
-        (self.next() % 1_000_000) as f32 / 1_000_000.0
-    }
 }
 
 // ------------------------------------------------------------ closest point

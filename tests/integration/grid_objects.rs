@@ -3,10 +3,7 @@
 //! sampled from in every representation; bad grid objects get one clear error; `toolkit
 //! render GRID_FILE` previews a grid and `toolkit convert SCENE --to mesh` extracts it.
 
-mod common;
-
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use sdfmesh::cli::commands::render_scene;
 use sdfmesh::convert::extract::ExtractMethod;
@@ -18,12 +15,7 @@ use sdfmesh::plan::{GridFill, GridStorage, MeshMethod, Representation};
 use sdfmesh::scene::parse_scene;
 use sdfmesh::scene::shape::Primitive;
 
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("sdfmesh-grid-objects-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use crate::util::{temp_dir, toolkit};
 
 /// A unit box (half size 0.5) sampled into `dir/box.sdf` at 40 cells.
 fn box_grid(dir: &Path) -> PathBuf {
@@ -102,18 +94,18 @@ fn a_placed_grid_renders_like_the_box_it_was_sampled_from() {
         parse_scene(&scene_text("type = \"box\"\nhalf_size = [0.75, 0.75, 0.75]"), &scene_path).unwrap();
     let reference = render_scene(&box_scene, Representation::Analytic { march: Default::default() });
     let bg = [0, 0, 0];
-    let ref_cover = common::covered(&reference.frame.image, bg);
+    let ref_cover = crate::util::covered(&reference.frame.image, bg);
     assert!(ref_cover > 1500, "the box covers {ref_cover} pixels");
     for (name, repr) in reprs() {
         let r = render_scene(&grid_scene, repr);
-        common::dump(&format!("grid_object_{name}"), &[&reference.frame.image, &r.frame.image]);
-        let cover = common::covered(&r.frame.image, bg);
+        crate::util::dump(&format!("grid_object_{name}"), &[&reference.frame.image, &r.frame.image]);
+        let cover = crate::util::covered(&r.frame.image, bg);
         // Silhouettes agree to about a cell of the 40-cell grid (scaled by 1.5): at most 4%
         // of the box's pixels differ in coverage, and 90% of all pixels are within 24/255
         // (edges of the sampled box are rounded by the trilinear interpolation).
         let diff = cover.abs_diff(ref_cover) as f64 / ref_cover as f64;
         assert!(diff < 0.04, "{name}: covers {cover} pixels, the box {ref_cover}");
-        let near = common::fraction_within(&reference.frame.image, &r.frame.image, 24);
+        let near = crate::util::fraction_within(&reference.frame.image, &r.frame.image, 24);
         assert!(near > 0.9, "{name}: only {near:.3} of pixels within 24/255 of the box");
     }
 }
@@ -142,30 +134,25 @@ fn toolkit_previews_a_grid_file_and_extracts_grid_objects() {
     let dir = temp_dir("cli");
     let grid = box_grid(&dir);
     let png = dir.join("preview.png");
-    let o = Command::new(env!("CARGO_BIN_EXE_toolkit"))
-        .args([
-            "render",
-            grid.to_str().unwrap(),
-            "-o",
-            png.to_str().unwrap(),
-            "--width",
-            "64",
-            "--height",
-            "64",
-        ])
-        .output()
-        .unwrap();
+    let o = toolkit(&[
+        "render",
+        grid.to_str().unwrap(),
+        "-o",
+        png.to_str().unwrap(),
+        "--width",
+        "64",
+        "--height",
+        "64",
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let img = image::open(&png).unwrap().to_rgb8();
-    assert!(common::covered(&img, [0, 0, 0]) > 300, "the preview shows the box");
+    assert!(crate::util::covered(&img, [0, 0, 0]) > 300, "the preview shows the box");
 
     std::fs::write(dir.join("scene.toml"), scene_text("type = \"grid\"\npath = \"box.sdf\"")).unwrap();
     let obj = dir.join("box.obj");
-    let o = Command::new(env!("CARGO_BIN_EXE_toolkit"))
-        .args(["convert", dir.join("scene.toml").to_str().unwrap(), "--to", "mesh", "--res", "24"])
-        .args(["--method", "dc", "-o", obj.to_str().unwrap()])
-        .output()
-        .unwrap();
+    let scene = dir.join("scene.toml");
+    let (scene, obj_arg) = (scene.to_str().unwrap(), obj.to_str().unwrap());
+    let o = toolkit(&["convert", scene, "--to", "mesh", "--res", "24", "--method", "dc", "-o", obj_arg]);
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(out.contains("closed: true"), "{out}");

@@ -2,8 +2,8 @@
 //! voxelize`, `convert --band K` (a memory report; the file stays dense) and
 //! `render --repr grid --fill voxelize --band K`.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
+use std::process::Output;
 
 use glam::Vec3;
 use sdfmesh::convert::tessellate::tessellate;
@@ -11,16 +11,7 @@ use sdfmesh::geometry::grid::io::load_grid;
 use sdfmesh::mesh::{TriangleMesh, save_mesh};
 use sdfmesh::scene::shape::Primitive;
 
-fn toolkit(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_toolkit")).args(args).output().expect("run toolkit")
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sdfmesh-grid-cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+use crate::util::{temp_dir, toolkit};
 
 fn write_mesh(dir: &Path, name: &str, mesh: &TriangleMesh) -> String {
     let p = dir.join(name);

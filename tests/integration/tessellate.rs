@@ -14,9 +14,7 @@ use sdfmesh::mesh::{TriangleMesh, is_degenerate};
 use sdfmesh::scene::shape::{CsgOp, Object, ObjectKind, Primitive, Shading};
 use sdfmesh::scene::transform::TransformDesc;
 
-#[path = "common/mesh_checks.rs"]
-mod mesh_checks;
-use mesh_checks::signed_volume;
+use crate::util::signed_volume;
 
 const RESOLUTIONS: [u32; 5] = [8, 16, 32, 64, 128];
 

@@ -3,9 +3,7 @@
 //! run keeps its rows and `--resume` completes it without duplicates, and the scaling
 //! experiment writes its rows.
 
-mod common;
-
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -16,12 +14,7 @@ use sdfmesh::metrics::{probe, surface_distance};
 use sdfmesh::plan::{Representation, build_scene};
 use sdfmesh::scene::shape::Primitive;
 
-fn temp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sdfmesh-compare-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+use crate::util::{temp_dir, toolkit};
 
 const SCENE: &str = r#"
 [camera]
@@ -51,10 +44,6 @@ type = "box"
 half_size = [0.5, 0.5, 0.5]
 translate = [1.5, 0, 0.5]
 "#;
-
-fn toolkit(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_toolkit")).args(args).output().expect("run toolkit")
-}
 
 fn run_compare(scene: &Path, csv: &Path, extra: &[&str]) -> std::process::Output {
     let res = if extra.contains(&"--res") { &[][..] } else { &["--res", "8,12"][..] };
@@ -222,12 +211,12 @@ fn interrupted_run_keeps_its_rows_and_resume_completes_it() {
 /// equal the radius difference (each sample of one sphere is exactly 0.25 from the other).
 #[test]
 fn concentric_spheres_are_their_radius_difference_apart() {
-    let sphere = |r| common::object(Primitive::Sphere { radius: r }, Vec3::ZERO, Vec3::ZERO, Vec3::ONE);
+    let sphere = |r| crate::util::object(Primitive::Sphere { radius: r }, Vec3::ZERO, Vec3::ZERO, Vec3::ONE);
     let march = MarchParams::default();
     let mut results = Vec::new();
     for repr in [Representation::Analytic { march }, Representation::Sdf { march }] {
         let (inner, outer) =
-            (common::lit_scene(vec![sphere(1.0)], 64), common::lit_scene(vec![sphere(1.25)], 64));
+            (crate::util::lit_scene(vec![sphere(1.0)], 64), crate::util::lit_scene(vec![sphere(1.25)], 64));
         let (gi, go) = (build_scene(&inner, repr), build_scene(&outer, repr));
         let pi = probe(&inner.camera, &gi, 1e5);
         let po = probe(&outer.camera, &go, 1e5);
@@ -240,7 +229,7 @@ fn concentric_spheres_are_their_radius_difference_apart() {
         assert!(d.diagonal > 1.0 && d.diagonal < 2.0 * 1.25 * 3f64.sqrt() + 1e-6, "{d:?}");
     }
     // A surface against itself is 0 apart.
-    let scene = common::lit_scene(vec![sphere(1.0)], 48);
+    let scene = crate::util::lit_scene(vec![sphere(1.0)], 48);
     let g = build_scene(&scene, Representation::Analytic { march });
     let p = probe(&scene.camera, &g, 1e5);
     let d = surface_distance(&g, &p.points, &g, &p.points).unwrap();

@@ -5,7 +5,6 @@
 //! the same surface; `toolkit convert --method mt` still gives marching tetrahedra.
 
 use std::collections::HashSet;
-use std::process::Command;
 
 use glam::{DVec3, Vec3};
 use proptest::prelude::*;
@@ -13,9 +12,7 @@ use sdfmesh::convert::extract::{ExtractMethod, Field, extract, extract_sampled, 
 use sdfmesh::geometry::Aabb;
 use sdfmesh::mesh::{TriangleMesh, is_degenerate};
 
-#[path = "common/mesh_checks.rs"]
-mod mesh_checks;
-use mesh_checks::{cube, non_manifold_edges, signed_volume};
+use crate::util::{cube, non_manifold_edges, signed_volume};
 
 /// The methods that are closed and manifold by construction (dual contouring is only
 /// checked on smoother fields, in `tests/extract.rs`: on this noise a dual edge between two
@@ -200,9 +197,7 @@ fn sampled_extraction_is_the_same() {
 /// gives about three times the triangles of the other two.
 #[test]
 fn convert_offers_every_method() {
-    let dir = std::env::temp_dir().join(format!("sdfmesh-extract-mc-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = crate::util::temp_dir("convert");
     let scene = dir.join("s.toml");
     std::fs::write(
         &scene,
@@ -214,21 +209,18 @@ fn convert_offers_every_method() {
     let mut tris = Vec::new();
     for method in ["mc", "mt", "dc"] {
         let out = dir.join(format!("{method}.ply"));
-        let run = Command::new(env!("CARGO_BIN_EXE_toolkit"))
-            .args([
-                "convert",
-                scene.to_str().unwrap(),
-                "--to",
-                "mesh",
-                "--res",
-                "24",
-                "--method",
-                method,
-                "-o",
-            ])
-            .arg(&out)
-            .output()
-            .expect("run toolkit");
+        let run = crate::util::toolkit(&[
+            "convert",
+            scene.to_str().unwrap(),
+            "--to",
+            "mesh",
+            "--res",
+            "24",
+            "--method",
+            method,
+            "-o",
+            out.to_str().unwrap(),
+        ]);
         assert!(run.status.success(), "{method}: {}", String::from_utf8_lossy(&run.stderr));
         let mesh = sdfmesh::mesh::load_mesh(&out).expect("written mesh loads").0;
         assert_clean(&mesh, method);

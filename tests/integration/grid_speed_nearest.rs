@@ -10,6 +10,8 @@ use sdfmesh::geometry::grid::closest::{GROUP_MAX, GroupStack, Nearest, NodeStack
 use sdfmesh::geometry::grid::sample_mesh;
 use sdfmesh::mesh::TriangleMesh;
 
+use crate::util::Lcg;
+
 /// A bumpy UV sphere: radius `r * (1 + amp * sin(k theta) * sin(m phi))` around `centre`,
 /// `rings` x `2 rings` quads; with `open`, the bottom quarter of the rings is left out.
 fn bumpy_sphere(centre: Vec3, r: f32, amp: f32, k: f32, m: f32, rings: u32, open: bool) -> TriangleMesh {
@@ -93,23 +95,6 @@ fn tolerance(mesh: &TriangleMesh, p: Vec3) -> f64 {
     let size = (hi - lo).max_element() as f64;
     let scale = p.abs().max_element().max(lo.abs().max(hi.abs()).max_element()) as f64;
     1e-6 * size + 8.0 * f32::EPSILON as f64 * scale
-}
-
-/// A tiny deterministic generator.
-struct Lcg(u64);
-impl Lcg {
-    fn unit(&mut self) -> f32 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (self.0 >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn dir(&mut self) -> Vec3 {
-        loop {
-            let v = Vec3::new(self.unit(), self.unit(), self.unit()) * 2.0 - 1.0;
-            if v.length_squared() > 0.01 && v.length_squared() <= 1.0 {
-                return v.normalize();
-            }
-        }
-    }
 }
 
 /// Query points for `mesh`: on triangles, just off them, inside, and up to 60 radii away.

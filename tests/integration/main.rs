@@ -1,0 +1,32 @@
+//! The integration tests, linked as one test binary (`cargo test --test integration`):
+//! each module was a test binary of its own. Shared helpers live in [`util`], each defined
+//! once; [`contract`] checks the `Geometry` contract for every representation.
+//! Proptest keeps the failing cases of a module's `proptest!` blocks in
+//! `tests/proptest-regressions/MODULE.txt` (its rule for a source file in a folder holding a
+//! `main.rs`: `tests/integration/extract.rs` -> `tests/proptest-regressions/extract.txt`).
+
+mod util;
+
+mod bad_requests;
+mod cli;
+mod compare;
+mod contract;
+mod extract;
+mod extract_dc;
+mod extract_mc;
+mod fuzz_regressions;
+mod grid_band;
+mod grid_cli;
+mod grid_io;
+mod grid_objects;
+mod grid_sample;
+mod grid_speed_nearest;
+mod grid_voxelize;
+mod hard_cases;
+mod hard_suite;
+mod mesh_io;
+mod mesh_tracing;
+mod representations;
+mod round_trip;
+mod scene_errors;
+mod tessellate;
