@@ -399,3 +399,152 @@ pub fn plan_scene(scene: &Scene, repr: Representation) -> Vec<ObjectPlan> {
 fn signed(o: &Object) -> bool {
     SdfTree::new(o).is_some_and(|t| t.signed)
 }
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use super::*;
+    use crate::scene::load_scene;
+
+    fn scene(name: &str) -> Scene {
+        load_scene(&Path::new(env!("CARGO_MANIFEST_DIR")).join("data/scenes").join(name))
+            .unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    fn mesh(method: MeshMethod) -> Representation {
+        Representation::Mesh {
+            resolution: 16,
+            shading: Shading::Smooth,
+            method,
+            march: MarchParams::default(),
+        }
+    }
+
+    fn grid(fill: GridFill) -> Representation {
+        Representation::Grid {
+            resolution: 16,
+            fill,
+            storage: GridStorage::Dense,
+            march: MarchParams::default(),
+        }
+    }
+
+    fn kind(o: &Object) -> &'static str {
+        match &o.kind {
+            ObjectKind::Primitive(Primitive::Plane { .. }) => "plane",
+            ObjectKind::Primitive(Primitive::Triangle { .. }) => "triangle",
+            ObjectKind::Primitive(_) => "primitive",
+            _ => "other",
+        }
+    }
+
+    #[test]
+    fn one_table_decides_every_object() {
+        let s = scene("showcase.toml");
+        let repr = Representation::Analytic { march: MarchParams::default() };
+        let march = repr.with_pixel_footprint(&s).march();
+        assert!(march.pixel_footprint > 0.0);
+        for (o, p) in s.objects.iter().zip(plan_scene(&s, repr)) {
+            let expect = match kind(o) {
+                "other" => ObjectPlan::fallback(
+                    Build::Marched { march },
+                    Fallback::NoClosedForm { kind: o.kind_name() },
+                ),
+                _ => ObjectPlan::as_asked(Build::ClosedForm),
+            };
+            assert_eq!(p, expect, "{}", o.label);
+        }
+        for p in plan_scene(&s, Representation::Sdf { march: MarchParams::default() }) {
+            assert_eq!(p, ObjectPlan::as_asked(Build::Marched { march }));
+        }
+        let mc = ExtractMethod::MarchingCubes;
+        for (o, p) in s.objects.iter().zip(plan_scene(&s, mesh(MeshMethod::Parametric))) {
+            let build = match kind(o) {
+                "plane" => Build::PlaneDisc { resolution: 16 },
+                "other" => Build::Extracted { method: mc, resolution: 16 },
+                _ => Build::Tessellated { resolution: 16, shading: Shading::Smooth },
+            };
+            assert_eq!(p, ObjectPlan::as_asked(build), "{}", o.label);
+        }
+        for (o, p) in s.objects.iter().zip(plan_scene(&s, mesh(MeshMethod::Extracted(mc)))) {
+            let expect = match kind(o) {
+                "plane" => ObjectPlan::as_asked(Build::PlaneDisc { resolution: 16 }),
+                "triangle" => ObjectPlan::fallback(Build::Marched { march }, Fallback::Unsigned),
+                _ => ObjectPlan::as_asked(Build::Extracted { method: mc, resolution: 16 }),
+            };
+            assert_eq!(p, expect, "{}", o.label);
+        }
+        for (o, p) in s.objects.iter().zip(plan_scene(&s, grid(GridFill::Voxelize))) {
+            let expect = match kind(o) {
+                "plane" => ObjectPlan::fallback(Build::Marched { march }, Fallback::Unbounded),
+                "triangle" => ObjectPlan::fallback(Build::Marched { march }, Fallback::Unsigned),
+                // Analytic objects are always sampled.
+                _ => ObjectPlan::as_asked(Build::Grid {
+                    resolution: 16,
+                    fill: GridFill::Sample,
+                    storage: GridStorage::Dense,
+                    march,
+                    clip: None,
+                }),
+            };
+            assert_eq!(p, expect, "{}", o.label);
+        }
+    }
+
+    #[test]
+    fn huge_objects_are_clipped_to_the_view_region() {
+        let s = scene("thesis_rt.toml");
+        let plans = plan_scene(&s, grid(GridFill::Sample));
+        let clipped: Vec<&str> = s
+            .objects
+            .iter()
+            .zip(&plans)
+            .filter(|(_, p)| matches!(p.build, Build::Grid { clip: Some(_), .. }))
+            .map(|(o, p)| {
+                assert_eq!(p.fallback, Some(Fallback::ClippedToViewRegion));
+                assert!(p.sphere_traced());
+                o.label.as_str()
+            })
+            .collect();
+        assert_eq!(clipped, ["yellow ground sphere"]);
+    }
+
+    #[test]
+    fn the_builder_returns_the_plans_it_realised() {
+        let s = scene("showcase.toml");
+        for repr in [
+            Representation::Analytic { march: MarchParams::default() },
+            mesh(MeshMethod::Parametric),
+            grid(GridFill::Sample),
+        ] {
+            let (g, realised) = build_scene_with_plans(&s, repr);
+            assert_eq!(g.objects().len(), realised.len());
+            let mut planned = plan_scene(&s, repr);
+            // Tessellations of sharp-edged shapes are shaded flat.
+            for (p, r) in planned.iter_mut().zip(&realised) {
+                if let (Build::Tessellated { shading, .. }, Build::Tessellated { shading: got, .. }) =
+                    (&mut p.build, r.build)
+                {
+                    *shading = got;
+                }
+            }
+            assert_eq!(planned, realised, "{}", repr.name());
+        }
+    }
+
+    #[test]
+    fn estimates_follow_the_plan() {
+        let s = scene("showcase.toml");
+        assert_eq!(budget::scene_bytes(&s, Representation::Analytic { march: MarchParams::default() }), 0);
+        assert_eq!(budget::scene_bytes(&s, Representation::Sdf { march: MarchParams::default() }), 0);
+        let gridded = plan_scene(&s, grid(GridFill::Sample))
+            .iter()
+            .filter(|p| matches!(p.build, Build::Grid { .. }))
+            .count() as u64;
+        let samples = grid_samples_per_axis(16) as u64;
+        assert_eq!(budget::scene_bytes(&s, grid(GridFill::Sample)), gridded * samples.pow(3) * 4);
+        assert_eq!(grid_samples_per_axis(8), 13);
+        assert_eq!(grid_samples_per_axis(u32::MAX), u32::MAX);
+    }
+}
