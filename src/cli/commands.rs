@@ -21,7 +21,7 @@ use crate::geometry::grid::{DEFAULT_MAX_GRID_BYTES, check_size, grid_layout, sam
 use crate::mesh::{MeshFormat, TriangleMesh, load_mesh, save_mesh};
 use crate::plan::GridFill;
 use crate::plan::budget::{MemoryBudget, extraction_bytes, mesh_to_grid_bytes, scene_bytes};
-use crate::plan::{MeshMethod, Representation, build_scene, grid_file_mesh};
+use crate::plan::{MeshMethod, Representation, build_scene, grid_file_mesh, grid_samples_per_axis};
 use crate::render::{Frame, render, write_png};
 use crate::scene::shape::Shading;
 use crate::scene::{Scene, grid_preview_scene, load_scene, mesh_preview_scene};
@@ -83,10 +83,7 @@ pub fn check_repr(repr: &Representation) -> Result<()> {
                     "--res must be between 2 and {MAX_CONVERT_MESH_RESOLUTION} for grids, got {resolution}"
                 )));
             }
-            check_size(
-                UVec3::splat(resolution + 1 + 2 * crate::plan::GRID_MARGIN_CELLS),
-                DEFAULT_MAX_GRID_BYTES,
-            )?;
+            check_size(UVec3::splat(grid_samples_per_axis(*resolution)), DEFAULT_MAX_GRID_BYTES)?;
             march
         }
         Representation::Mesh { resolution, march, .. } => {

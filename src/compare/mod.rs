@@ -14,6 +14,7 @@ pub mod scaling;
 pub mod summary;
 
 use std::collections::HashSet;
+use std::fmt;
 use std::fs::{File, OpenOptions};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -25,16 +26,19 @@ use image::RgbImage;
 use serde::{Deserialize, Serialize};
 
 use crate::cli::commands::{Overrides, check_repr, load_scene_or_mesh};
-use crate::convert::extract::{ExtractMethod, Field, extract};
+use crate::convert::extract::ExtractMethod;
 use crate::error::{Error, Result};
-use crate::geometry::grid::{SdfGrid, sample_mesh};
+use crate::geometry::Geometry;
+use crate::geometry::grid::SdfGrid;
 use crate::geometry::march::MarchParams;
 use crate::geometry::scene::SceneGeometry;
-use crate::geometry::{Geometry, aabb};
 use crate::mesh::{TriangleMesh, save_mesh};
 use crate::metrics::{self, Probe};
-use crate::plan::budget::{MemoryBudget, extraction_bytes, mesh_to_grid_bytes, scene_bytes};
-use crate::plan::{GridFill, GridStorage, MeshMethod, Representation, build_scene};
+use crate::plan::budget::{MemoryBudget, reextract_bytes, scene_bytes};
+use crate::plan::{
+    Fallback, GridFill, GridStorage, MeshMethod, ObjectPlan, Representation, build_scene_with_plans,
+    reextract_mesh,
+};
 use crate::render::{Frame, render, write_png};
 use crate::scene::Scene;
 use crate::scene::shape::{ObjectKind, Shading};
@@ -234,10 +238,42 @@ enum Build {
     Reextract { fill: GridFill, resolution: u32 },
 }
 
+/// The `repr` column: which representation a run stands for (a mesh input's original
+/// mesh and its re-extractions are `mesh` runs although the mesh is traced as it is).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum RunRepr {
+    /// Closed-form intersection (sphere tracing where there is none).
+    Analytic,
+    /// Sphere tracing of the analytic SDFs.
+    Sdf,
+    /// Triangle meshes.
+    Mesh,
+    /// SDF grids.
+    Grid,
+}
+
+impl RunRepr {
+    /// The column value: `analytic`, `sdf`, `mesh` or `grid`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            RunRepr::Analytic => "analytic",
+            RunRepr::Sdf => "sdf",
+            RunRepr::Mesh => "mesh",
+            RunRepr::Grid => "grid",
+        }
+    }
+}
+
+impl fmt::Display for RunRepr {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
 /// One planned run.
 #[derive(Clone, Debug)]
 struct Run {
-    repr: &'static str,
+    repr: RunRepr,
     method: &'static str,
     resolution: Option<u32>,
     build: Build,
@@ -262,7 +298,7 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
     let mut runs = Vec::new();
     if mesh_input(scene).is_some() {
         runs.push(Run {
-            repr: "mesh",
+            repr: RunRepr::Mesh,
             method: "original",
             resolution: None,
             build: Build::Scene(Representation::Analytic { march }),
@@ -270,31 +306,31 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
         for &r in &opts.resolutions {
             let res = Some(r);
             runs.push(Run {
-                repr: "grid",
+                repr: RunRepr::Grid,
                 method: "sample",
                 resolution: res,
                 build: grid(r, GridFill::Sample, GridStorage::Dense),
             });
             runs.push(Run {
-                repr: "grid",
+                repr: RunRepr::Grid,
                 method: "voxelize",
                 resolution: res,
                 build: grid(r, GridFill::Voxelize, GridStorage::Dense),
             });
             runs.push(Run {
-                repr: "grid",
+                repr: RunRepr::Grid,
                 method: "sample-band",
                 resolution: res,
                 build: grid(r, GridFill::Sample, band),
             });
             runs.push(Run {
-                repr: "mesh",
+                repr: RunRepr::Mesh,
                 method: "from-sample",
                 resolution: res,
                 build: Build::Reextract { fill: GridFill::Sample, resolution: r },
             });
             runs.push(Run {
-                repr: "mesh",
+                repr: RunRepr::Mesh,
                 method: "from-voxelize",
                 resolution: res,
                 build: Build::Reextract { fill: GridFill::Voxelize, resolution: r },
@@ -302,13 +338,13 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
         }
     } else {
         runs.push(Run {
-            repr: "analytic",
+            repr: RunRepr::Analytic,
             method: "closed-form",
             resolution: None,
             build: Build::Scene(Representation::Analytic { march }),
         });
         runs.push(Run {
-            repr: "sdf",
+            repr: RunRepr::Sdf,
             method: "sphere-trace",
             resolution: None,
             build: Build::Scene(Representation::Sdf { march }),
@@ -324,25 +360,25 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
                 })
             };
             runs.push(Run {
-                repr: "mesh",
+                repr: RunRepr::Mesh,
                 method: "parametric",
                 resolution: res,
                 build: mesh(MeshMethod::Parametric),
             });
             runs.push(Run {
-                repr: "mesh",
+                repr: RunRepr::Mesh,
                 method: "extracted",
                 resolution: res,
                 build: mesh(MeshMethod::Extracted(ExtractMethod::MarchingCubes)),
             });
             runs.push(Run {
-                repr: "grid",
+                repr: RunRepr::Grid,
                 method: "dense",
                 resolution: res,
                 build: grid(r, GridFill::Sample, GridStorage::Dense),
             });
             runs.push(Run {
-                repr: "grid",
+                repr: RunRepr::Grid,
                 method: "band",
                 resolution: res,
                 build: grid(r, GridFill::Sample, band),
@@ -352,10 +388,11 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
     runs
 }
 
-/// A built run: its geometry, build time and, for meshes and grids, what to save as
-/// artifacts.
+/// A built run: its geometry, the realised plan of each object, build time and, for
+/// meshes and grids, what to save as artifacts.
 struct Built {
     geometry: SceneGeometry,
+    plans: Vec<ObjectPlan>,
     build_ms: f64,
     mesh: Option<TriangleMesh>,
     grid: Option<SdfGrid>,
@@ -365,46 +402,28 @@ fn build(scene: &Scene, b: Build, budget: &MemoryBudget) -> Result<Built> {
     let need = match b {
         Build::Scene(repr) => scene_bytes(scene, repr),
         Build::Reextract { fill, resolution } => {
-            let dims = glam::UVec3::splat(resolution + 1 + 2 * crate::plan::GRID_MARGIN_CELLS);
-            let triangles = mesh_input(scene).map_or(0, |m| m.triangles.len());
-            mesh_to_grid_bytes(triangles, dims, fill)
-                .saturating_add(extraction_bytes(resolution, ExtractMethod::MarchingCubes))
+            reextract_bytes(mesh_input(scene).map_or(0, |m| m.triangles.len()), fill, resolution)
         }
     };
     budget.check("this run", need)?;
     let start = Instant::now();
     match b {
         Build::Scene(repr) => {
-            let geometry = build_scene(scene, repr);
-            Ok(Built { geometry, build_ms: ms(start), mesh: None, grid: None })
+            let (geometry, plans) = build_scene_with_plans(scene, repr);
+            Ok(Built { geometry, plans, build_ms: ms(start), mesh: None, grid: None })
         }
         Build::Reextract { fill, resolution } => {
             let original = mesh_input(scene).ok_or_else(|| Error::Usage("not a mesh input".into()))?;
-            let grid = match fill {
-                GridFill::Sample => sample_mesh(original, resolution, crate::plan::GRID_MARGIN_CELLS)?,
-                GridFill::Voxelize => crate::geometry::grid::voxelize::voxelize_mesh(
-                    original,
-                    resolution,
-                    crate::plan::GRID_MARGIN_CELLS,
-                )?,
-            };
-            let (lo, hi) = grid.bounds();
-            let cells = (grid.dims - 1).max_element();
-            let mesh = extract(
-                &|p: DVec3| grid.trilinear(p.as_vec3()) as f64,
-                Field::Arbitrary,
-                &aabb(lo, hi),
-                cells,
-                ExtractMethod::MarchingCubes,
-            );
+            let (grid, mesh) = reextract_mesh(original, fill, resolution)?;
             let mut s = scene.clone();
             s.objects[0].kind = ObjectKind::Mesh {
                 mesh: Arc::new(mesh.clone()),
                 source: PathBuf::from("re-extracted"),
                 shading: Shading::Smooth,
             };
-            let geometry = build_scene(&s, Representation::Analytic { march: MarchParams::default() });
-            Ok(Built { geometry, build_ms: ms(start), mesh: Some(mesh), grid: Some(grid) })
+            let (geometry, plans) =
+                build_scene_with_plans(&s, Representation::Analytic { march: MarchParams::default() });
+            Ok(Built { geometry, plans, build_ms: ms(start), mesh: Some(mesh), grid: Some(grid) })
         }
     }
 }
@@ -578,16 +597,22 @@ fn stem(path: &Path) -> String {
     path.file_stem().map_or_else(|| "input".into(), |s| s.to_string_lossy().into_owned())
 }
 
-/// What the run did not represent as asked, from the objects' descriptions.
-fn note(geometry: &SceneGeometry, repr: &str) -> String {
-    if repr != "mesh" && repr != "grid" {
+/// What a mesh or grid run did not represent as asked, from the objects' realised plans:
+/// the description of every object with a fallback that sphere traces it (entirely or
+/// outside a view-region clip) or that sampled a mesh voxelizing found open; empty for
+/// other runs.
+fn note(geometry: &SceneGeometry, plans: &[ObjectPlan], repr: RunRepr) -> String {
+    if !matches!(repr, RunRepr::Mesh | RunRepr::Grid) {
         return String::new();
     }
     let fallbacks: Vec<String> = geometry
         .objects()
         .iter()
-        .map(|o| o.describe())
-        .filter(|d| d.contains("sphere traced") || d.contains("found it open"))
+        .zip(plans)
+        .filter(|(_, p)| {
+            p.fallback.is_some() && (p.sphere_traced() || p.fallback == Some(Fallback::OpenMeshSampled))
+        })
+        .map(|(o, _)| o.describe())
         .collect();
     if fallbacks.is_empty() {
         String::new()
@@ -769,7 +794,7 @@ fn measure(
         timestamp: timing.timestamp,
         frame_ms_samples: timing.samples,
         schema_version: SCHEMA_VERSION,
-        note: note(&built.geometry, run.repr),
+        note: note(&built.geometry, &built.plans, run.repr),
     };
     if let Some(dir) = &opts.artifacts {
         save_artifacts(&dir.join(name), run, scene, &built, &frame.image, is_reference)?;
@@ -799,7 +824,7 @@ fn save_artifacts(
     }
     if run.resolution.is_some_and(|r| r <= ARTIFACT_MAX_RES) {
         let mesh = built.mesh.clone().or_else(|| {
-            (run.repr == "mesh").then(|| crate::plan::scene_mesh(scene, run_repr(run))).flatten()
+            (run.repr == RunRepr::Mesh).then(|| crate::plan::scene_mesh(scene, representation(run))).flatten()
         });
         if let Some(mesh) = mesh.filter(|m| !m.triangles.is_empty()) {
             save_mesh(&mesh, &dir.join(format!("{base}.ply")))?;
@@ -814,7 +839,8 @@ fn save_artifacts(
     Ok(())
 }
 
-fn run_repr(run: &Run) -> Representation {
+/// The representation a run's [`crate::plan::scene_mesh`] artifact is made in.
+fn representation(run: &Run) -> Representation {
     match run.build {
         Build::Scene(r) => r,
         Build::Reextract { .. } => Representation::Analytic { march: MarchParams::default() },

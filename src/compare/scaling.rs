@@ -51,7 +51,7 @@ pub const SCALING_COLUMNS: [&str; 23] = [
 pub struct ScalingRow {
     /// `sphere`, `cube`, `cylinder` or `cone`.
     pub primitive: &'static str,
-    /// Representation name.
+    /// Representation name ([`Representation::name`]).
     pub repr: &'static str,
     /// Method within the representation (with its resolution, e.g. `parametric-32`).
     pub method: String,
@@ -186,11 +186,10 @@ pub fn scaling_command(opts: &ScalingOptions, csv_path: &Path) -> Result<String>
     }
     let march = opts.march;
     let res = opts.resolution;
-    let reprs: [(&str, String, Representation); 4] = [
-        ("analytic", "closed-form".into(), Representation::Analytic { march }),
-        ("sdf", "sphere-trace".into(), Representation::Sdf { march }),
+    let reprs: [(String, Representation); 4] = [
+        ("closed-form".into(), Representation::Analytic { march }),
+        ("sphere-trace".into(), Representation::Sdf { march }),
         (
-            "mesh",
             format!("parametric-{res}"),
             Representation::Mesh {
                 resolution: res,
@@ -200,7 +199,6 @@ pub fn scaling_command(opts: &ScalingOptions, csv_path: &Path) -> Result<String>
             },
         ),
         (
-            "grid",
             format!("dense-{res}"),
             Representation::Grid {
                 resolution: res,
@@ -210,7 +208,7 @@ pub fn scaling_command(opts: &ScalingOptions, csv_path: &Path) -> Result<String>
             },
         ),
     ];
-    for (_, _, r) in &reprs {
+    for (_, r) in &reprs {
         crate::cli::commands::check_repr(r)?;
     }
     let commit = commit_id();
@@ -221,7 +219,8 @@ pub fn scaling_command(opts: &ScalingOptions, csv_path: &Path) -> Result<String>
         for &count in &opts.counts {
             let mut scene = scaling_scene(kind, count, 320, 240);
             opts.overrides.apply(&mut scene)?;
-            for (repr, method, r) in &reprs {
+            for (method, r) in &reprs {
+                let repr = r.name();
                 let start = Instant::now();
                 let geometry = build_scene(&scene, *r);
                 let build_ms = start.elapsed().as_secs_f64() * 1e3;

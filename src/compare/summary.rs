@@ -8,7 +8,7 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
-use super::Row;
+use super::{Row, RunRepr};
 
 /// Thresholds on `chamfer_rel` the summary reports.
 pub const THRESHOLDS: [f64; 3] = [1e-2, 3e-3, 1e-3];
@@ -95,7 +95,7 @@ fn min_by<'a>(rows: impl Iterator<Item = &'a Row>, key: impl Fn(&Row) -> f64) ->
 }
 
 fn is_marched(r: &Row) -> bool {
-    r.repr == "sdf" || r.repr == "grid"
+    r.repr == RunRepr::Sdf.as_str() || r.repr == RunRepr::Grid.as_str()
 }
 
 /// Summarises rows (any order; several inputs).
@@ -121,9 +121,9 @@ pub fn summarize(rows: &[Row]) -> Summary {
                     let fastest = min_by(ok(), time);
                     let smallest = min_by(ok(), bytes);
                     let best_marched = min_by(ok().filter(|r| is_marched(r)), time);
-                    let best_mesh = min_by(ok().filter(|r| r.repr == "mesh"), time);
+                    let best_mesh = min_by(ok().filter(|r| r.repr == RunRepr::Mesh.as_str()), time);
                     let small_marched = min_by(ok().filter(|r| is_marched(r)), bytes);
-                    let small_mesh = min_by(ok().filter(|r| r.repr == "mesh"), bytes);
+                    let small_mesh = min_by(ok().filter(|r| r.repr == RunRepr::Mesh.as_str()), bytes);
                     AtThreshold {
                         max_chamfer_rel: t,
                         fastest: fastest.map(pick),

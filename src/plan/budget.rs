@@ -15,9 +15,9 @@ use glam::UVec3;
 
 use crate::convert::extract::ExtractMethod;
 use crate::error::{Error, Result};
-use crate::plan::{GRID_MARGIN_CELLS, GridFill, MAX_EXTRACT_RESOLUTION, MeshMethod, Representation};
+use crate::plan::{Build, GridFill, ObjectPlan, Representation, grid_samples_per_axis, plan_object};
 use crate::scene::Scene;
-use crate::scene::shape::{ObjectKind, Primitive};
+use crate::scene::shape::{Object, ObjectKind};
 
 /// Used when the machine's memory cannot be read: 8 GiB.
 pub const FALLBACK_BYTES: u64 = 8 << 30;
@@ -129,55 +129,56 @@ pub fn extraction_bytes(res: u32, method: ExtractMethod) -> u64 {
 }
 
 /// An upper estimate of the bytes the geometry of `scene` in `repr` needs while it is
-/// built and traced: per bounded object, its grid (grid representation; each object's grid
-/// has at most `res + 1 + 2 margin` samples per axis) or its triangles (mesh
-/// representation: parametric primitives have at most `2 res^2` triangles, extracted
-/// objects as [`extraction_bytes`]); loaded meshes and grid files count as what they hold.
+/// built and traced: the sum of [`object_bytes`] over the objects' plans
+/// ([`plan_object`]).
 pub fn scene_bytes(scene: &Scene, repr: Representation) -> u64 {
     let mut total: u64 = 0;
     for o in &scene.objects {
-        let bounded = o.bounds().is_some();
-        let bytes = match (&o.kind, repr) {
-            (ObjectKind::Mesh { mesh, .. }, Representation::Grid { resolution, fill, .. }) => {
-                mesh_to_grid_bytes(mesh.triangles.len(), cube(resolution), fill)
-            }
-            (ObjectKind::Mesh { mesh, .. }, _) => {
-                (mesh.triangles.len() as u64).saturating_mul(BYTES_PER_TRACED_TRIANGLE)
-            }
-            (ObjectKind::Grid { grid, .. }, Representation::Mesh { resolution, method, .. }) => {
-                extraction_bytes(resolution.min(MAX_EXTRACT_RESOLUTION), extract_method(method))
-                    .saturating_add(grid_bytes(grid.dims, 4))
-            }
-            (ObjectKind::Grid { grid, .. }, _) => grid_bytes(grid.dims, 4),
-            // A narrow band never holds more than the dense grid.
-            (_, Representation::Grid { resolution, .. }) if bounded => grid_bytes(cube(resolution), 4),
-            (ObjectKind::Primitive(Primitive::Plane { .. }), Representation::Mesh { .. }) => 0,
-            (
-                ObjectKind::Primitive(_),
-                Representation::Mesh { resolution, method: MeshMethod::Parametric, .. },
-            ) => {
-                let r = resolution as u64;
-                (2 * r * r).saturating_mul(BYTES_PER_TRACED_TRIANGLE)
-            }
-            (_, Representation::Mesh { resolution, method, .. }) if bounded => {
-                extraction_bytes(resolution.min(MAX_EXTRACT_RESOLUTION), extract_method(method))
-            }
-            _ => 0,
-        };
-        total = total.saturating_add(bytes);
+        total = total.saturating_add(object_bytes(o, &plan_object(scene, o, repr)));
     }
     total
 }
 
-fn cube(resolution: u32) -> UVec3 {
-    UVec3::splat(resolution.saturating_add(1 + 2 * GRID_MARGIN_CELLS))
+/// An upper estimate of the bytes building `o` as `plan` says, and tracing it, needs: a
+/// grid's samples (each grid has at most [`grid_samples_per_axis`] samples per axis; a
+/// narrow band never holds more than the dense grid) with what sampling or voxelizing a
+/// mesh needs ([`mesh_to_grid_bytes`]); triangles (parametric primitives have at most
+/// `2 res^2`, extracted objects as [`extraction_bytes`]); loaded meshes and grid files
+/// count as what they hold. Sphere tracing and closed forms count nothing.
+pub fn object_bytes(o: &Object, plan: &ObjectPlan) -> u64 {
+    let triangles = match &o.kind {
+        ObjectKind::Mesh { mesh, .. } => mesh.triangles.len(),
+        _ => 0,
+    };
+    let grid_file = match &o.kind {
+        ObjectKind::Grid { grid, .. } => grid_bytes(grid.dims, 4),
+        _ => 0,
+    };
+    match plan.build {
+        Build::ClosedForm | Build::Marched { .. } | Build::PlaneDisc { .. } => 0,
+        Build::MeshTriangles => (triangles as u64).saturating_mul(BYTES_PER_TRACED_TRIANGLE),
+        Build::Tessellated { resolution, .. } => {
+            let r = resolution as u64;
+            (2 * r * r).saturating_mul(BYTES_PER_TRACED_TRIANGLE)
+        }
+        Build::Extracted { method, resolution } => extraction_bytes(resolution, method),
+        // Analytic objects are sampled (`fill` is `Sample`) and hold no triangles.
+        Build::Grid { resolution, fill, .. } => {
+            mesh_to_grid_bytes(triangles, UVec3::splat(grid_samples_per_axis(resolution)), fill)
+        }
+        Build::GridFileMarched { .. } => grid_file,
+        Build::GridFileExtracted { method, resolution } => {
+            extraction_bytes(resolution, method).saturating_add(grid_file)
+        }
+    }
 }
 
-fn extract_method(method: MeshMethod) -> ExtractMethod {
-    match method {
-        MeshMethod::Extracted(m) => m,
-        MeshMethod::Parametric => ExtractMethod::MarchingCubes,
-    }
+/// An upper estimate of the bytes [`crate::plan::reextract_mesh`] needs for a mesh of
+/// `triangles` triangles at `resolution`: its grid and the extraction.
+pub fn reextract_bytes(triangles: usize, fill: GridFill, resolution: u32) -> u64 {
+    let dims = UVec3::splat(grid_samples_per_axis(resolution));
+    mesh_to_grid_bytes(triangles, dims, fill)
+        .saturating_add(extraction_bytes(resolution, ExtractMethod::MarchingCubes))
 }
 
 #[cfg(test)]

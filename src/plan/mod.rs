@@ -1,29 +1,47 @@
-//! Representations of scene objects behind the [`Geometry`] interface: closed-form
-//! primitives, sphere-traced analytic SDFs, and the scene's top-level BVH over objects
-//! (itself a `Geometry`, so the tracer sees one geometry whatever the representation).
+//! The object plan: how each scene object is built for tracing in a [`Representation`].
+//!
+//! One place decides. [`plan_object`] looks at an object and the asked representation and
+//! returns an [`ObjectPlan`]; the builder ([`build_scene_with_plans`], [`build_objects`],
+//! [`scene_mesh`]) builds exactly that, and the memory estimate
+//! ([`budget::scene_bytes`]) counts exactly that, so the two cannot disagree.
+//!
+//! The plans ([`Build`]):
+//! - [`Build::ClosedForm`]: closed-form ray/primitive intersection (primitives, analytic).
+//! - [`Build::Marched`]: sphere tracing of the analytic SDF (the sdf representation, and
+//!   every fallback below that says "sphere traced").
+//! - [`Build::MeshTriangles`]: a loaded mesh traced as its own triangles.
+//! - [`Build::Tessellated`]: a primitive tessellated parametrically.
+//! - [`Build::PlaneDisc`]: an infinite plane as a disc around the camera.
+//! - [`Build::Extracted`]: a bounded object's surface extracted from its SDF.
+//! - [`Build::Grid`]: an object sampled (or a mesh voxelized) into an SDF grid, dense or
+//!   narrow band, possibly clipped to the view region.
+//! - [`Build::GridFileMarched`], [`Build::GridFileExtracted`]: a grid file ray marched,
+//!   or its surface extracted.
+//!
+//! Fallbacks are typed: [`ObjectPlan::fallback`] says why an object is not in the asked
+//! representation ([`Fallback`]). Some are known only while building (voxelizing finds a
+//! mesh open, an extraction yields no triangles, a grid cannot be built): the builder
+//! returns the realised plan, with the fallback that actually happened, beside the
+//! geometry ([`build_scene_with_plans`]).
 
 pub mod budget;
+mod build;
 
-use glam::{DVec3, Vec3};
+use std::fmt;
 
-use crate::convert::extract::{ExtractMethod, Field, extract_object};
-use crate::convert::tessellate::plane_view_mesh;
-use crate::convert::tessellate::tessellate;
-use crate::geometry::Geometry;
-use crate::geometry::analytic::AnalyticObject;
-use crate::geometry::grid::band::{BandGrid, band_from_function, band_from_mesh};
-use crate::geometry::grid::object::{ClippedGrid, GridObject, GridStore, VIEW_CLIP_FRACTION, view_region};
-use crate::geometry::grid::voxelize::voxelize_mesh;
-use crate::geometry::grid::{SdfGrid, sample_function, sample_mesh};
+use glam::Vec3;
+
+pub use build::{
+    build_objects, build_scene, build_scene_with_plans, grid_file_mesh, reextract_mesh, scene_mesh,
+};
+
+use crate::convert::extract::ExtractMethod;
+use crate::geometry::Aabb;
+use crate::geometry::grid::object::{VIEW_CLIP_FRACTION, view_region};
 use crate::geometry::march::MarchParams;
-use crate::geometry::mesh::MeshGeometry;
-use crate::geometry::scene::SceneGeometry;
-use crate::geometry::sdf::SdfObject;
 use crate::geometry::sdf::SdfTree;
-use crate::mesh::TriangleMesh;
 use crate::scene::Scene;
 use crate::scene::shape::{Object, ObjectKind, Primitive, Shading};
-use crate::scene::transform::Transform;
 
 /// How the scene's objects are represented for tracing.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -88,318 +106,445 @@ impl Representation {
             Representation::Grid { .. } => "grid",
         }
     }
-}
 
-/// Builds the geometry of every top-level object of `scene` in representation `repr`.
-/// Sphere tracing takes its pixel footprint from the scene's camera.
-pub fn build_objects(scene: &Scene, repr: Representation) -> Vec<Box<dyn Geometry>> {
-    let footprint =
-        2.0 * ((scene.camera.fov_y_deg as f64).to_radians() * 0.5).tan() / scene.camera.height.max(1) as f64;
-    let with_footprint = |march: MarchParams| MarchParams { pixel_footprint: footprint, ..march };
-    let repr = match repr {
-        Representation::Analytic { march } => Representation::Analytic { march: with_footprint(march) },
-        Representation::Sdf { march } => Representation::Sdf { march: with_footprint(march) },
-        Representation::Mesh { resolution, shading, method, march } => {
-            Representation::Mesh { resolution, shading, method, march: with_footprint(march) }
+    /// The sphere tracing parameters (used by every object that is marched).
+    pub fn march(&self) -> MarchParams {
+        match *self {
+            Representation::Analytic { march }
+            | Representation::Sdf { march }
+            | Representation::Mesh { march, .. }
+            | Representation::Grid { march, .. } => march,
         }
-        Representation::Grid { resolution, fill, storage, march } => {
-            Representation::Grid { resolution, fill, storage, march: with_footprint(march) }
+    }
+
+    /// This representation with its sphere tracing's pixel footprint taken from the
+    /// scene's camera (the angle one pixel subtends at unit distance).
+    pub fn with_pixel_footprint(self, scene: &Scene) -> Representation {
+        let footprint = 2.0 * ((scene.camera.fov_y_deg as f64).to_radians() * 0.5).tan()
+            / scene.camera.height.max(1) as f64;
+        let with_footprint = |march: MarchParams| MarchParams { pixel_footprint: footprint, ..march };
+        match self {
+            Representation::Analytic { march } => Representation::Analytic { march: with_footprint(march) },
+            Representation::Sdf { march } => Representation::Sdf { march: with_footprint(march) },
+            Representation::Mesh { resolution, shading, method, march } => {
+                Representation::Mesh { resolution, shading, method, march: with_footprint(march) }
+            }
+            Representation::Grid { resolution, fill, storage, march } => {
+                Representation::Grid { resolution, fill, storage, march: with_footprint(march) }
+            }
         }
-    };
-    scene
-        .objects
-        .iter()
-        .map(|o| -> Box<dyn Geometry> {
-            if let ObjectKind::Grid { .. } = &o.kind {
-                return grid_file_geometry(o, repr);
-            }
-            let (march, why) = match repr {
-                Representation::Analytic { march } => {
-                    if let ObjectKind::Primitive(p) = &o.kind {
-                        return Box::new(AnalyticObject::new(*p, o));
-                    }
-                    let kind = o.kind_name();
-                    (march, format!("{kind} '{}': sphere traced (no closed form for {kind})", o.label))
-                }
-                Representation::Sdf { march } => {
-                    (march, format!("{} '{}': sphere traced", o.kind_name(), o.label))
-                }
-                Representation::Mesh { resolution, shading, method, march } => {
-                    if let Some(g) = tessellated(scene, o, resolution, shading, method) {
-                        return Box::new(g);
-                    }
-                    (march, format!("{} '{}': sphere traced (unbounded: no mesh)", o.kind_name(), o.label))
-                }
-                Representation::Grid { resolution, fill, storage, march } => {
-                    if let Some(g) = gridded(scene, o, resolution, fill, storage, march) {
-                        return g;
-                    }
-                    let why = "unbounded or unsigned: no grid";
-                    (march, format!("{} '{}': sphere traced ({why})", o.kind_name(), o.label))
-                }
-            };
-            if let ObjectKind::Mesh { mesh, shading, .. } = &o.kind {
-                // A mesh is traced as triangles in the other representations.
-                return Box::new(MeshGeometry::new(
-                    TriangleMesh::clone(mesh),
-                    *shading,
-                    o.compiled_transform(),
-                    o.material,
-                    format!("mesh '{}'", o.label),
-                ));
-            }
-            match SdfObject::new(o, march, why) {
-                Some(s) => Box::new(s),
-                None => unreachable!("only top-level objects hold meshes"),
-            }
-        })
-        .collect()
+    }
 }
 
-/// A grid-file object ([`ObjectKind::Grid`]) in representation `repr`: its surface
-/// extracted at `resolution` cells ([`grid_file_mesh`]) in the mesh representation, the
-/// grid itself ray marched in every other one (stored as a narrow band under
-/// [`GridStorage::Band`]).
-fn grid_file_geometry(o: &Object, repr: Representation) -> Box<dyn Geometry> {
-    let ObjectKind::Grid { grid, source } = &o.kind else { unreachable!("called for grid objects only") };
-    let file =
-        source.file_name().map_or_else(|| source.display().to_string(), |f| f.to_string_lossy().into());
-    let transform = o.compiled_transform();
-    let (march, storage) = match repr {
-        Representation::Mesh { resolution, method, .. } => {
-            if let Some(mesh) = grid_file_mesh(o, resolution, method) {
-                let res = resolution.min(MAX_EXTRACT_RESOLUTION);
-                let label = format!("grid '{}' ({file}) extracted at {res} cells", o.label);
-                return Box::new(MeshGeometry::new(
-                    mesh,
-                    Shading::Flat,
-                    Transform::IDENTITY,
-                    o.material,
-                    label,
-                ));
-            }
-            // No surface in the grid: march it (it will show nothing, honestly).
-            (MarchParams::default(), GridStorage::Dense)
+impl MeshMethod {
+    /// The extraction method used for objects extracted from their SDF (marching cubes
+    /// under [`MeshMethod::Parametric`], for the objects that cannot be tessellated).
+    pub fn extract_method(self) -> ExtractMethod {
+        match self {
+            MeshMethod::Extracted(m) => m,
+            MeshMethod::Parametric => ExtractMethod::MarchingCubes,
         }
-        Representation::Grid { storage, march, .. } => (march, storage),
-        Representation::Analytic { march } | Representation::Sdf { march } => (march, GridStorage::Dense),
-    };
-    let label = format!("grid '{}' ({file})", o.label);
-    let store: GridStore = match storage {
-        GridStorage::Band { cells } => match BandGrid::from_dense(grid, cells) {
-            Ok(b) => b.into(),
-            Err(_) => SdfGrid::clone(grid).into(),
-        },
-        GridStorage::Dense => SdfGrid::clone(grid).into(),
-    };
-    Box::new(GridObject::placed(store, &transform, o.material, march, label))
-}
-
-/// The zero level set of a grid-file object's trilinear field, in world space, extracted at
-/// `resolution` cells (at most [`MAX_EXTRACT_RESOLUTION`]) along the longest axis of its
-/// box with marching cubes, or with `method`'s extraction method; `None` for other objects
-/// or when the grid holds no surface.
-pub fn grid_file_mesh(o: &Object, resolution: u32, method: MeshMethod) -> Option<TriangleMesh> {
-    let ObjectKind::Grid { grid, .. } = &o.kind else { return None };
-    let how = match method {
-        MeshMethod::Extracted(m) => m,
-        MeshMethod::Parametric => ExtractMethod::MarchingCubes,
-    };
-    // The field of `GridObject::placed`: the grid's frame under a rigid transform with
-    // uniform scale (checked when the scene is read), so distances scale exactly.
-    let t = o.compiled_transform();
-    let (to_local, scale) = (t.to_local_f64, t.min_scale as f64);
-    let f = |p: DVec3| grid.trilinear(to_local.transform_point3(p).as_vec3()) as f64 * scale;
-    let bounds = o.bounds()?;
-    let mesh = crate::convert::extract::extract(
-        &f,
-        Field::Arbitrary,
-        &bounds,
-        resolution.min(MAX_EXTRACT_RESOLUTION),
-        how,
-    );
-    (!mesh.triangles.is_empty()).then_some(mesh)
-}
-
-/// Builds the scene geometry in representation `repr`.
-pub fn build_scene(scene: &Scene, repr: Representation) -> SceneGeometry {
-    SceneGeometry::new(build_objects(scene, repr))
+    }
 }
 
 /// Largest resolution SDF-to-mesh extraction is run at in the mesh representation.
 pub const MAX_EXTRACT_RESOLUTION: u32 = 512;
 
-/// A primitive object tessellated at `resolution` and traced as a mesh under the object's
-/// transform; an infinite plane becomes a disc around the camera; a bounded CSG or
-/// repetition node is extracted from its SDF. `None` for unbounded nodes.
-fn tessellated(
-    scene: &Scene,
-    o: &Object,
-    resolution: u32,
-    shading: Shading,
-    method: MeshMethod,
-) -> Option<MeshGeometry> {
-    let parametric = matches!(
-        (&o.kind, method),
-        (ObjectKind::Primitive(Primitive::Plane { .. }), _)
-            | (ObjectKind::Primitive(_), MeshMethod::Parametric)
-    );
-    if !parametric {
-        // CSG and bounded repetition (and every bounded object when extraction is asked
-        // for): extracted from the SDF at most 512 cells along the longest axis (the
-        // sample grid is held in memory while extracting).
-        let how = match method {
-            MeshMethod::Extracted(m) => m,
-            MeshMethod::Parametric => ExtractMethod::MarchingCubes,
-        };
-        let res = resolution.min(MAX_EXTRACT_RESOLUTION);
-        let mesh = extract_object(o, res, how)?;
-        if mesh.triangles.is_empty() {
-            return None;
-        }
-        let label = format!("{} '{}' extracted from its SDF at {res} cells", o.kind_name(), o.label);
-        return Some(MeshGeometry::new(mesh, Shading::Flat, Transform::IDENTITY, o.material, label));
-    }
-    let ObjectKind::Primitive(prim) = &o.kind else { return None };
-    let label = format!("{} '{}' tessellated at {resolution}", prim.kind_name(), o.label);
-    if let Primitive::Plane { normal, offset } = *prim {
-        let t = o.compiled_transform();
-        let n = t.normal_to_world(normal);
-        let p0 = t.to_world.transform_point3(normal * offset);
-        let mesh = plane_view_mesh(n, n.dot(p0), scene.camera.position, scene.settings.max_distance);
-        return Some(MeshGeometry::new(mesh, Shading::Flat, Transform::IDENTITY, o.material, label));
-    }
-    let mesh = tessellate(prim, resolution, None);
-    // Sharp-edged shapes come without vertex normals: they stay flat even when smooth
-    // shading is asked for (averaged normals would round their edges off).
-    let shading = if mesh.normals.is_some() { shading } else { Shading::Flat };
-    Some(MeshGeometry::new(mesh, shading, o.compiled_transform(), o.material, label))
-}
-
-/// Every object of `scene` that the mesh representation `repr` turns into triangles, in
-/// world space, as one mesh (for artifacts and external checks); `None` when `repr` is not
-/// a mesh representation or nothing becomes triangles.
-pub fn scene_mesh(scene: &Scene, repr: Representation) -> Option<TriangleMesh> {
-    let Representation::Mesh { resolution, shading, method, .. } = repr else { return None };
-    let mut all = TriangleMesh::default();
-    for o in &scene.objects {
-        let mesh = match &o.kind {
-            ObjectKind::Mesh { mesh, .. } => {
-                let mut m = TriangleMesh::clone(mesh);
-                m.transform(&o.compiled_transform().to_world);
-                m
-            }
-            ObjectKind::Grid { .. } => match grid_file_mesh(o, resolution, method) {
-                Some(m) => m,
-                None => continue,
-            },
-            _ => match tessellated(scene, o, resolution, shading, method) {
-                Some(g) => g.world_mesh(),
-                None => continue,
-            },
-        };
-        let base = all.positions.len() as u32;
-        all.positions.extend(&mesh.positions);
-        all.triangles.extend(mesh.triangles.iter().map(|t| t.map(|i| i + base)));
-    }
-    (!all.triangles.is_empty()).then_some(all)
-}
-
 /// Margin of grids around an object's bounds, in cells: keeps the surface off the grid's
 /// boundary so the interpolated field is closed.
 pub const GRID_MARGIN_CELLS: u32 = 2;
 
-/// A bounded object sampled into a world-space SDF grid, or `None` when it is unbounded,
-/// unsigned (holds a triangle primitive) or its grid cannot be built.
-///
-/// `fill` applies to mesh objects only: [`GridFill::Voxelize`] voxelizes them
-/// ([`crate::geometry::grid::voxelize`], about one voxel of error; a mesh that voxelizing finds open
-/// falls back to exact sampling and its label says so). Analytic objects (primitives, CSG,
-/// repetition) are always sampled exactly from their SDF. `storage`
-/// [`GridStorage::Band`] keeps only the bricks near the surface
-/// ([`crate::geometry::grid::band`]); it is built without a dense grid except for voxelized meshes
-/// (the distance transform needs the whole grid).
-///
-/// View clipping: an analytic object whose box is much larger than the region the camera
-/// sees ([`view_region`]: the view frustum out to twice the other objects' farthest
-/// corner; used when it cuts the object's longest extent by more than
-/// [`VIEW_CLIP_FRACTION`]) is gridded only inside that region, `resolution` cells along
-/// the clipped box's longest axis, and sphere traced on its analytic SDF outside it
-/// ([`ClippedGrid`]); entirely outside the region it is only sphere traced. Mesh objects
-/// are never clipped.
-fn gridded(
-    scene: &Scene,
-    o: &Object,
-    resolution: u32,
-    fill: GridFill,
-    storage: GridStorage,
-    march: MarchParams,
-) -> Option<Box<dyn Geometry>> {
-    let b = o.bounds()?;
-    let (mut lo, mut hi) = (Vec3::from(b.min), Vec3::from(b.max));
-    let kind = o.kind_name();
-    let is_mesh = matches!(o.kind, ObjectKind::Mesh { .. });
-    let clip = if is_mesh { None } else { view_region(scene, o) };
-    let mut clipped = false;
-    if let Some(region) = clip {
-        let c = region.intersection(&b);
-        let (clo, chi) = (Vec3::from(c.min), Vec3::from(c.max));
-        if !(chi - clo).cmpge(Vec3::ZERO).all() {
-            let why = format!("{kind} '{}': sphere traced (outside the view region: no grid)", o.label);
-            return Some(Box::new(SdfObject::new(o, march, why)?));
-        }
-        if (chi - clo).max_element() < VIEW_CLIP_FRACTION * (hi - lo).max_element() {
-            (lo, hi, clipped) = (clo, chi, true);
+/// Samples along the longest axis of a grid of `resolution` cells there (cell corners,
+/// plus [`GRID_MARGIN_CELLS`] on each side): `resolution + 1 + 2 margin`, saturating. The
+/// other axes have at most as many.
+pub fn grid_samples_per_axis(resolution: u32) -> u32 {
+    resolution.saturating_add(1 + 2 * GRID_MARGIN_CELLS)
+}
+
+/// How one object is built for tracing, and why it is not as asked when it is not.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ObjectPlan {
+    /// What is built.
+    pub build: Build,
+    /// Why `build` is not (entirely) the asked representation; `None` when it is.
+    pub fallback: Option<Fallback>,
+}
+
+/// What is built for one object (see the module header).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Build {
+    /// Closed-form ray/primitive intersection ([`crate::geometry::analytic::AnalyticObject`]).
+    ClosedForm,
+    /// Sphere tracing of the object's analytic SDF ([`crate::geometry::sdf::SdfObject`]).
+    Marched {
+        /// Sphere tracing parameters (pixel footprint from the camera).
+        march: MarchParams,
+    },
+    /// A loaded mesh traced as its triangles under the object's transform.
+    MeshTriangles,
+    /// A primitive (not a plane) tessellated parametrically and traced as a mesh under the
+    /// object's transform.
+    Tessellated {
+        /// Segments around the largest circle, `>= 3`.
+        resolution: u32,
+        /// Shading of the triangles: the asked one, or flat for sharp-edged shapes (known
+        /// once tessellated: those come without vertex normals).
+        shading: Shading,
+    },
+    /// An infinite plane as a flat disc around the camera out to the scene's
+    /// `max_distance`.
+    PlaneDisc {
+        /// The asked tessellation resolution (named in the description only).
+        resolution: u32,
+    },
+    /// A bounded, signed object's surface extracted from its SDF, traced flat in world
+    /// space.
+    Extracted {
+        /// The extraction method.
+        method: ExtractMethod,
+        /// Cells along the longest axis of the object's box, at most
+        /// [`MAX_EXTRACT_RESOLUTION`].
+        resolution: u32,
+    },
+    /// An object sampled into a world-space SDF grid and ray marched through it.
+    Grid {
+        /// Cells along the longest axis of the gridded box (the object's, or `clip`).
+        resolution: u32,
+        /// How the grid is filled: meshes as asked (or [`GridFill::Sample`] when
+        /// voxelizing found the mesh open); analytic objects always [`GridFill::Sample`].
+        fill: GridFill,
+        /// How the samples are stored.
+        storage: GridStorage,
+        /// Ray marching parameters (pixel footprint from the camera).
+        march: MarchParams,
+        /// The part of the object's box that is gridded when it is clipped to the view
+        /// region (the rest is sphere traced); `None`: the whole box.
+        clip: Option<Aabb>,
+    },
+    /// A grid file ray marched.
+    GridFileMarched {
+        /// How its samples are stored.
+        storage: GridStorage,
+        /// Ray marching parameters.
+        march: MarchParams,
+    },
+    /// A grid file's zero level set extracted and traced flat in world space.
+    GridFileExtracted {
+        /// The extraction method.
+        method: ExtractMethod,
+        /// Cells along the longest axis of the grid's box, at most
+        /// [`MAX_EXTRACT_RESOLUTION`].
+        resolution: u32,
+    },
+}
+
+/// Why an object is not built in the asked representation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Fallback {
+    /// Analytic: the object kind (CSG, repetition) has no closed-form intersection; it is
+    /// sphere traced.
+    NoClosedForm {
+        /// The object's kind name.
+        kind: &'static str,
+    },
+    /// Mesh or grid: the object is unbounded (unbounded repetition, CSG around a plane);
+    /// it is sphere traced.
+    Unbounded,
+    /// Mesh (extraction) or grid: the object holds a triangle, whose distance has no sign;
+    /// it is sphere traced.
+    Unsigned,
+    /// Grid: the object's box lies entirely outside the view region; it is sphere traced.
+    OutsideViewRegion,
+    /// Grid: the object is gridded only inside the view region and sphere traced outside
+    /// it.
+    ClippedToViewRegion,
+    /// Grid with [`GridFill::Voxelize`]: voxelizing found the mesh open, so it was sampled
+    /// exactly instead (known while building).
+    OpenMeshSampled,
+    /// Mesh: extracting the surface gave no triangles; the object is sphere traced (known
+    /// while building).
+    EmptyExtraction,
+    /// Grid: the grid could not be built (see the grid builders' errors); an analytic
+    /// object is sphere traced, a mesh traced as triangles (known while building).
+    GridNotBuilt,
+    /// Mesh: a grid file holds no surface to extract; its grid is ray marched (known while
+    /// building).
+    NoSurfaceInGridFile,
+    /// Grid with [`GridStorage::Band`]: a grid file's narrow band could not be built; it is
+    /// stored dense (known while building).
+    DenseInsteadOfBand,
+}
+
+impl fmt::Display for Fallback {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Fallback::NoClosedForm { kind } => write!(f, "no closed form for {kind}: sphere traced"),
+            Fallback::Unbounded => f.write_str("unbounded: sphere traced"),
+            Fallback::Unsigned => f.write_str("unsigned distance (holds a triangle): sphere traced"),
+            Fallback::OutsideViewRegion => f.write_str("outside the view region: sphere traced"),
+            Fallback::ClippedToViewRegion => {
+                f.write_str("gridded inside the view region, sphere traced outside it")
+            }
+            Fallback::OpenMeshSampled => f.write_str("voxelizing found the mesh open: sampled"),
+            Fallback::EmptyExtraction => f.write_str("extraction gave no triangles: sphere traced"),
+            Fallback::GridNotBuilt => f.write_str("the grid could not be built"),
+            Fallback::NoSurfaceInGridFile => f.write_str("no surface in the grid: ray marched"),
+            Fallback::DenseInsteadOfBand => f.write_str("the narrow band could not be built: dense"),
         }
     }
-    let band = |g: SdfGrid| -> Option<GridStore> {
-        Some(match storage {
-            GridStorage::Dense => g.into(),
-            GridStorage::Band { cells } => BandGrid::from_dense(&g, cells).ok()?.into(),
-        })
-    };
-    let mut how = "sampled";
-    let grid: GridStore = if let ObjectKind::Mesh { mesh, .. } = &o.kind {
-        let mut world = TriangleMesh::clone(mesh);
-        world.transform(&o.compiled_transform().to_world);
-        let voxelized = match fill {
-            GridFill::Voxelize => match voxelize_mesh(&world, resolution, GRID_MARGIN_CELLS) {
-                Ok(g) => {
-                    how = "voxelized";
-                    Some(g)
-                }
-                Err(_) => {
-                    how = "sampled (voxelizing found it open)";
-                    None
-                }
+}
+
+impl ObjectPlan {
+    /// `build`, as asked.
+    pub fn as_asked(build: Build) -> Self {
+        ObjectPlan { build, fallback: None }
+    }
+
+    /// `build` instead of the asked representation, because of `fallback`.
+    pub fn fallback(build: Build, fallback: Fallback) -> Self {
+        ObjectPlan { build, fallback: Some(fallback) }
+    }
+
+    /// Whether the object is sphere traced on its analytic SDF, entirely ([`Build::Marched`])
+    /// or outside a view-region clip.
+    pub fn sphere_traced(&self) -> bool {
+        matches!(self.build, Build::Marched { .. } | Build::Grid { clip: Some(_), .. })
+    }
+}
+
+/// Decides how `o` (a top-level object of `scene`) is built in `repr`: the one place that
+/// maps representation and object kind to a [`Build`] (see the module header). The plan
+/// holds `repr`'s sphere tracing parameters with the camera's pixel footprint. Fallbacks
+/// found only while building are not in it (see [`build_scene_with_plans`]).
+pub fn plan_object(scene: &Scene, o: &Object, repr: Representation) -> ObjectPlan {
+    let repr = repr.with_pixel_footprint(scene);
+    let marched = |fallback| ObjectPlan { build: Build::Marched { march: repr.march() }, fallback };
+    if let ObjectKind::Grid { .. } = o.kind {
+        let build = match repr {
+            Representation::Mesh { resolution, method, .. } => Build::GridFileExtracted {
+                method: method.extract_method(),
+                resolution: resolution.min(MAX_EXTRACT_RESOLUTION),
             },
-            GridFill::Sample => None,
+            Representation::Grid { storage, march, .. } => Build::GridFileMarched { storage, march },
+            Representation::Analytic { march } | Representation::Sdf { march } => {
+                Build::GridFileMarched { storage: GridStorage::Dense, march }
+            }
         };
-        match (voxelized, storage) {
-            (Some(g), _) => band(g)?,
-            (None, GridStorage::Dense) => sample_mesh(&world, resolution, GRID_MARGIN_CELLS).ok()?.into(),
-            (None, GridStorage::Band { cells }) => {
-                band_from_mesh(&world, resolution, GRID_MARGIN_CELLS, cells).ok()?.into()
-            }
-        }
-    } else {
-        let tree = SdfTree::new(o)?;
-        if !tree.signed {
-            return None;
-        }
-        let f = |p| tree.distance(p);
-        match storage {
-            GridStorage::Dense => sample_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS).ok()?.into(),
-            GridStorage::Band { cells } => {
-                band_from_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS, cells).ok()?.into()
-            }
-        }
-    };
-    let label = format!("{kind} '{}' {how} at {resolution}", o.label);
-    let grid = GridObject::new(grid, o.material, march, label);
-    if clipped {
-        let why = format!("{kind} '{}' outside the view region", o.label);
-        return Some(Box::new(ClippedGrid::new(grid, Box::new(SdfObject::new(o, march, why)?))));
+        return ObjectPlan::as_asked(build);
     }
-    Some(Box::new(grid))
+    let is_mesh = matches!(o.kind, ObjectKind::Mesh { .. });
+    match repr {
+        _ if is_mesh && !matches!(repr, Representation::Grid { .. }) => {
+            ObjectPlan::as_asked(Build::MeshTriangles)
+        }
+        Representation::Analytic { .. } => match o.kind {
+            ObjectKind::Primitive(_) => ObjectPlan::as_asked(Build::ClosedForm),
+            _ => marched(Some(Fallback::NoClosedForm { kind: o.kind_name() })),
+        },
+        Representation::Sdf { .. } => marched(None),
+        Representation::Mesh { resolution, shading, method, .. } => match (&o.kind, method) {
+            (ObjectKind::Primitive(Primitive::Plane { .. }), _) => {
+                ObjectPlan::as_asked(Build::PlaneDisc { resolution })
+            }
+            (ObjectKind::Primitive(_), MeshMethod::Parametric) => {
+                ObjectPlan::as_asked(Build::Tessellated { resolution, shading })
+            }
+            // CSG and bounded repetition (and every bounded object when extraction is
+            // asked for): extracted from the SDF.
+            _ if !signed(o) => marched(Some(Fallback::Unsigned)),
+            _ if o.bounds().is_none() => marched(Some(Fallback::Unbounded)),
+            _ => ObjectPlan::as_asked(Build::Extracted {
+                method: method.extract_method(),
+                resolution: resolution.min(MAX_EXTRACT_RESOLUTION),
+            }),
+        },
+        Representation::Grid { resolution, fill, storage, march } => {
+            let grid = |fill, clip| Build::Grid { resolution, fill, storage, march, clip };
+            let Some(b) = o.bounds() else {
+                let build = if is_mesh { Build::MeshTriangles } else { Build::Marched { march } };
+                return ObjectPlan::fallback(build, Fallback::Unbounded);
+            };
+            if is_mesh {
+                // Meshes are never clipped to the view region.
+                return ObjectPlan::as_asked(grid(fill, None));
+            }
+            let clip = match view_region(scene, o) {
+                Some(region) => {
+                    let c = region.intersection(&b);
+                    let (clo, chi) = (Vec3::from(c.min), Vec3::from(c.max));
+                    let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
+                    if !(chi - clo).cmpge(Vec3::ZERO).all() {
+                        return marched(Some(Fallback::OutsideViewRegion));
+                    }
+                    ((chi - clo).max_element() < VIEW_CLIP_FRACTION * (hi - lo).max_element()).then_some(c)
+                }
+                None => None,
+            };
+            if !signed(o) {
+                return marched(Some(Fallback::Unsigned));
+            }
+            let fallback = clip.map(|_| Fallback::ClippedToViewRegion);
+            ObjectPlan { build: grid(GridFill::Sample, clip), fallback }
+        }
+    }
+}
+
+/// The plans of every top-level object of `scene` in `repr`, in scene order.
+pub fn plan_scene(scene: &Scene, repr: Representation) -> Vec<ObjectPlan> {
+    scene.objects.iter().map(|o| plan_object(scene, o, repr)).collect()
+}
+
+/// Whether `o` has a signed analytic distance (false when it holds a triangle, a mesh or a
+/// grid file).
+fn signed(o: &Object) -> bool {
+    SdfTree::new(o).is_some_and(|t| t.signed)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use super::*;
+    use crate::scene::load_scene;
+
+    fn scene(name: &str) -> Scene {
+        load_scene(&Path::new(env!("CARGO_MANIFEST_DIR")).join("data/scenes").join(name))
+            .unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    fn mesh(method: MeshMethod) -> Representation {
+        Representation::Mesh {
+            resolution: 16,
+            shading: Shading::Smooth,
+            method,
+            march: MarchParams::default(),
+        }
+    }
+
+    fn grid(fill: GridFill) -> Representation {
+        Representation::Grid {
+            resolution: 16,
+            fill,
+            storage: GridStorage::Dense,
+            march: MarchParams::default(),
+        }
+    }
+
+    fn kind(o: &Object) -> &'static str {
+        match &o.kind {
+            ObjectKind::Primitive(Primitive::Plane { .. }) => "plane",
+            ObjectKind::Primitive(Primitive::Triangle { .. }) => "triangle",
+            ObjectKind::Primitive(_) => "primitive",
+            _ => "other",
+        }
+    }
+
+    #[test]
+    fn one_table_decides_every_object() {
+        let s = scene("showcase.toml");
+        let repr = Representation::Analytic { march: MarchParams::default() };
+        let march = repr.with_pixel_footprint(&s).march();
+        assert!(march.pixel_footprint > 0.0);
+        for (o, p) in s.objects.iter().zip(plan_scene(&s, repr)) {
+            let expect = match kind(o) {
+                "other" => ObjectPlan::fallback(
+                    Build::Marched { march },
+                    Fallback::NoClosedForm { kind: o.kind_name() },
+                ),
+                _ => ObjectPlan::as_asked(Build::ClosedForm),
+            };
+            assert_eq!(p, expect, "{}", o.label);
+        }
+        for p in plan_scene(&s, Representation::Sdf { march: MarchParams::default() }) {
+            assert_eq!(p, ObjectPlan::as_asked(Build::Marched { march }));
+        }
+        let mc = ExtractMethod::MarchingCubes;
+        for (o, p) in s.objects.iter().zip(plan_scene(&s, mesh(MeshMethod::Parametric))) {
+            let build = match kind(o) {
+                "plane" => Build::PlaneDisc { resolution: 16 },
+                "other" => Build::Extracted { method: mc, resolution: 16 },
+                _ => Build::Tessellated { resolution: 16, shading: Shading::Smooth },
+            };
+            assert_eq!(p, ObjectPlan::as_asked(build), "{}", o.label);
+        }
+        for (o, p) in s.objects.iter().zip(plan_scene(&s, mesh(MeshMethod::Extracted(mc)))) {
+            let expect = match kind(o) {
+                "plane" => ObjectPlan::as_asked(Build::PlaneDisc { resolution: 16 }),
+                "triangle" => ObjectPlan::fallback(Build::Marched { march }, Fallback::Unsigned),
+                _ => ObjectPlan::as_asked(Build::Extracted { method: mc, resolution: 16 }),
+            };
+            assert_eq!(p, expect, "{}", o.label);
+        }
+        for (o, p) in s.objects.iter().zip(plan_scene(&s, grid(GridFill::Voxelize))) {
+            let expect = match kind(o) {
+                "plane" => ObjectPlan::fallback(Build::Marched { march }, Fallback::Unbounded),
+                "triangle" => ObjectPlan::fallback(Build::Marched { march }, Fallback::Unsigned),
+                // Analytic objects are always sampled.
+                _ => ObjectPlan::as_asked(Build::Grid {
+                    resolution: 16,
+                    fill: GridFill::Sample,
+                    storage: GridStorage::Dense,
+                    march,
+                    clip: None,
+                }),
+            };
+            assert_eq!(p, expect, "{}", o.label);
+        }
+    }
+
+    #[test]
+    fn huge_objects_are_clipped_to_the_view_region() {
+        let s = scene("thesis_rt.toml");
+        let plans = plan_scene(&s, grid(GridFill::Sample));
+        let clipped: Vec<&str> = s
+            .objects
+            .iter()
+            .zip(&plans)
+            .filter(|(_, p)| matches!(p.build, Build::Grid { clip: Some(_), .. }))
+            .map(|(o, p)| {
+                assert_eq!(p.fallback, Some(Fallback::ClippedToViewRegion));
+                assert!(p.sphere_traced());
+                o.label.as_str()
+            })
+            .collect();
+        assert_eq!(clipped, ["yellow ground sphere"]);
+    }
+
+    #[test]
+    fn the_builder_returns_the_plans_it_realised() {
+        let s = scene("showcase.toml");
+        for repr in [
+            Representation::Analytic { march: MarchParams::default() },
+            mesh(MeshMethod::Parametric),
+            grid(GridFill::Sample),
+        ] {
+            let (g, realised) = build_scene_with_plans(&s, repr);
+            assert_eq!(g.objects().len(), realised.len());
+            let mut planned = plan_scene(&s, repr);
+            // Tessellations of sharp-edged shapes are shaded flat.
+            for (p, r) in planned.iter_mut().zip(&realised) {
+                if let (Build::Tessellated { shading, .. }, Build::Tessellated { shading: got, .. }) =
+                    (&mut p.build, r.build)
+                {
+                    *shading = got;
+                }
+            }
+            assert_eq!(planned, realised, "{}", repr.name());
+        }
+    }
+
+    #[test]
+    fn estimates_follow_the_plan() {
+        let s = scene("showcase.toml");
+        assert_eq!(budget::scene_bytes(&s, Representation::Analytic { march: MarchParams::default() }), 0);
+        assert_eq!(budget::scene_bytes(&s, Representation::Sdf { march: MarchParams::default() }), 0);
+        let gridded = plan_scene(&s, grid(GridFill::Sample))
+            .iter()
+            .filter(|p| matches!(p.build, Build::Grid { .. }))
+            .count() as u64;
+        let samples = grid_samples_per_axis(16) as u64;
+        assert_eq!(budget::scene_bytes(&s, grid(GridFill::Sample)), gridded * samples.pow(3) * 4);
+        assert_eq!(grid_samples_per_axis(8), 13);
+        assert_eq!(grid_samples_per_axis(u32::MAX), u32::MAX);
+    }
 }

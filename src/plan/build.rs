@@ -1,0 +1,387 @@
+//! Builds the geometry an [`ObjectPlan`] names, and returns the realised plan: the one
+//! that was built, with the fallbacks found while building (voxelizing finds a mesh open,
+//! an extraction yields no triangles, a grid cannot be built).
+
+use glam::{DVec3, Vec3};
+
+use super::{
+    Build, Fallback, GRID_MARGIN_CELLS, GridFill, GridStorage, MeshMethod, ObjectPlan, Representation,
+    plan_object,
+};
+use crate::convert::extract::{ExtractMethod, Field, extract, extract_object};
+use crate::convert::tessellate::{plane_view_mesh, tessellate};
+use crate::error::Result;
+use crate::geometry::analytic::AnalyticObject;
+use crate::geometry::grid::band::{BandGrid, band_from_function, band_from_mesh};
+use crate::geometry::grid::object::{ClippedGrid, GridObject, GridStore};
+use crate::geometry::grid::voxelize::voxelize_mesh;
+use crate::geometry::grid::{SdfGrid, sample_function, sample_mesh};
+use crate::geometry::march::MarchParams;
+use crate::geometry::mesh::MeshGeometry;
+use crate::geometry::scene::SceneGeometry;
+use crate::geometry::sdf::{SdfObject, SdfTree};
+use crate::geometry::{Geometry, aabb};
+use crate::mesh::TriangleMesh;
+use crate::scene::Scene;
+use crate::scene::shape::{Object, ObjectKind, Primitive, Shading};
+use crate::scene::transform::Transform;
+
+/// Builds the geometry of every top-level object of `scene` in representation `repr`.
+/// Sphere tracing takes its pixel footprint from the scene's camera.
+pub fn build_objects(scene: &Scene, repr: Representation) -> Vec<Box<dyn Geometry>> {
+    build_with_plans(scene, repr).0
+}
+
+/// Builds the scene geometry in representation `repr`.
+pub fn build_scene(scene: &Scene, repr: Representation) -> SceneGeometry {
+    build_scene_with_plans(scene, repr).0
+}
+
+/// Builds the scene geometry in representation `repr`, with the realised plan of each
+/// object (in scene order, as [`SceneGeometry::objects`]): what was built and, where it is
+/// not as asked, why.
+pub fn build_scene_with_plans(scene: &Scene, repr: Representation) -> (SceneGeometry, Vec<ObjectPlan>) {
+    let (objects, plans) = build_with_plans(scene, repr);
+    (SceneGeometry::new(objects), plans)
+}
+
+fn build_with_plans(scene: &Scene, repr: Representation) -> (Vec<Box<dyn Geometry>>, Vec<ObjectPlan>) {
+    let repr = repr.with_pixel_footprint(scene);
+    scene.objects.iter().map(|o| build_object(scene, o, repr, plan_object(scene, o, repr))).unzip()
+}
+
+/// Builds `plan` for `o`, asked in `repr` (which names the sphere tracing used when a
+/// fallback found while building turns to it, and words the descriptions); returns the
+/// geometry and the realised plan.
+fn build_object(
+    scene: &Scene,
+    o: &Object,
+    repr: Representation,
+    plan: ObjectPlan,
+) -> (Box<dyn Geometry>, ObjectPlan) {
+    let march = repr.march();
+    let marched = |fallback: Fallback| -> (Box<dyn Geometry>, ObjectPlan) {
+        let plan = ObjectPlan::fallback(Build::Marched { march }, fallback);
+        (sphere_traced(o, repr, march, plan.fallback), plan)
+    };
+    match plan.build {
+        Build::ClosedForm => {
+            let ObjectKind::Primitive(p) = &o.kind else { unreachable!("closed form for primitives only") };
+            (Box::new(AnalyticObject::new(*p, o)), plan)
+        }
+        Build::Marched { march } => (sphere_traced(o, repr, march, plan.fallback), plan),
+        Build::MeshTriangles => (Box::new(mesh_triangles(o)), plan),
+        Build::Tessellated { .. } | Build::PlaneDisc { .. } | Build::Extracted { .. } => {
+            match mesh_geometry(scene, o, plan.build) {
+                Some((g, build)) => (Box::new(g), ObjectPlan { build, ..plan }),
+                None => marched(Fallback::EmptyExtraction),
+            }
+        }
+        Build::GridFileExtracted { method, resolution } => match grid_file_surface(o, resolution, method) {
+            Some(mesh) => {
+                let label =
+                    format!("grid '{}' ({}) extracted at {resolution} cells", o.label, grid_file_name(o));
+                let g = MeshGeometry::new(mesh, Shading::Flat, Transform::IDENTITY, o.material, label);
+                (Box::new(g), plan)
+            }
+            // No surface in the grid: march it (it will show nothing, honestly).
+            None => {
+                let build =
+                    Build::GridFileMarched { storage: GridStorage::Dense, march: MarchParams::default() };
+                let (g, realised) = grid_file_marched(o, build);
+                (g, ObjectPlan::fallback(realised.build, Fallback::NoSurfaceInGridFile))
+            }
+        },
+        Build::GridFileMarched { .. } => {
+            let (g, realised) = grid_file_marched(o, plan.build);
+            (g, ObjectPlan { fallback: plan.fallback.or(realised.fallback), ..realised })
+        }
+        Build::Grid { .. } => match gridded(o, plan) {
+            Some(built) => built,
+            None if matches!(o.kind, ObjectKind::Mesh { .. }) => (
+                Box::new(mesh_triangles(o)),
+                ObjectPlan::fallback(Build::MeshTriangles, Fallback::GridNotBuilt),
+            ),
+            None => marched(Fallback::GridNotBuilt),
+        },
+    }
+}
+
+/// `o` sphere traced on its analytic SDF, described by why (from `repr` and `fallback`).
+fn sphere_traced(
+    o: &Object,
+    repr: Representation,
+    march: MarchParams,
+    fallback: Option<Fallback>,
+) -> Box<dyn Geometry> {
+    let kind = o.kind_name();
+    // The descriptions of the render report (`toolkit render`); under the mesh and grid
+    // representations one text covers several fallbacks. Each `format!` is written as it
+    // always was: the string's capacity counts in `bytes_used` (the compare CSV's bytes).
+    let why = match (fallback, repr) {
+        (None, _) => format!("{kind} '{}': sphere traced", o.label),
+        (Some(Fallback::NoClosedForm { kind }), _) => {
+            format!("{kind} '{}': sphere traced (no closed form for {kind})", o.label)
+        }
+        (Some(Fallback::OutsideViewRegion), _) => {
+            format!("{kind} '{}': sphere traced (outside the view region: no grid)", o.label)
+        }
+        (Some(_), Representation::Mesh { .. }) => {
+            format!("{kind} '{}': sphere traced (unbounded: no mesh)", o.label)
+        }
+        (Some(_), _) => {
+            let why = "unbounded or unsigned: no grid";
+            format!("{kind} '{}': sphere traced ({why})", o.label)
+        }
+    };
+    match SdfObject::new(o, march, why) {
+        Some(s) => Box::new(s),
+        None => unreachable!("meshes and grid files are never sphere traced"),
+    }
+}
+
+/// A loaded mesh traced as its triangles.
+fn mesh_triangles(o: &Object) -> MeshGeometry {
+    let ObjectKind::Mesh { mesh, shading, .. } = &o.kind else { unreachable!("called for meshes only") };
+    MeshGeometry::new(
+        TriangleMesh::clone(mesh),
+        *shading,
+        o.compiled_transform(),
+        o.material,
+        format!("mesh '{}'", o.label),
+    )
+}
+
+/// The triangles of a [`Build::Tessellated`], [`Build::PlaneDisc`] or [`Build::Extracted`]
+/// plan, with the realised build (the shading a tessellation got); `None` when an
+/// extraction gives no triangles.
+fn mesh_geometry(scene: &Scene, o: &Object, build: Build) -> Option<(MeshGeometry, Build)> {
+    let prim = || match &o.kind {
+        ObjectKind::Primitive(p) => *p,
+        _ => unreachable!("tessellation of primitives only"),
+    };
+    match build {
+        Build::Extracted { method, resolution } => {
+            // The sample grid is held in memory while extracting.
+            let mesh = extract_object(o, resolution, method)?;
+            if mesh.triangles.is_empty() {
+                return None;
+            }
+            let label =
+                format!("{} '{}' extracted from its SDF at {resolution} cells", o.kind_name(), o.label);
+            Some((MeshGeometry::new(mesh, Shading::Flat, Transform::IDENTITY, o.material, label), build))
+        }
+        Build::PlaneDisc { resolution } => {
+            let prim = prim();
+            let Primitive::Plane { normal, offset } = prim else { unreachable!("discs of planes only") };
+            let label = format!("{} '{}' tessellated at {resolution}", prim.kind_name(), o.label);
+            let t = o.compiled_transform();
+            let n = t.normal_to_world(normal);
+            let p0 = t.to_world.transform_point3(normal * offset);
+            let mesh = plane_view_mesh(n, n.dot(p0), scene.camera.position, scene.settings.max_distance);
+            Some((MeshGeometry::new(mesh, Shading::Flat, Transform::IDENTITY, o.material, label), build))
+        }
+        Build::Tessellated { resolution, shading } => {
+            let prim = prim();
+            let label = format!("{} '{}' tessellated at {resolution}", prim.kind_name(), o.label);
+            let mesh = tessellate(&prim, resolution, None);
+            // Sharp-edged shapes come without vertex normals: they stay flat even when
+            // smooth shading is asked for (averaged normals would round their edges off).
+            let shading = if mesh.normals.is_some() { shading } else { Shading::Flat };
+            let g = MeshGeometry::new(mesh, shading, o.compiled_transform(), o.material, label);
+            Some((g, Build::Tessellated { resolution, shading }))
+        }
+        _ => unreachable!("not a triangle plan"),
+    }
+}
+
+/// A grid file's name for descriptions.
+fn grid_file_name(o: &Object) -> String {
+    let ObjectKind::Grid { source, .. } = &o.kind else { unreachable!("called for grid objects only") };
+    source.file_name().map_or_else(|| source.display().to_string(), |f| f.to_string_lossy().into())
+}
+
+/// A grid-file object ray marched ([`Build::GridFileMarched`]), stored as a narrow band
+/// when asked and possible; returns the realised plan.
+fn grid_file_marched(o: &Object, build: Build) -> (Box<dyn Geometry>, ObjectPlan) {
+    let ObjectKind::Grid { grid, .. } = &o.kind else { unreachable!("called for grid objects only") };
+    let Build::GridFileMarched { storage, march } = build else { unreachable!("a marched grid file") };
+    let label = format!("grid '{}' ({})", o.label, grid_file_name(o));
+    let (store, plan): (GridStore, _) = match storage {
+        GridStorage::Band { cells } => match BandGrid::from_dense(grid, cells) {
+            Ok(b) => (b.into(), ObjectPlan::as_asked(build)),
+            Err(_) => (
+                SdfGrid::clone(grid).into(),
+                ObjectPlan::fallback(
+                    Build::GridFileMarched { storage: GridStorage::Dense, march },
+                    Fallback::DenseInsteadOfBand,
+                ),
+            ),
+        },
+        GridStorage::Dense => (SdfGrid::clone(grid).into(), ObjectPlan::as_asked(build)),
+    };
+    let transform = o.compiled_transform();
+    (Box::new(GridObject::placed(store, &transform, o.material, march, label)), plan)
+}
+
+/// The zero level set of a grid-file object's trilinear field, in world space, extracted at
+/// `resolution` cells (at most [`super::MAX_EXTRACT_RESOLUTION`]) along the longest axis
+/// of its box with marching cubes, or with `method`'s extraction method; `None` for other
+/// objects or when the grid holds no surface.
+pub fn grid_file_mesh(o: &Object, resolution: u32, method: MeshMethod) -> Option<TriangleMesh> {
+    grid_file_surface(o, resolution.min(super::MAX_EXTRACT_RESOLUTION), method.extract_method())
+}
+
+/// [`grid_file_mesh`] at `resolution` cells with `method`.
+fn grid_file_surface(o: &Object, resolution: u32, method: ExtractMethod) -> Option<TriangleMesh> {
+    let ObjectKind::Grid { grid, .. } = &o.kind else { return None };
+    // The field of `GridObject::placed`: the grid's frame under a rigid transform with
+    // uniform scale (checked when the scene is read), so distances scale exactly.
+    let t = o.compiled_transform();
+    let (to_local, scale) = (t.to_local_f64, t.min_scale as f64);
+    let f = |p: DVec3| grid.trilinear(to_local.transform_point3(p).as_vec3()) as f64 * scale;
+    let bounds = o.bounds()?;
+    let mesh = extract(&f, Field::Arbitrary, &bounds, resolution, method);
+    (!mesh.triangles.is_empty()).then_some(mesh)
+}
+
+/// Every object of `scene` that the mesh representation `repr` turns into triangles, in
+/// world space, as one mesh (for artifacts and external checks); `None` when `repr` is not
+/// a mesh representation or nothing becomes triangles.
+pub fn scene_mesh(scene: &Scene, repr: Representation) -> Option<TriangleMesh> {
+    if !matches!(repr, Representation::Mesh { .. }) {
+        return None;
+    }
+    let mut all = TriangleMesh::default();
+    for o in &scene.objects {
+        let mesh = match plan_object(scene, o, repr).build {
+            Build::MeshTriangles => {
+                let ObjectKind::Mesh { mesh, .. } = &o.kind else { continue };
+                let mut m = TriangleMesh::clone(mesh);
+                m.transform(&o.compiled_transform().to_world);
+                m
+            }
+            Build::GridFileExtracted { method, resolution } => match grid_file_surface(o, resolution, method)
+            {
+                Some(m) => m,
+                None => continue,
+            },
+            build @ (Build::Tessellated { .. } | Build::PlaneDisc { .. } | Build::Extracted { .. }) => {
+                match mesh_geometry(scene, o, build) {
+                    Some((g, _)) => g.world_mesh(),
+                    None => continue,
+                }
+            }
+            _ => continue,
+        };
+        let base = all.positions.len() as u32;
+        all.positions.extend(&mesh.positions);
+        all.triangles.extend(mesh.triangles.iter().map(|t| t.map(|i| i + base)));
+    }
+    (!all.triangles.is_empty()).then_some(all)
+}
+
+/// A [`Build::Grid`] plan built: `o` sampled into a world-space SDF grid, or `None` when
+/// its grid cannot be built. Returns the realised plan.
+///
+/// `fill` applies to mesh objects only: [`GridFill::Voxelize`] voxelizes them
+/// ([`crate::geometry::grid::voxelize`], about one voxel of error; a mesh that voxelizing
+/// finds open is sampled exactly instead, [`Fallback::OpenMeshSampled`]). Analytic objects
+/// (primitives, CSG, repetition) are always sampled exactly from their SDF. `storage`
+/// [`GridStorage::Band`] keeps only the bricks near the surface
+/// ([`crate::geometry::grid::band`]); it is built without a dense grid except for voxelized
+/// meshes (the distance transform needs the whole grid).
+///
+/// View clipping ([`plan_object`] decides it): an object with a `clip` box is gridded
+/// only inside it, `resolution` cells along the clipped box's longest axis, and sphere
+/// traced on its analytic SDF outside it ([`ClippedGrid`]).
+fn gridded(o: &Object, plan: ObjectPlan) -> Option<(Box<dyn Geometry>, ObjectPlan)> {
+    let Build::Grid { resolution, fill, storage, march, clip } = plan.build else {
+        unreachable!("a grid plan")
+    };
+    let b = clip.or_else(|| o.bounds())?;
+    let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
+    let kind = o.kind_name();
+    let band = |g: SdfGrid| -> Option<GridStore> {
+        Some(match storage {
+            GridStorage::Dense => g.into(),
+            GridStorage::Band { cells } => BandGrid::from_dense(&g, cells).ok()?.into(),
+        })
+    };
+    let mut realised = plan;
+    let mut how = "sampled";
+    let grid: GridStore = if let ObjectKind::Mesh { mesh, .. } = &o.kind {
+        let mut world = TriangleMesh::clone(mesh);
+        world.transform(&o.compiled_transform().to_world);
+        let voxelized = match fill {
+            GridFill::Voxelize => match voxelize_mesh(&world, resolution, GRID_MARGIN_CELLS) {
+                Ok(g) => {
+                    how = "voxelized";
+                    Some(g)
+                }
+                Err(_) => {
+                    how = "sampled (voxelizing found it open)";
+                    realised = ObjectPlan::fallback(
+                        Build::Grid { resolution, fill: GridFill::Sample, storage, march, clip },
+                        Fallback::OpenMeshSampled,
+                    );
+                    None
+                }
+            },
+            GridFill::Sample => None,
+        };
+        match (voxelized, storage) {
+            (Some(g), _) => band(g)?,
+            (None, GridStorage::Dense) => sample_mesh(&world, resolution, GRID_MARGIN_CELLS).ok()?.into(),
+            (None, GridStorage::Band { cells }) => {
+                band_from_mesh(&world, resolution, GRID_MARGIN_CELLS, cells).ok()?.into()
+            }
+        }
+    } else {
+        let tree = SdfTree::new(o)?;
+        let f = |p| tree.distance(p);
+        match storage {
+            GridStorage::Dense => sample_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS).ok()?.into(),
+            GridStorage::Band { cells } => {
+                band_from_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS, cells).ok()?.into()
+            }
+        }
+    };
+    let label = format!("{kind} '{}' {how} at {resolution}", o.label);
+    let grid = GridObject::new(grid, o.material, march, label);
+    if clip.is_some() {
+        let why = format!("{kind} '{}' outside the view region", o.label);
+        let outside = Box::new(SdfObject::new(o, march, why)?);
+        return Some((Box::new(ClippedGrid::new(grid, outside)), realised));
+    }
+    Some((Box::new(grid), realised))
+}
+
+/// The compare experiment's mesh round trip: `mesh` sampled or voxelized into a grid of
+/// `resolution` cells along its longest axis (with [`GRID_MARGIN_CELLS`]), and that grid's
+/// zero level set extracted back with marching cubes at its own cell count. Returns the
+/// grid and the extracted mesh (both in `mesh`'s frame).
+///
+/// # Errors
+/// When the grid cannot be built (a mesh without triangles, one that voxelizing finds
+/// open, a grid over the size limit).
+pub fn reextract_mesh(
+    mesh: &TriangleMesh,
+    fill: GridFill,
+    resolution: u32,
+) -> Result<(SdfGrid, TriangleMesh)> {
+    let grid = match fill {
+        GridFill::Sample => sample_mesh(mesh, resolution, GRID_MARGIN_CELLS)?,
+        GridFill::Voxelize => voxelize_mesh(mesh, resolution, GRID_MARGIN_CELLS)?,
+    };
+    let (lo, hi) = grid.bounds();
+    let cells = (grid.dims - 1).max_element();
+    let surface = extract(
+        &|p: DVec3| grid.trilinear(p.as_vec3()) as f64,
+        Field::Arbitrary,
+        &aabb(lo, hi),
+        cells,
+        ExtractMethod::MarchingCubes,
+    );
+    Ok((grid, surface))
+}
