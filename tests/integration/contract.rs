@@ -26,7 +26,9 @@ use sdfmesh::convert::tessellate::tessellate;
 use sdfmesh::geometry::march::MarchParams;
 use sdfmesh::geometry::{Aabb, Geometry, Hit, Ray, RayStats};
 use sdfmesh::mesh::save_mesh;
-use sdfmesh::plan::{GridFill, GridStorage, MeshMethod, Representation, build_objects, build_scene};
+use sdfmesh::plan::{
+    Build, GridFill, GridStorage, MeshMethod, ObjectPlan, Representation, build_scene_with_plans,
+};
 use sdfmesh::scene::shape::{CsgOp, Object, ObjectKind, Primitive, Shading};
 use sdfmesh::scene::transform::TransformDesc;
 use sdfmesh::scene::{Scene, parse_scene};
@@ -197,16 +199,15 @@ children = [
 /// every representation) also the pixel footprint times `t`: a march stops within
 /// `epsilon * t` of the surface, or, when it runs out of steps near a tangent, within
 /// `2 tan(fov / 2) / height` times `t` (documented in `MarchParams::pixel_footprint`).
-fn accuracy(g: &dyn Geometry, t: f32, size: f32) -> f64 {
+fn accuracy(marched: bool, t: f32, size: f32) -> f64 {
     let rounding = 1e-4 * (size + t) as f64;
-    if marched(g) { rounding + footprint() * t as f64 } else { rounding }
+    if marched { rounding + footprint() * t as f64 } else { rounding }
 }
 
-/// Whether `g` is (or holds something) marched rather than intersected in closed form or
-/// as triangles, from its description.
-fn marched(g: &dyn Geometry) -> bool {
-    let d = g.describe();
-    !(d.contains("closed form") || d.contains("triangles")) || d.contains("traced") || d.contains("marched")
+/// Whether the realised plan marches the object (analytic SDF or grid, entirely or in
+/// part) rather than intersecting it in closed form or as triangles.
+fn marched(plan: &ObjectPlan) -> bool {
+    matches!(plan.build, Build::Marched { .. } | Build::Grid { .. } | Build::GridFileMarched { .. })
 }
 
 fn footprint() -> f64 {
@@ -268,7 +269,7 @@ fn rays_from_hit(hit: &Hit, size: f32, rng: &mut Lcg) -> Vec<(Ray, f32, f32)> {
 
 /// Checks `g` (named `what`) with the rays of `rays`/`rays_from_hit`; returns the number
 /// of hits.
-fn check_geometry(what: &str, g: &dyn Geometry, centre: Vec3, size: f32, seed: u64) -> usize {
+fn check_geometry(what: &str, g: &dyn Geometry, marched: bool, centre: Vec3, size: f32, seed: u64) -> usize {
     let bytes = g.bytes_used();
     assert!(bytes > 0, "{what}: bytes_used is 0");
     assert_eq!(g.bytes_used(), bytes, "{what}: bytes_used changes between calls");
@@ -289,7 +290,7 @@ fn check_geometry(what: &str, g: &dyn Geometry, centre: Vec3, size: f32, seed: u
         assert_eq!(any, closest.is_some(), "{}: any_hit {any}, closest {closest:?}", ctx());
         let Some(hit) = closest else { continue };
         hits += 1;
-        worst = worst.max(check_hit(&ctx(), g, &ray, t_min, t_max, &hit, bounds.as_ref(), size));
+        worst = worst.max(check_hit(&ctx(), g, marched, &ray, t_min, t_max, &hit, bounds.as_ref(), size));
         // An interval that ends before the hit, or starts after it, never returns it.
         let before = hit.t - (1e-3 * size).max(hit.t.abs() * 1e-3);
         if before > t_min {
@@ -304,7 +305,7 @@ fn check_geometry(what: &str, g: &dyn Geometry, centre: Vec3, size: f32, seed: u
             && let Some(h) = g.closest_hit(&ray, after, t_max, &mut stats)
         {
             assert!(h.t >= after && h.t <= t_max, "{}: t_min {after}: hit at {}", ctx(), h.t);
-            worst = worst.max(check_hit(&ctx(), g, &ray, after, t_max, &h, bounds.as_ref(), size));
+            worst = worst.max(check_hit(&ctx(), g, marched, &ray, after, t_max, &h, bounds.as_ref(), size));
         }
         // Grazing and inside rays from the first 60 primary hits.
         if i <= 300 && hits <= 60 {
@@ -327,6 +328,7 @@ fn check_geometry(what: &str, g: &dyn Geometry, centre: Vec3, size: f32, seed: u
 fn check_hit(
     ctx: &str,
     g: &dyn Geometry,
+    marched: bool,
     ray: &Ray,
     t_min: f32,
     t_max: f32,
@@ -354,18 +356,20 @@ fn check_hit(
         hit.point
     );
     let d = g.surface_distance(hit.point.as_dvec3());
-    let tol = accuracy(g, hit.t, size);
+    let tol = accuracy(marched, hit.t, size);
     assert!(d <= tol, "{ctx}: hit at t {} is {d} from the surface (tolerance {tol})", hit.t);
     d / tol
 }
 
 /// Checks every object of `scene` built in `repr`, then the scene aggregate.
 fn check(scene: Scene, repr: Representation) {
-    let objects = build_objects(&scene, repr);
+    let (aggregate, plans) = build_scene_with_plans(&scene, repr);
+    let objects = aggregate.objects();
+    let any_marched = plans.iter().any(marched);
     assert_eq!(objects.len(), scene.objects.len());
     // The region the rays aim at: the union of the bounded objects' boxes.
     let mut region = Aabb::empty();
-    for g in &objects {
+    for g in objects {
         if let Some(b) = g.bounds() {
             // Mesh discs standing in for planes reach out to max_distance: leave them out.
             if (b.max - b.min).max_element() < 100.0 {
@@ -379,12 +383,11 @@ fn check(scene: Scene, repr: Representation) {
     let mut total = 0;
     for (k, g) in objects.iter().enumerate() {
         let what = format!("{} '{}' ({})", repr.name(), scene.objects[k].label, g.describe());
-        let hits = check_geometry(&what, g.as_ref(), centre, size, 17 + k as u64);
+        let hits = check_geometry(&what, g.as_ref(), marched(&plans[k]), centre, size, 17 + k as u64);
         total += hits;
     }
     assert!(total > 100, "{}: only {total} hits on the objects", repr.name());
-    let aggregate = build_scene(&scene, repr);
-    let hits = check_geometry(&format!("{} scene", repr.name()), &aggregate, centre, size, 99);
+    let hits = check_geometry(&format!("{} scene", repr.name()), &aggregate, any_marched, centre, size, 99);
     assert!(hits > 100, "{}: only {hits} hits on the scene", repr.name());
     // The aggregate's closest hit is the nearest of its objects' closest hits.
     let mut stats = RayStats::default();
@@ -395,7 +398,7 @@ fn check(scene: Scene, repr: Representation) {
             .filter_map(|g| g.closest_hit(&ray, t_min, t_max, &mut stats).map(|h| h.t))
             .min_by(f32::total_cmp);
         let agree = match (all, nearest) {
-            (Some(a), Some(b)) => (a - b).abs() <= 1e-3 * size + accuracy(&aggregate, b, size) as f32,
+            (Some(a), Some(b)) => (a - b).abs() <= 1e-3 * size + accuracy(any_marched, b, size) as f32,
             (None, None) => true,
             _ => false,
         };
