@@ -26,8 +26,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::cli::commands::{Overrides, check_repr, load_scene_or_mesh};
 use crate::convert::extract::{ExtractMethod, Field, extract};
+use crate::convert::mesh_to_grid::sample_mesh;
 use crate::error::{Error, Result};
-use crate::geometry::grid::{SdfGrid, sample_mesh};
+use crate::geometry::grid::SdfGrid;
 use crate::geometry::march::MarchParams;
 use crate::geometry::scene::SceneGeometry;
 use crate::geometry::{Geometry, aabb};
@@ -382,7 +383,7 @@ fn build(scene: &Scene, b: Build, budget: &MemoryBudget) -> Result<Built> {
             let original = mesh_input(scene).ok_or_else(|| Error::Usage("not a mesh input".into()))?;
             let grid = match fill {
                 GridFill::Sample => sample_mesh(original, resolution, crate::plan::GRID_MARGIN_CELLS)?,
-                GridFill::Voxelize => crate::geometry::grid::voxelize::voxelize_mesh(
+                GridFill::Voxelize => crate::convert::mesh_to_grid::voxelize::voxelize_mesh(
                     original,
                     resolution,
                     crate::plan::GRID_MARGIN_CELLS,

@@ -7,14 +7,16 @@ pub mod budget;
 use glam::{DVec3, Vec3};
 
 use crate::convert::extract::{ExtractMethod, Field, extract_object};
+use crate::convert::mesh_to_grid::band::{band_from_function, band_from_mesh};
+use crate::convert::mesh_to_grid::voxelize::voxelize_mesh;
+use crate::convert::mesh_to_grid::{sample_function, sample_mesh};
 use crate::convert::tessellate::plane_view_mesh;
 use crate::convert::tessellate::tessellate;
 use crate::geometry::Geometry;
 use crate::geometry::analytic::AnalyticObject;
-use crate::geometry::grid::band::{BandGrid, band_from_function, band_from_mesh};
+use crate::geometry::grid::SdfGrid;
+use crate::geometry::grid::band::BandGrid;
 use crate::geometry::grid::object::{ClippedGrid, GridObject, GridStore, VIEW_CLIP_FRACTION, view_region};
-use crate::geometry::grid::voxelize::voxelize_mesh;
-use crate::geometry::grid::{SdfGrid, sample_function, sample_mesh};
 use crate::geometry::march::MarchParams;
 use crate::geometry::mesh::MeshGeometry;
 use crate::geometry::scene::SceneGeometry;
@@ -313,7 +315,7 @@ pub const GRID_MARGIN_CELLS: u32 = 2;
 /// unsigned (holds a triangle primitive) or its grid cannot be built.
 ///
 /// `fill` applies to mesh objects only: [`GridFill::Voxelize`] voxelizes them
-/// ([`crate::geometry::grid::voxelize`], about one voxel of error; a mesh that voxelizing finds open
+/// ([`crate::convert::mesh_to_grid::voxelize`], about one voxel of error; a mesh that voxelizing finds open
 /// falls back to exact sampling and its label says so). Analytic objects (primitives, CSG,
 /// repetition) are always sampled exactly from their SDF. `storage`
 /// [`GridStorage::Band`] keeps only the bricks near the surface

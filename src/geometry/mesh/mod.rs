@@ -14,8 +14,7 @@ use glam::{DVec3, Vec3};
 use obvhs::BvhBuildParams;
 
 use crate::geometry::bvh2;
-use crate::geometry::grid::closest::closest_point_on_triangle;
-use crate::geometry::mesh::triangle::ShearedRay;
+use crate::geometry::mesh::triangle::{ShearedRay, closest_point_on_triangle};
 #[cfg(target_arch = "x86_64")]
 use crate::geometry::mesh::wide_bvh::BoxRayAvx2;
 use crate::geometry::mesh::wide_bvh::{BoxRay, BoxTest, LeafHit, WideBvh, closest_walk};

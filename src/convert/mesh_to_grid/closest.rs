@@ -1,10 +1,7 @@
-//! Exact closest points on triangles and the nearest-triangle query over a BVH.
+//! The nearest-triangle query over a BVH, for sampling a mesh's distance field.
 //!
-//! [`closest_point_on_triangle`] is Ericson's region-based method (Real-Time Collision
-//! Detection, 5.1.5): the query point is classified against the Voronoi regions of the
-//! triangle's corners and edges with dot products; in the face region the point is
-//! projected onto the triangle's plane (more accurate in `f32` than Ericson's barycentric
-//! form when the point is far from a small triangle).
+//! The exact closest point on one triangle is [`closest_point_on_triangle`] (in
+//! [`crate::geometry::mesh::triangle`], beside the ray/triangle test).
 //!
 //! [`TriangleBvh`] holds an obvhs [`Bvh2`] over a mesh's triangles with the corners stored
 //! in leaf order, and the same hierarchy collapsed to 4-wide nodes whose children's bounds
@@ -35,6 +32,7 @@ use obvhs::BvhBuildParams;
 use obvhs::bvh2::Bvh2;
 
 use crate::geometry::bvh2;
+use crate::geometry::mesh::triangle::closest_point_on_triangle;
 use crate::geometry::{Aabb, aabb};
 use crate::mesh::TriangleMesh;
 
@@ -42,51 +40,6 @@ use crate::mesh::TriangleMesh;
 /// (high 32 bits) and its index (low). Keep one per thread; it grows to the BVH's depth
 /// once and is then reused.
 pub type NodeStack = Vec<u64>;
-
-/// The closest point to `p` on the triangle `a, b, c` (Ericson's region-based method).
-///
-/// The triangle must have non-zero area (the [`TriangleMesh`] invariant).
-#[inline]
-pub fn closest_point_on_triangle(p: Vec3A, a: Vec3A, b: Vec3A, c: Vec3A) -> Vec3A {
-    let ab = b - a;
-    let ac = c - a;
-    let ap = p - a;
-    let d1 = ab.dot(ap);
-    let d2 = ac.dot(ap);
-    if d1 <= 0.0 && d2 <= 0.0 {
-        return a; // corner region A
-    }
-    let bp = p - b;
-    let d3 = ab.dot(bp);
-    let d4 = ac.dot(bp);
-    if d3 >= 0.0 && d4 <= d3 {
-        return b; // corner region B
-    }
-    let vc = d1 * d4 - d3 * d2;
-    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        let v = d1 / (d1 - d3);
-        return a + ab * v; // edge region AB
-    }
-    let cp = p - c;
-    let d5 = ab.dot(cp);
-    let d6 = ac.dot(cp);
-    if d6 >= 0.0 && d5 <= d6 {
-        return c; // corner region C
-    }
-    let vb = d5 * d2 - d1 * d6;
-    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        let w = d2 / (d2 - d6);
-        return a + ac * w; // edge region AC
-    }
-    let va = d3 * d6 - d5 * d4;
-    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
-        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        return b + (c - b) * w; // edge region BC
-    }
-    // Face region: project onto the plane.
-    let n = ab.cross(ac);
-    p - n * (ap.dot(n) / n.length_squared())
-}
 
 /// Squared distance from `p` to the box `[lo, hi]` (0 inside).
 #[inline]
