@@ -20,7 +20,7 @@
 //! far or than a caller-supplied upper bound. [`TriangleBvh::nearest_group`] answers up to
 //! [`GROUP_MAX`] nearby points in one walk (a node is opened when any of them needs it,
 //! each prunes by its own best), which shares the node loads and overlaps the points'
-//! independent arithmetic; where the CPU has AVX2 (detected at run time) its node and
+//! independent arithmetic; where the CPU has AVX2 ([`crate::simd::avx2`]) its node and
 //! leaf tests take two points per instruction, with the same operations in the same order
 //! as the portable ones (so the same results). Neither allocates: the caller passes a
 //! reusable [`NodeStack`] or [`GroupStack`].
@@ -888,12 +888,7 @@ impl TriangleBvh {
         let corners: Vec<[Vec3A; 3]> = original.iter().map(|&i| tri(&mesh.triangles[i as usize])).collect();
         bvh.primitive_indices = (0..original.len() as u32).collect();
         let (wide, packets) = collapse(&bvh, &corners);
-        #[cfg(target_arch = "x86_64")]
-        let avx2 = std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("popcnt")
-            && std::arch::is_x86_feature_detected!("bmi1");
-        #[cfg(not(target_arch = "x86_64"))]
-        let avx2 = false;
+        let avx2 = crate::simd::avx2();
         TriangleBvh { bvh, corners, original, wide, packets, avx2 }
     }
 
@@ -1025,7 +1020,8 @@ impl TriangleBvh {
     ) {
         #[cfg(target_arch = "x86_64")]
         if self.avx2 {
-            // SAFETY: `avx2` is only set where the CPU has AVX2.
+            // SAFETY: `avx2` is only set where the CPU has AVX2, POPCNT and BMI1
+            // (`crate::simd::avx2`).
             return unsafe { self.nearest_group_avx2(points, hints, out, stack, visited) };
         }
         self.group_walk::<false>(points, hints, out, stack, visited)

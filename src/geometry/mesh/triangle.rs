@@ -11,7 +11,7 @@ use std::ops::{Add, Div, Mul, Sub};
 
 use glam::{DVec3, Vec3, Vec3A};
 
-use crate::geometry::mesh::wide_bvh::F4;
+use crate::simd::F4;
 
 /// Per-ray precomputation of the shear that maps the ray to the +z axis.
 #[derive(Clone, Copy, Debug)]

@@ -4,10 +4,9 @@
 //! instruction per step where the CPU has it, detected at run time, else two SSE halves),
 //! with leaves of up to eight triangles pre-gathered into one or two [`Tri4`] packets
 //! (tested together in one eight-lane AVX test, `ShearedRay::intersect8_avx`, where the
-//! CPU has it, else one [`ShearedRay::intersect4`] after the other). Owns the closest-hit,
-//! any-hit and nearest-point walks over it and their work counting, and [`F4`], the
-//! four-lane f32 vector the box and triangle tests use (SSE on x86_64, plain arrays
-//! elsewhere). The scene's top-level BVH over objects stays in [`crate::geometry::bvh2`].
+//! CPU has it ([`crate::simd::avx2`]), else one [`ShearedRay::intersect4`] after the
+//! other). Owns the closest-hit, any-hit and nearest-point walks over it and their work
+//! counting. The scene's top-level BVH over objects stays in [`crate::geometry::bvh2`].
 
 use std::mem::MaybeUninit;
 use std::ops::{Mul, Sub};
@@ -17,6 +16,7 @@ use obvhs::bvh2::Bvh2;
 
 use crate::geometry::mesh::triangle::{ShearedRay, Tri4};
 use crate::geometry::{Aabb, RayStats, box_distance};
+use crate::simd::F4;
 
 /// Children per node. Eight rather than four (benches/primary_rays.rs, armadillo) cuts the
 /// nodes a primary ray visits from 3.4 to 2.5 and the depth from 11 to 7, and raised
@@ -318,198 +318,6 @@ impl BoxTest for BoxRayAvx2 {
     }
 }
 
-/// Four f32 lanes: SSE on x86_64 (part of its baseline, so the intrinsics are safe to
-/// call), a plain array elsewhere. Arithmetic is IEEE single precision lane by lane, so
-/// results equal the scalar ones bit for bit.
-#[derive(Clone, Copy, Debug)]
-pub struct F4(
-    #[cfg(target_arch = "x86_64")] core::arch::x86_64::__m128,
-    #[cfg(not(target_arch = "x86_64"))] [f32; 4],
-);
-
-#[cfg(target_arch = "x86_64")]
-mod f4 {
-    use super::F4;
-    use core::arch::x86_64::*;
-
-    // SAFETY (every block below): SSE and SSE2 are part of the x86_64 baseline, so the
-    // intrinsics' target features are always present; loads and stores go through
-    // references to `[f32; 4]`.
-
-    impl F4 {
-        /// Loads four lanes.
-        #[inline(always)]
-        pub fn load(a: &[f32; 4]) -> F4 {
-            F4(unsafe { _mm_loadu_ps(a.as_ptr()) })
-        }
-        /// The same value in every lane.
-        #[inline(always)]
-        pub fn splat(x: f32) -> F4 {
-            F4(unsafe { _mm_set1_ps(x) })
-        }
-        /// The four lanes.
-        #[inline(always)]
-        pub fn to_array(self) -> [f32; 4] {
-            let mut a = [0.0f32; 4];
-            unsafe { _mm_storeu_ps(a.as_mut_ptr(), self.0) };
-            a
-        }
-        /// Lane-wise `if a < b { a } else { b }` (`b` where either is NaN).
-        #[inline(always)]
-        pub fn min(self, b: F4) -> F4 {
-            F4(unsafe { _mm_min_ps(self.0, b.0) })
-        }
-        /// Lane-wise `if a > b { a } else { b }` (`b` where either is NaN).
-        #[inline(always)]
-        pub fn max(self, b: F4) -> F4 {
-            F4(unsafe { _mm_max_ps(self.0, b.0) })
-        }
-        /// Bit `l` set where lane `l` has `a <= b`.
-        #[inline(always)]
-        pub fn le(self, b: F4) -> u32 {
-            unsafe { _mm_movemask_ps(_mm_cmple_ps(self.0, b.0)) as u32 }
-        }
-        /// Bit `l` set where lane `l` has `a < b`.
-        #[inline(always)]
-        pub fn lt(self, b: F4) -> u32 {
-            unsafe { _mm_movemask_ps(_mm_cmplt_ps(self.0, b.0)) as u32 }
-        }
-        /// Bit `l` set where lane `l` has `a == b`.
-        #[inline(always)]
-        pub fn eq(self, b: F4) -> u32 {
-            unsafe { _mm_movemask_ps(_mm_cmpeq_ps(self.0, b.0)) as u32 }
-        }
-    }
-
-    impl std::ops::Add for F4 {
-        type Output = F4;
-        /// Lane-wise `a + b`.
-        #[inline(always)]
-        fn add(self, b: F4) -> F4 {
-            F4(unsafe { _mm_add_ps(self.0, b.0) })
-        }
-    }
-
-    impl std::ops::Sub for F4 {
-        type Output = F4;
-        /// Lane-wise `a - b`.
-        #[inline(always)]
-        fn sub(self, b: F4) -> F4 {
-            F4(unsafe { _mm_sub_ps(self.0, b.0) })
-        }
-    }
-
-    impl std::ops::Mul for F4 {
-        type Output = F4;
-        /// Lane-wise `a * b`.
-        #[inline(always)]
-        fn mul(self, b: F4) -> F4 {
-            F4(unsafe { _mm_mul_ps(self.0, b.0) })
-        }
-    }
-
-    impl std::ops::Div for F4 {
-        type Output = F4;
-        /// Lane-wise `a / b`.
-        #[inline(always)]
-        fn div(self, b: F4) -> F4 {
-            F4(unsafe { _mm_div_ps(self.0, b.0) })
-        }
-    }
-}
-
-#[cfg(not(target_arch = "x86_64"))]
-mod f4 {
-    use super::F4;
-
-    fn zip(a: F4, b: F4, f: impl Fn(f32, f32) -> f32) -> F4 {
-        F4([f(a.0[0], b.0[0]), f(a.0[1], b.0[1]), f(a.0[2], b.0[2]), f(a.0[3], b.0[3])])
-    }
-
-    fn bits(a: F4, b: F4, f: impl Fn(f32, f32) -> bool) -> u32 {
-        (0..4).fold(0, |m, l| m | (u32::from(f(a.0[l], b.0[l])) << l))
-    }
-
-    impl F4 {
-        /// Loads four lanes.
-        #[inline(always)]
-        pub fn load(a: &[f32; 4]) -> F4 {
-            F4(*a)
-        }
-        /// The same value in every lane.
-        #[inline(always)]
-        pub fn splat(x: f32) -> F4 {
-            F4([x; 4])
-        }
-        /// The four lanes.
-        #[inline(always)]
-        pub fn to_array(self) -> [f32; 4] {
-            self.0
-        }
-        /// Lane-wise `if a < b { a } else { b }` (`b` where either is NaN).
-        #[inline(always)]
-        pub fn min(self, b: F4) -> F4 {
-            zip(self, b, |x, y| if x < y { x } else { y })
-        }
-        /// Lane-wise `if a > b { a } else { b }` (`b` where either is NaN).
-        #[inline(always)]
-        pub fn max(self, b: F4) -> F4 {
-            zip(self, b, |x, y| if x > y { x } else { y })
-        }
-        /// Bit `l` set where lane `l` has `a <= b`.
-        #[inline(always)]
-        pub fn le(self, b: F4) -> u32 {
-            bits(self, b, |x, y| x <= y)
-        }
-        /// Bit `l` set where lane `l` has `a < b`.
-        #[inline(always)]
-        pub fn lt(self, b: F4) -> u32 {
-            bits(self, b, |x, y| x < y)
-        }
-        /// Bit `l` set where lane `l` has `a == b`.
-        #[inline(always)]
-        pub fn eq(self, b: F4) -> u32 {
-            bits(self, b, |x, y| x == y)
-        }
-    }
-
-    impl std::ops::Add for F4 {
-        type Output = F4;
-        /// Lane-wise `a + b`.
-        #[inline(always)]
-        fn add(self, b: F4) -> F4 {
-            zip(self, b, |x, y| x + y)
-        }
-    }
-
-    impl std::ops::Sub for F4 {
-        type Output = F4;
-        /// Lane-wise `a - b`.
-        #[inline(always)]
-        fn sub(self, b: F4) -> F4 {
-            zip(self, b, |x, y| x - y)
-        }
-    }
-
-    impl std::ops::Mul for F4 {
-        type Output = F4;
-        /// Lane-wise `a * b`.
-        #[inline(always)]
-        fn mul(self, b: F4) -> F4 {
-            zip(self, b, |x, y| x * y)
-        }
-    }
-
-    impl std::ops::Div for F4 {
-        type Output = F4;
-        /// Lane-wise `a / b`.
-        #[inline(always)]
-        fn div(self, b: F4) -> F4 {
-            zip(self, b, |x, y| x / y)
-        }
-    }
-}
-
 impl WideBvh {
     /// Collapses `bvh`, built over the boxes `boxes` of the triangles `corners(i)`, with
     /// its primitive indices already in leaf order (`primitive_indices[i] == i`). Which BVH2
@@ -536,7 +344,7 @@ impl WideBvh {
         }
         w.nodes.shrink_to_fit();
         w.packets.shrink_to_fit();
-        w.avx2 = avx2_detected();
+        w.avx2 = crate::simd::avx2();
         w
     }
 
@@ -1068,21 +876,6 @@ fn any_walk_in<B: BoxTest>(
         }
     }
     found
-}
-
-/// Whether the CPU has AVX2, FMA, POPCNT and BMI1 (the walks' fast box test).
-fn avx2_detected() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("popcnt")
-            && std::arch::is_x86_feature_detected!("bmi1")
-            && std::arch::is_x86_feature_detected!("fma")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
 }
 
 /// Appends the primitives of the BVH2 subtree at `node` to `out`.
