@@ -470,6 +470,15 @@ const MAX_CYLINDER_TRIANGLES: u32 = 1 << 12;
 /// The 4-wide hierarchy and leaf packets of `bvh` (a [`Bvh2`] with fewer than `2^31`
 /// nodes and packets, whose `primitive_indices` are the identity into `corners`),
 /// parents before children.
+///
+/// The mesh tracer collapses its BVH2 too
+/// ([`crate::geometry::mesh::wide_bvh::WideBvh::from_bvh2`]); the two share the traversal
+/// orders of [`bvh2`] ([`bvh2::parents_first`], [`bvh2::subtree_primitives`]), not the
+/// grouping: that one chooses up to eight children per node and leaves of up to eight
+/// triangles by a surface area heuristic tuned for ray tests, this one opens the largest
+/// inner child until there are four (every BVH2 leaf a leaf of its own) and fits bounding
+/// cylinders. A shared grouping would change one of the two trees, and with it the speed
+/// each was measured at.
 fn collapse(bvh: &Bvh2, corners: &[[Vec3A; 3]]) -> (Vec<Node4>, Vec<Packet>) {
     let nodes = &bvh.nodes;
     let mut out: Vec<Node4> = Vec::with_capacity(nodes.len() / 2 + 1);
@@ -478,16 +487,7 @@ fn collapse(bvh: &Bvh2, corners: &[[Vec3A; 3]]) -> (Vec<Node4>, Vec<Packet>) {
     // children before parents (the reverse of a depth-first pre-order).
     let mut normal = vec![DVec3::ZERO; nodes.len()];
     let mut count = vec![0u32; nodes.len()];
-    let mut order = Vec::with_capacity(nodes.len());
-    let mut todo = vec![0u32];
-    while let Some(i) = todo.pop() {
-        order.push(i);
-        let n = &nodes[i as usize];
-        if !n.is_leaf() {
-            todo.extend([n.first_index, n.first_index + 1]);
-        }
-    }
-    for &i in order.iter().rev() {
+    for &i in bvh2::parents_first(bvh).iter().rev() {
         let (i, n) = (i as usize, &nodes[i as usize]);
         if n.is_leaf() {
             for s in n.first_index..n.first_index + n.prim_count {
@@ -502,22 +502,14 @@ fn collapse(bvh: &Bvh2, corners: &[[Vec3A; 3]]) -> (Vec<Node4>, Vec<Packet>) {
         }
     }
     let mut slots: Vec<u32> = Vec::new();
-    let mut walk: Vec<u32> = Vec::new();
     let mut cylinder = |i: u32| {
         if count[i as usize] > MAX_CYLINDER_TRIANGLES {
             return Cylinder::NONE;
         }
+        // The subtree's slots (its primitive indices: the identity); the fit takes maxima
+        // and extents, so their order does not matter.
         slots.clear();
-        walk.clear();
-        walk.push(i);
-        while let Some(k) = walk.pop() {
-            let n = &nodes[k as usize];
-            if n.is_leaf() {
-                slots.extend(n.first_index..n.first_index + n.prim_count);
-            } else {
-                walk.extend([n.first_index, n.first_index + 1]);
-            }
-        }
+        bvh2::subtree_primitives(bvh, i as usize, &mut slots);
         let points = slots.iter().flat_map(|&s| corners[s as usize]);
         Cylinder::fit(points, normal[i as usize], None)
     };

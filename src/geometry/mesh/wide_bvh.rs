@@ -14,6 +14,7 @@ use std::ops::{Mul, Sub};
 use glam::{DVec3, Vec3};
 use obvhs::bvh2::Bvh2;
 
+use crate::geometry::bvh2;
 use crate::geometry::mesh::triangle::{ShearedRay, Tri4};
 use crate::geometry::{Aabb, RayStats, box_distance};
 use crate::simd::F4;
@@ -369,7 +370,7 @@ impl WideBvh {
             let b = *bvh.nodes[c].aabb();
             let reference = if packet {
                 prims.clear();
-                subtree_prims(bvh, c, &mut prims);
+                bvh2::subtree_primitives(bvh, c, &mut prims);
                 self.leaf(boxes, corners, &prims, depth + 1)
             } else {
                 let index = self.nodes.len();
@@ -878,19 +879,8 @@ fn any_walk_in<B: BoxTest>(
     found
 }
 
-/// Appends the primitives of the BVH2 subtree at `node` to `out`.
-fn subtree_prims(bvh: &Bvh2, node: usize, out: &mut Vec<u32>) {
-    let n = &bvh.nodes[node];
-    if n.is_leaf() {
-        out.extend((n.first_index..n.first_index + n.prim_count).map(|i| bvh.primitive_indices[i as usize]));
-    } else {
-        subtree_prims(bvh, n.first_index as usize, out);
-        subtree_prims(bvh, n.first_index as usize + 1, out);
-    }
-}
-
 /// The SAH-optimal grouping of a BVH2 into wide nodes and packets
-/// ([`WideBvh::from_bvh2_sah`]). Per BVH2 node and slot budget `j` (1 to [`WIDTH`]), how its
+/// ([`WideBvh::from_bvh2`]). Per BVH2 node and slot budget `j` (1 to [`WIDTH`]), how its
 /// subtree is best covered by at most `j` child slots of a wide node.
 struct SahPlan {
     /// `choice[node][j - 1]`: [`SahPlan::PACKET`] (one slot, a leaf of one or two packets),
@@ -912,17 +902,9 @@ impl SahPlan {
         let mut choice = vec![[Self::PACKET; WIDTH]; count];
         let mut wide = vec![0u8; count];
         let mut prims = vec![0u32; count];
-        // Parents before children; visited in reverse, children come first.
-        let mut order = Vec::with_capacity(count);
-        let mut stack = vec![0usize];
-        while let Some(i) = stack.pop() {
-            order.push(i);
-            let n = &bvh.nodes[i];
-            if !n.is_leaf() {
-                stack.extend([n.first_index as usize, n.first_index as usize + 1]);
-            }
-        }
-        for &i in order.iter().rev() {
+        // Children before parents.
+        for &i in bvh2::parents_first(bvh).iter().rev() {
+            let i = i as usize;
             let n = &bvh.nodes[i];
             let area = n.aabb().half_area();
             if n.is_leaf() {
