@@ -148,7 +148,7 @@ pub struct TriangleBvh {
     /// cylinders in SIMD layout, for the nearest-triangle queries.
     wide: Vec<Node4>,
     /// The leaves' triangles in packets of four (in SIMD layout).
-    packets: Vec<Packet>,
+    packets: Vec<ClosestPacket>,
     /// Whether the group walks use the AVX2 node test (set where the CPU has it).
     avx2: bool,
 }
@@ -268,18 +268,18 @@ struct Node4 {
     leaves: u32,
 }
 
-/// A leaf packet: up to four triangles in SIMD layout (see [`Tri4`]) and their slots in
+/// A leaf packet: up to four triangles in SIMD layout (see [`PointTri4`]) and their slots in
 /// [`TriangleBvh::corners`]. A leaf of more than four triangles continues in the next
 /// packet while `more` is set.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(32))]
-struct Packet {
-    tri: Tri4,
+struct ClosestPacket {
+    tri: PointTri4,
     slot: [u32; 4],
     more: bool,
 }
 
-impl Packet {
+impl ClosestPacket {
     /// The packet's triangles' exact closest points to `q` (splatted), taken in lane order
     /// as the scalar loop would: each at most `best2` away replaces the best so far. Lowers
     /// `best2` and returns the last replacement (slot and closest point), if any.
@@ -305,13 +305,13 @@ impl Packet {
 }
 
 /// Four triangles of a leaf packet for the SIMD closest-point test
-/// ([`Tri4::closest`]): corners `a`, `b`, `c`, the normal `n = (b - a) x (c - a)` and
+/// ([`PointTri4::closest`]): corners `a`, `b`, `c`, the normal `n = (b - a) x (c - a)` and
 /// `|n|^2`, as structure of arrays (the normal and its square computed by glam exactly as
 /// [`closest_point_on_triangle`] computes them). An unused lane repeats lane 0 (triangle
 /// and slot), so it can only tie with it.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(16))]
-struct Tri4 {
+struct PointTri4 {
     a: [Vec4; 3],
     b: [Vec4; 3],
     c: [Vec4; 3],
@@ -319,11 +319,11 @@ struct Tri4 {
     nn: Vec4,
 }
 
-impl Tri4 {
+impl PointTri4 {
     /// The packet of `corners` (at least the first is `Some`).
-    fn new(corners: [Option<[Vec3A; 3]>; 4]) -> Tri4 {
+    fn new(corners: [Option<[Vec3A; 3]>; 4]) -> PointTri4 {
         let first = corners[0].expect("a packet has a triangle");
-        let mut t = Tri4 {
+        let mut t = PointTri4 {
             a: [Vec4::ZERO; 3],
             b: [Vec4::ZERO; 3],
             c: [Vec4::ZERO; 3],
@@ -479,10 +479,10 @@ const MAX_CYLINDER_TRIANGLES: u32 = 1 << 12;
 /// inner child until there are four (every BVH2 leaf a leaf of its own) and fits bounding
 /// cylinders. A shared grouping would change one of the two trees, and with it the speed
 /// each was measured at.
-fn collapse(bvh: &Bvh2, corners: &[[Vec3A; 3]]) -> (Vec<Node4>, Vec<Packet>) {
+fn collapse(bvh: &Bvh2, corners: &[[Vec3A; 3]]) -> (Vec<Node4>, Vec<ClosestPacket>) {
     let nodes = &bvh.nodes;
     let mut out: Vec<Node4> = Vec::with_capacity(nodes.len() / 2 + 1);
-    let mut packets: Vec<Packet> = Vec::with_capacity(corners.len() / 3 + 1);
+    let mut packets: Vec<ClosestPacket> = Vec::with_capacity(corners.len() / 3 + 1);
     // Per BVH2 node: the area-weighted normal sum and the triangle count of its subtree,
     // children before parents (the reverse of a depth-first pre-order).
     let mut normal = vec![DVec3::ZERO; nodes.len()];
@@ -513,19 +513,19 @@ fn collapse(bvh: &Bvh2, corners: &[[Vec3A; 3]]) -> (Vec<Node4>, Vec<Packet>) {
         let points = slots.iter().flat_map(|&s| corners[s as usize]);
         Cylinder::fit(points, normal[i as usize], None)
     };
-    let leaf = |i: u32, packets: &mut Vec<Packet>| {
+    let leaf = |i: u32, packets: &mut Vec<ClosestPacket>| {
         let n = &nodes[i as usize];
         let first = packets.len() as u32;
         let slots: Vec<u32> = (n.first_index..n.first_index + n.prim_count).collect();
         for (k, chunk) in slots.chunks(4).enumerate() {
-            // Unused lanes repeat the first triangle (see `Tri4`).
+            // Unused lanes repeat the first triangle (see `PointTri4`).
             let mut slot = [chunk[0]; 4];
             let mut tris = [None; 4];
             for (lane, &s) in chunk.iter().enumerate() {
                 slot[lane] = s;
                 tris[lane] = Some(corners[s as usize]);
             }
-            let p = Packet { tri: Tri4::new(tris), slot, more: (k + 1) * 4 < slots.len() };
+            let p = ClosestPacket { tri: PointTri4::new(tris), slot, more: (k + 1) * 4 < slots.len() };
             packets.push(p);
         }
         Node4::LEAF | first
@@ -714,13 +714,13 @@ unsafe fn avx2_node_within(
     }
 }
 
-/// [`Tri4::closest`] for two points at once (`q`: point `2 j` in the low four lanes,
+/// [`PointTri4::closest`] for two points at once (`q`: point `2 j` in the low four lanes,
 /// `2 j + 1` in the high four, as [`pair_coordinates`] gives them) with AVX: the same
 /// operations in the same order, so the same bits. Safety: only for code running with AVX
 /// enabled.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-unsafe fn avx2_tri_closest(t: &Tri4, q: &[__m256; 3]) -> (__m256, [__m256; 3]) {
+unsafe fn avx2_tri_closest(t: &PointTri4, q: &[__m256; 3]) -> (__m256, [__m256; 3]) {
     // SAFETY: AVX intrinsics; the caller runs with AVX enabled.
     unsafe {
         let sub = |u: [__m256; 3], v: [__m256; 3]| {
@@ -792,12 +792,12 @@ unsafe fn avx2_tri_closest(t: &Tri4, q: &[__m256; 3]) -> (__m256, [__m256; 3]) {
     }
 }
 
-/// [`Packet::improve`] for points `s` and `s + 1` (`s` even; those in `mask`) of a group
+/// [`ClosestPacket::improve`] for points `s` and `s + 1` (`s` even; those in `mask`) of a group
 /// walk at once, with AVX. Safety: only for code running with AVX2 enabled.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 unsafe fn avx2_improve_pair(
-    packet: &Packet,
+    packet: &ClosestPacket,
     q: &[__m256; 3],
     s: usize,
     mask: u32,
@@ -1046,7 +1046,7 @@ impl TriangleBvh {
     }
 
     /// The leaf `r` (a reference with [`Node4::LEAF`]) for the points in `mask` of a group
-    /// walk: each point's best improved by the leaf's triangles, as [`Packet::improve`]
+    /// walk: each point's best improved by the leaf's triangles, as [`ClosestPacket::improve`]
     /// does (with AVX2, two points per instruction, the same bits).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
@@ -1244,7 +1244,7 @@ impl TriangleBvh {
             + self.corners.capacity() * std::mem::size_of::<[Vec3A; 3]>()
             + self.original.capacity() * 4
             + self.wide.capacity() * std::mem::size_of::<Node4>()
-            + self.packets.capacity() * std::mem::size_of::<Packet>()
+            + self.packets.capacity() * std::mem::size_of::<ClosestPacket>()
     }
 }
 
@@ -1265,7 +1265,7 @@ mod tests {
         assert!((cp(Vec3A::new(0.2, 0.3, -4.0)) - Vec3A::new(0.2, 0.3, 0.0)).length() < 1e-6);
     }
 
-    /// [`Tri4::closest`] gives the bits of [`closest_point_on_triangle`] (distance and
+    /// [`PointTri4::closest`] gives the bits of [`closest_point_on_triangle`] (distance and
     /// point) in every lane: random triangles (some slivers, some far from the origin, some
     /// with corners on a coarse lattice so that ties and region borders are hit exactly),
     /// query points in every region, on corners and edges, with unused lanes.
@@ -1297,7 +1297,7 @@ mod tests {
             if tris[0].is_none() {
                 continue;
             }
-            let t4 = Tri4::new(tris);
+            let t4 = PointTri4::new(tris);
             let q = match round % 3 {
                 0 => offset + v() * 3.0,
                 1 => tris[0].unwrap()[round / 3 % 3],

@@ -38,7 +38,7 @@ const LEAF: u32 = 1 << 31;
 const LEAF_SHIFT: u32 = 5;
 const _: () = assert!(LEAF_MAX * LEAF_PACKETS <= 1 << LEAF_SHIFT);
 // Node references are byte offsets, and `WideBvh::node` checks them as such.
-const _: () = assert!(size_of::<Node>() == 256);
+const _: () = assert!(size_of::<WideNode>() == 256);
 /// Cost of a leaf test (one or two packets, one eight-lane test) relative to a node test
 /// in the surface area heuristic that groups the BVH2 into wide nodes
 /// ([`WideBvh::from_bvh2`]). It decides which subtrees of at most eight triangles become
@@ -55,7 +55,7 @@ const STACK: usize = 255;
 /// line).
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
-pub struct Node {
+pub struct WideNode {
     /// Child boxes, scene units: `bounds[0..3][lane]` are the minimum x, y, z and
     /// `bounds[3..6][lane]` the maximum; unused lanes are NaN (no ray enters them).
     pub bounds: [[f32; WIDTH]; 6],
@@ -93,7 +93,7 @@ pub struct LeafHit {
 #[derive(Clone, Debug, Default)]
 pub struct WideBvh {
     /// Inner nodes; node 0 is the root.
-    pub nodes: Vec<Node>,
+    pub nodes: Vec<WideNode>,
     /// Leaf packets.
     pub packets: Vec<Packet>,
     /// Deepest node level (root = 1), which bounds the traversal stack.
@@ -103,17 +103,17 @@ pub struct WideBvh {
     avx2: bool,
 }
 
-/// A ray prepared for the eight-box test of a [`Node`].
+/// A ray prepared for the eight-box test of a [`WideNode`].
 pub(crate) trait BoxTest: Copy {
     /// Prepares the ray `origin + t * dir`.
     fn new(origin: Vec3, dir: Vec3) -> Self;
     /// The lanes whose child box the ray enters within `[t_min, t_max]` (bit `l` for lane
     /// `l`) and the [`order_key`]s of the entry distances.
-    fn hit(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]);
+    fn hit(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]);
 
     /// [`BoxTest::hit`] for the root, the first node of every walk.
     #[inline(always)]
-    fn hit_root(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
+    fn hit_root(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
         self.hit(n, t_min, t_max)
     }
 
@@ -142,23 +142,23 @@ fn safe_inverse(dir: Vec3) -> [f32; 3] {
 
 /// The portable box test: each node as two halves of four lanes ([`F4`]).
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct BoxRay {
+pub(crate) struct WideBoxRay {
     origin: [F4; 3],
     inv: [F4; 3],
 }
 
-impl BoxTest for BoxRay {
+impl BoxTest for WideBoxRay {
     #[inline(always)]
     fn new(origin: Vec3, dir: Vec3) -> Self {
         let inv = safe_inverse(dir);
-        BoxRay {
+        WideBoxRay {
             origin: [F4::splat(origin.x), F4::splat(origin.y), F4::splat(origin.z)],
             inv: [F4::splat(inv[0]), F4::splat(inv[1]), F4::splat(inv[2])],
         }
     }
 
     #[inline(always)]
-    fn hit(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
+    fn hit(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
         let b = &n.bounds;
         let half = |h: usize| {
             let slab = |row: usize, a: usize| {
@@ -192,7 +192,7 @@ impl BoxTest for BoxRay {
 /// feature). Both rows of an axis sit at fixed offsets and are ordered by `min` and
 /// `max`, which keep an empty lane's NaN (as in the portable test), rather than rows
 /// chosen by the direction's signs: no row index to keep per ray. Shared by
-/// [`BoxRayAvx2::hit`] and [`BoxRayAvx2::hit_root`], which differ only in the slab
+/// [`WideBoxRayAvx2::hit`] and [`WideBoxRayAvx2::hit_root`], which differ only in the slab
 /// distance.
 #[cfg(target_arch = "x86_64")]
 macro_rules! box_test_avx {
@@ -242,7 +242,7 @@ macro_rules! box_test_avx {
 /// (a fused root made rays that miss slower than the unfused test).
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct BoxRayAvx2 {
+pub(crate) struct WideBoxRayAvx2 {
     origin: [core::arch::x86_64::__m256; 3],
     inv: [core::arch::x86_64::__m256; 3],
     /// Per bound row (minimum x, y, z, then maximum x, y, z): `origin * inv` of its axis,
@@ -252,7 +252,7 @@ pub(crate) struct BoxRayAvx2 {
 }
 
 #[cfg(target_arch = "x86_64")]
-impl BoxTest for BoxRayAvx2 {
+impl BoxTest for WideBoxRayAvx2 {
     #[inline(always)]
     fn new(origin: Vec3, dir: Vec3) -> Self {
         use core::arch::x86_64::_mm256_set1_ps;
@@ -269,7 +269,7 @@ impl BoxTest for BoxRayAvx2 {
             let e = (p.abs() * (2.0 * f32::EPSILON)).copysign(inv[a]);
             splat(if row < 3 { p + e } else { p - e })
         };
-        BoxRayAvx2 {
+        WideBoxRayAvx2 {
             origin: [splat(o[0]), splat(o[1]), splat(o[2])],
             inv: [splat(inv[0]), splat(inv[1]), splat(inv[2])],
             offset: [offset(0), offset(1), offset(2), offset(3), offset(4), offset(5)],
@@ -277,7 +277,7 @@ impl BoxTest for BoxRayAvx2 {
     }
 
     #[inline(always)]
-    fn hit(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
+    fn hit(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
         // SAFETY: as in `new`, the CPU has AVX and FMA (see the type's documentation).
         unsafe {
             use core::arch::x86_64::*;
@@ -291,7 +291,7 @@ impl BoxTest for BoxRayAvx2 {
     }
 
     #[inline(always)]
-    fn hit_root(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
+    fn hit_root(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
         // SAFETY: as in `hit`.
         unsafe {
             use core::arch::x86_64::*;
@@ -423,7 +423,7 @@ impl WideBvh {
     /// Bytes held: the struct, nodes and packets.
     pub fn bytes_used(&self) -> usize {
         std::mem::size_of::<Self>()
-            + self.nodes.capacity() * std::mem::size_of::<Node>()
+            + self.nodes.capacity() * std::mem::size_of::<WideNode>()
             + self.packets.capacity() * std::mem::size_of::<Packet>()
     }
 
@@ -444,7 +444,7 @@ impl WideBvh {
             // SAFETY: `avx2` is only set where the CPU has AVX2, FMA, POPCNT and BMI1.
             return unsafe { self.closest_hit_avx2(origin, dir, t_min, t_max, stats) };
         }
-        closest_walk::<BoxRay>(self, origin, dir, t_min, t_max, stats)
+        closest_walk::<WideBoxRay>(self, origin, dir, t_min, t_max, stats)
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -457,7 +457,7 @@ impl WideBvh {
         t_max: f32,
         stats: &mut RayStats,
     ) -> Option<LeafHit> {
-        closest_walk::<BoxRayAvx2>(self, origin, dir, t_min, t_max, stats)
+        closest_walk::<WideBoxRayAvx2>(self, origin, dir, t_min, t_max, stats)
     }
 
     /// Whether any triangle is hit with `t` in `[t_min, t_max]`; stops at the first
@@ -469,13 +469,13 @@ impl WideBvh {
             // SAFETY: `avx2` is only set where the CPU has AVX2, FMA, POPCNT and BMI1.
             return unsafe { self.any_hit_avx2(origin, dir, t_min, t_max, stats) };
         }
-        any_walk::<BoxRay>(self, origin, dir, t_min, t_max, stats)
+        any_walk::<WideBoxRay>(self, origin, dir, t_min, t_max, stats)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,popcnt,bmi1")]
     fn any_hit_avx2(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
-        any_walk::<BoxRayAvx2>(self, origin, dir, t_min, t_max, stats)
+        any_walk::<WideBoxRayAvx2>(self, origin, dir, t_min, t_max, stats)
     }
 
     /// The node of inner-node reference `r` (its byte offset in [`WideBvh::nodes`]): one
@@ -484,7 +484,7 @@ impl WideBvh {
     /// compare and a branch that never goes the other way: rotated right by 8 bits, a
     /// multiple of 256 is its node's index, and any other offset has a low bit at the top.
     #[inline(always)]
-    fn node(&self, r: u32) -> &Node {
+    fn node(&self, r: u32) -> &WideNode {
         let at = r as usize;
         assert!(at.rotate_right(8) < self.nodes.len(), "node reference out of range");
         // SAFETY: by the check, `at` is 256 (the size of a node, asserted at compile time)
@@ -617,7 +617,7 @@ macro_rules! with_stack {
 
 /// [`WideBvh::closest_hit`] with the box test `B` and a stack from [`with_stack`]. Inlined
 /// into its callers, so that under `#[target_feature(enable = "avx2,fma,popcnt,bmi1")]` (which
-/// alone may use [`BoxRayAvx2`]) all of it is compiled with AVX2.
+/// alone may use [`WideBoxRayAvx2`]) all of it is compiled with AVX2.
 #[inline(always)]
 pub(crate) fn closest_walk<B: BoxTest>(
     bvh: &WideBvh,
@@ -637,7 +637,7 @@ pub(crate) fn closest_walk<B: BoxTest>(
 #[inline(always)]
 fn visit_node<B: BoxTest, const ROOT: bool>(
     br: &B,
-    n: &Node,
+    n: &WideNode,
     t_min: f32,
     t_max: f32,
     stack: &mut [MaybeUninit<Entry>],
@@ -972,17 +972,17 @@ impl SahPlan {
 /// The reference of node `index`: its byte offset in [`WideBvh::nodes`]. Panics past
 /// 2^23 nodes (some 200 million triangles), where it would reach the [`LEAF`] bit.
 fn node_ref(index: usize) -> u32 {
-    let r = index * size_of::<Node>();
-    assert!(r < LEAF as usize, "more than {} BVH nodes", LEAF as usize / size_of::<Node>());
+    let r = index * size_of::<WideNode>();
+    assert!(r < LEAF as usize, "more than {} BVH nodes", LEAF as usize / size_of::<WideNode>());
     r as u32
 }
 
 /// A node with every lane unused: NaN boxes (never entered) and [`NONE`] references.
-fn empty_node() -> Node {
-    Node { bounds: [[f32::NAN; WIDTH]; 6], children: [NONE; WIDTH] }
+fn empty_node() -> WideNode {
+    WideNode { bounds: [[f32::NAN; WIDTH]; 6], children: [NONE; WIDTH] }
 }
 
-fn set_lane(n: &mut Node, lane: usize, b: &Aabb, reference: u32) {
+fn set_lane(n: &mut WideNode, lane: usize, b: &Aabb, reference: u32) {
     for a in 0..3 {
         n.bounds[a][lane] = b.min[a];
         n.bounds[a + 3][lane] = b.max[a];
