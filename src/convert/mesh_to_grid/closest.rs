@@ -15,16 +15,15 @@
 //! branches (every region evaluated, the scalar code's region selected per lane) and with
 //! the same `f32` operations in the same order as [`closest_point_on_triangle`], so its
 //! distances and points are bit for bit those of the scalar test.
-//! One nearest-first walk answers every query: it walks the wide nodes depth first, nearer
-//! children first, for up to [`GROUP_MAX`] nearby points at once
-//! ([`TriangleBvh::nearest_group`]; a node is opened when any of them needs it, each
-//! prunes every node whose bound (squared distance) is farther than its best triangle so
-//! far or than a caller-supplied upper bound), which shares the node loads and overlaps
-//! the points' independent arithmetic; [`TriangleBvh::nearest`] and
-//! [`TriangleBvh::nearest_with_hint`] are the walk for one point. Where the CPU has AVX2
-//! ([`crate::simd::avx2`]) its node and leaf tests take two points per instruction, with
-//! the same operations in the same order as the portable ones (so the same results). It
-//! does not allocate: the caller passes a reusable [`GroupStack`].
+//! [`TriangleBvh::nearest`] walks the wide nodes depth first, nearer children first,
+//! pruning every node whose bound (squared distance) is farther than the best triangle so
+//! far or than a caller-supplied upper bound. [`TriangleBvh::nearest_group`] answers up to
+//! [`GROUP_MAX`] nearby points in one walk (a node is opened when any of them needs it,
+//! each prunes by its own best), which shares the node loads and overlaps the points'
+//! independent arithmetic; where the CPU has AVX2 ([`crate::simd::avx2`]) its node and
+//! leaf tests take two points per instruction, with the same operations in the same order
+//! as the portable ones (so the same results). Neither allocates: the caller passes a
+//! reusable [`NodeStack`] or [`GroupStack`].
 //! [`TriangleBvh::axis_segment_may_meet`] is a conservative segment test for signing by
 //! regions.
 
@@ -37,9 +36,10 @@ use crate::geometry::mesh::triangle::closest_point_on_triangle;
 use crate::geometry::{Aabb, aabb};
 use crate::mesh::TriangleMesh;
 
-/// The traversal stack of the one-point queries ([`TriangleBvh::nearest`]), which are
-/// group walks of one point: a [`GroupStack`].
-pub type NodeStack = GroupStack;
+/// A reusable traversal stack: per entry, the bits of the squared distance bound of a node
+/// (high 32 bits) and its index (low). Keep one per thread; it grows to the BVH's depth
+/// once and is then reused.
+pub type NodeStack = Vec<u64>;
 
 /// Squared distance from `p` to the box `[lo, hi]` (0 inside).
 #[inline]
@@ -108,22 +108,9 @@ pub fn axis_segment_may_meet_triangle(
 pub const GROUP_MAX: usize = 8;
 const _: () = assert!(GROUP_MAX <= 8, "the transpose in `nearest_group` handles up to 8 points");
 
-/// A reusable traversal stack for [`TriangleBvh::nearest_group`] (and the one-point
-/// queries); keep one per thread. It grows to the BVH's depth once and is then reused.
+/// A reusable traversal stack for [`TriangleBvh::nearest_group`]; keep one per thread.
 #[derive(Clone, Debug, Default)]
 pub struct GroupStack(Vec<GroupEntry>);
-
-impl GroupStack {
-    /// An empty stack.
-    pub fn new() -> Self {
-        GroupStack(Vec::new())
-    }
-
-    /// An empty stack with room for `n` entries.
-    pub fn with_capacity(n: usize) -> Self {
-        GroupStack(Vec::with_capacity(n))
-    }
-}
 
 /// A pending node of a group walk: the least bound of the points that need it, and which.
 #[derive(Clone, Copy, Debug)]
@@ -925,9 +912,84 @@ impl TriangleBvh {
         stack: &mut NodeStack,
         visited: &mut u64,
     ) -> Option<Nearest> {
-        let mut out = [None];
-        self.group(&[p], &[hint], max_dist, &mut out, stack, visited);
-        out[0]
+        let nodes = &self.bvh.nodes;
+        if nodes.is_empty() {
+            return None;
+        }
+        let q = Vec3A::from(p);
+        let qs = splat3(q);
+        // At most `f32::MAX`, so that empty (infinitely far) slots are never entered.
+        let mut best2 = (max_dist * max_dist).min(f32::MAX);
+        let mut best: Option<(u32, Vec3A)> = None;
+        if let Some(slot) = hint.filter(|&s| (s as usize) < self.corners.len()) {
+            let [a, b, c] = self.corners[slot as usize];
+            let x = closest_point_on_triangle(q, a, b, c);
+            let d2 = (x - q).length_squared();
+            if d2 <= best2 {
+                best2 = d2;
+                best = Some((slot, x));
+            }
+        }
+        let test_leaf = |r: u32, best2: &mut f32, best: &mut Option<(u32, Vec3A)>| {
+            let mut at = (r & !Node4::LEAF) as usize;
+            loop {
+                let packet = &self.packets[at];
+                if let Some(found) = packet.improve(&qs, best2) {
+                    *best = Some(found);
+                }
+                if !packet.more {
+                    break;
+                }
+                at += 1;
+            }
+        };
+        let wide = &self.wide;
+        stack.clear();
+        stack.push(0); // the root, bound 0
+        while let Some(key) = stack.pop() {
+            if f32::from_bits((key >> 32) as u32) > best2 {
+                continue;
+            }
+            let n = &wide[key as u32 as usize];
+            *visited += 4;
+            let d2 = n.distances2(&qs);
+            let within = d2.cmple(Vec4::splat(best2)).bitmask();
+            // Leaves at once (tightening the bound).
+            let mut leaves = within & n.leaves;
+            while leaves != 0 {
+                let k = leaves.trailing_zeros() as usize;
+                leaves &= leaves - 1;
+                test_leaf(n.child[k], &mut best2, &mut best);
+            }
+            // Inner nodes onto the stack, farthest first: keys (bound bits, reference) sorted
+            // without branches (non-negative floats order as their bits).
+            let inner = within & !n.leaves;
+            if inner != 0 {
+                let d = d2.to_array();
+                let key = |k: usize| {
+                    if inner >> k & 1 != 0 {
+                        (d[k].to_bits() as u64) << 32 | n.child[k] as u64
+                    } else {
+                        u64::MAX
+                    }
+                };
+                let mut keys = [key(0), key(1), key(2), key(3)];
+                for (x, y) in [(0, 1), (2, 3), (0, 2), (1, 3), (1, 2)] {
+                    let (lo, hi) = (keys[x].min(keys[y]), keys[x].max(keys[y]));
+                    keys[x] = lo;
+                    keys[y] = hi;
+                }
+                for &k in keys[..inner.count_ones() as usize].iter().rev() {
+                    stack.push(k);
+                }
+            }
+        }
+        best.map(|(slot, x)| Nearest {
+            dist2: best2,
+            triangle: self.original[slot as usize],
+            slot,
+            point: Vec3::from(x),
+        })
     }
 
     /// [`TriangleBvh::nearest_with_hint`] for up to [`GROUP_MAX`] nearby points at once
@@ -948,26 +1010,13 @@ impl TriangleBvh {
         stack: &mut GroupStack,
         visited: &mut u64,
     ) {
-        self.group(points, hints, f32::INFINITY, out, stack, visited)
-    }
-
-    /// [`TriangleBvh::nearest_group`] for answers closer than `max_dist` (else `None`).
-    fn group(
-        &self,
-        points: &[Vec3],
-        hints: &[Option<u32>],
-        max_dist: f32,
-        out: &mut [Option<Nearest>],
-        stack: &mut GroupStack,
-        visited: &mut u64,
-    ) {
         #[cfg(target_arch = "x86_64")]
         if self.avx2 {
             // SAFETY: `avx2` is only set where the CPU has AVX2, POPCNT and BMI1
             // (`crate::simd::avx2`).
-            return unsafe { self.nearest_group_avx2(points, hints, max_dist, out, stack, visited) };
+            return unsafe { self.nearest_group_avx2(points, hints, out, stack, visited) };
         }
-        self.group_walk::<false>(points, hints, max_dist, out, stack, visited)
+        self.group_walk::<false>(points, hints, out, stack, visited)
     }
 
     /// [`TriangleBvh::nearest_group`] with the AVX2 node and leaf tests (two points per
@@ -978,12 +1027,11 @@ impl TriangleBvh {
         &self,
         points: &[Vec3],
         hints: &[Option<u32>],
-        max_dist: f32,
         out: &mut [Option<Nearest>],
         stack: &mut GroupStack,
         visited: &mut u64,
     ) {
-        self.group_walk::<true>(points, hints, max_dist, out, stack, visited)
+        self.group_walk::<true>(points, hints, out, stack, visited)
     }
 
     /// Whether [`TriangleBvh::nearest_group`] uses the AVX2 node and leaf tests.
@@ -1041,14 +1089,11 @@ impl TriangleBvh {
         }
     }
 
-    /// The nearest-first walk over the 4-wide nodes, for one to [`GROUP_MAX`] points (see
-    /// [`TriangleBvh::nearest_group`]), each bounded by `max_dist` from the start.
     #[inline(always)]
     fn group_walk<const AVX2: bool>(
         &self,
         points: &[Vec3],
         hints: &[Option<u32>],
-        max_dist: f32,
         out: &mut [Option<Nearest>],
         stack: &mut GroupStack,
         visited: &mut u64,
@@ -1061,8 +1106,7 @@ impl TriangleBvh {
         }
         let mut qs = [[Vec4::ZERO; 3]; GROUP_MAX];
         let mut qa = [Vec3A::ZERO; GROUP_MAX];
-        // At most `f32::MAX`, so that empty (infinitely far) slots are never entered.
-        let mut best2 = [(max_dist * max_dist).min(f32::MAX); GROUP_MAX];
+        let mut best2 = [f32::MAX; GROUP_MAX];
         let mut best: [(u32, Vec3A); GROUP_MAX] = [(u32::MAX, Vec3A::ZERO); GROUP_MAX];
         for s in 0..g {
             qa[s] = Vec3A::from(points[s]);
@@ -1070,11 +1114,8 @@ impl TriangleBvh {
             if let Some(slot) = hints[s].filter(|&h| (h as usize) < self.corners.len()) {
                 let [a, b, c] = self.corners[slot as usize];
                 let x = closest_point_on_triangle(qa[s], a, b, c);
-                let d2 = (x - qa[s]).length_squared().min(f32::MAX);
-                if d2 <= best2[s] {
-                    best2[s] = d2;
-                    best[s] = (slot, x);
-                }
+                best2[s] = (x - qa[s]).length_squared().min(f32::MAX);
+                best[s] = (slot, x);
             }
         }
         #[cfg(target_arch = "x86_64")]
