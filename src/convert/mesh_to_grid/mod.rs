@@ -1,5 +1,5 @@
 //! Mesh (and distance function) -> signed distance grid: filling an
-//! [`SdfGrid`](crate::geometry::grid::SdfGrid) or a narrow-band
+//! [`SdfGrid`] or a narrow-band
 //! [`BandGrid`](crate::geometry::grid::band::BandGrid) ([`band`]) from a triangle mesh,
 //! by exact sampling or by voxelizing ([`voxelize`]), or from a distance function
 //! ([`sample_function`]).
