@@ -1,6 +1,6 @@
-//! Mesh -> signed distance grid: our exact sampler (`sdfmesh::geometry::grid::sample_mesh`) side by
+//! Mesh -> signed distance grid: our exact sampler (`sdfmesh::convert::mesh_to_grid::sample_mesh`) side by
 //! side with the `mesh_to_sdf` crate (`generate_grid_sdf`), and our voxelizer
-//! (`sdfmesh::geometry::grid::voxelize::voxelize_mesh`) against our exact samples.
+//! (`sdfmesh::convert::mesh_to_grid::voxelize::voxelize_mesh`) against our exact samples.
 //!
 //! * Meshes: the Stanford bunny (open: holes in its base) and the armadillo (closed), from
 //!   `../shared/meshes`, at 128 cells along the longest axis plus
@@ -44,9 +44,10 @@ use std::time::Instant;
 use glam::{DVec3, Vec3, Vec3A};
 use rayon::ThreadPool;
 use rayon::prelude::*;
-use sdfmesh::geometry::grid::closest::closest_point_on_triangle;
-use sdfmesh::geometry::grid::voxelize::voxelize_mesh;
-use sdfmesh::geometry::grid::{SdfGrid, sample_mesh_with_stats};
+use sdfmesh::convert::mesh_to_grid::sample_mesh_with_stats;
+use sdfmesh::convert::mesh_to_grid::voxelize::voxelize_mesh;
+use sdfmesh::geometry::grid::SdfGrid;
+use sdfmesh::geometry::mesh::triangle::closest_point_on_triangle;
 use sdfmesh::mesh::{TriangleMesh, load_mesh};
 use sdfmesh::plan::GRID_MARGIN_CELLS;
 
@@ -156,7 +157,7 @@ fn brute_distance(tris: &[[Vec3A; 3]], p: Vec3) -> f32 {
 }
 
 /// Exact generalized winding number of `p` (Van Oosterom and Strackee in `f64`, summed
-/// over every triangle), written independently of `sdfmesh::geometry::grid::winding`.
+/// over every triangle), written independently of `sdfmesh::convert::mesh_to_grid::winding`.
 fn brute_winding(tris: &[[DVec3; 3]], p: Vec3) -> f64 {
     let q = p.as_dvec3();
     let mut omega = 0.0;
@@ -303,7 +304,7 @@ mod peer {
 fn bench_mesh(out: &mut Out, pool: &ThreadPool, name: &str, mesh: &TriangleMesh, plan: &Plan) {
     let res = plan.res;
     let margin = GRID_MARGIN_CELLS;
-    let closed = sdfmesh::geometry::grid::winding::is_closed(mesh);
+    let closed = sdfmesh::convert::mesh_to_grid::winding::is_closed(mesh);
     out.line(format!(
         "\n== {name}: {} triangles, {} vertices, {}; grid {res} cells along the longest axis + {margin} margin",
         mesh.triangles.len(),

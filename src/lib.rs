@@ -40,3 +40,4 @@ pub mod metrics;
 pub mod plan;
 pub mod render;
 pub mod scene;
+pub mod simd;

@@ -12,12 +12,13 @@ use glam::UVec3;
 
 use crate::cli::progress::Stage;
 use crate::convert::extract::{ExtractMethod, extract_object};
+use crate::convert::mesh_to_grid::sample_mesh;
+use crate::convert::mesh_to_grid::voxelize::voxelize_mesh;
 use crate::error::{Error, Result};
 use crate::geometry::Geometry;
 use crate::geometry::grid::band::{BRICK, BandGrid};
 use crate::geometry::grid::io::{load_grid, save_grid};
-use crate::geometry::grid::voxelize::voxelize_mesh;
-use crate::geometry::grid::{DEFAULT_MAX_GRID_BYTES, check_size, grid_layout, sample_mesh};
+use crate::geometry::grid::{DEFAULT_MAX_GRID_BYTES, check_size, grid_layout};
 use crate::mesh::{MeshFormat, TriangleMesh, load_mesh, save_mesh};
 use crate::plan::GridFill;
 use crate::plan::budget::{MemoryBudget, extraction_bytes, mesh_to_grid_bytes, scene_bytes};

@@ -1,7 +1,9 @@
 //! BVH traversal over obvhs's `Bvh2` with work counting: closest-hit and any-hit walks
-//! that call back for each primitive in a visited leaf, visiting near children first.
-//! Used for the scene's top-level BVH over objects; meshes trace the 4-wide BVH of
-//! [`crate::geometry::mesh::wide_bvh`], collapsed from a BVH2 built here.
+//! that call back for each primitive in a visited leaf, visiting near children first, and
+//! the nearest-first distance walk ([`nearest`]). Used for the scene's top-level BVH over
+//! objects; meshes trace the 8-wide BVH of [`crate::geometry::mesh::wide_bvh`], collapsed
+//! from a BVH2 built here (the traversal orders both wide-tree collapses share,
+//! [`parents_first`] and [`subtree_primitives`], are here too).
 
 use std::time::Duration;
 
@@ -177,6 +179,39 @@ pub fn nearest(bvh: &Bvh2, p: glam::DVec3, mut dist: impl FnMut(u32) -> f64) -> 
         stack.push((near, dn));
     }
     best
+}
+
+/// The BVH2's nodes (indices), every parent before its children: a depth-first pre-order,
+/// right subtree first. Reversed, children come before their parents: the order of the
+/// bottom-up passes of the two collapses of a BVH2 into a wide tree (the mesh tracer's
+/// [`crate::geometry::mesh::wide_bvh::WideBvh::from_bvh2`] and the nearest-triangle BVH
+/// of `convert::mesh_to_grid::closest`). Empty for an empty BVH.
+pub fn parents_first(bvh: &Bvh2) -> Vec<u32> {
+    let mut order = Vec::with_capacity(bvh.nodes.len());
+    if bvh.nodes.is_empty() {
+        return order;
+    }
+    let mut stack = vec![0u32];
+    while let Some(i) = stack.pop() {
+        order.push(i);
+        let n = &bvh.nodes[i as usize];
+        if !n.is_leaf() {
+            stack.extend([n.first_index, n.first_index + 1]);
+        }
+    }
+    order
+}
+
+/// Appends the primitives (entries of `primitive_indices`) of the subtree at `node` to
+/// `out`, left subtree first.
+pub fn subtree_primitives(bvh: &Bvh2, node: usize, out: &mut Vec<u32>) {
+    let n = &bvh.nodes[node];
+    if n.is_leaf() {
+        out.extend((n.first_index..n.first_index + n.prim_count).map(|i| bvh.primitive_indices[i as usize]));
+    } else {
+        subtree_primitives(bvh, n.first_index as usize, out);
+        subtree_primitives(bvh, n.first_index as usize + 1, out);
+    }
 }
 
 /// Bytes held by a BVH2: nodes and primitive indices.

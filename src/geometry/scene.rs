@@ -7,7 +7,7 @@ use obvhs::BvhBuildParams;
 use obvhs::bvh2::Bvh2;
 
 use crate::geometry::bvh2;
-use crate::geometry::{Aabb, Census, Geometry, Hit, Ray, RayStats, box_distance};
+use crate::geometry::{Aabb, Census, Geometry, Hit, Ray, RayStats};
 
 /// The whole scene as one geometry: a top-level BVH over the bounded objects plus a list of
 /// unbounded ones (infinite planes, unbounded repetition) that every ray tests.
@@ -111,19 +111,11 @@ impl Geometry for SceneGeometry {
         for &i in &self.unbounded {
             best = best.min(self.objects[i as usize].surface_distance(p));
         }
-        // Objects nearest first by their boxes; a box farther than the best is skipped.
-        let mut order: Vec<(f64, u32)> = self
-            .bounded
-            .iter()
-            .map(|&i| (self.objects[i as usize].bounds().map_or(0.0, |b| box_distance(&b, p)), i))
-            .collect();
-        order.sort_by(|a, b| a.0.total_cmp(&b.0));
-        for (d, i) in order {
-            if d >= best {
-                break;
-            }
-            best = best.min(self.objects[i as usize].surface_distance(p));
-        }
-        best
+        // Bounded objects nearest first through the top-level BVH, which skips every
+        // subtree whose box is farther than the best so far.
+        let bounded = bvh2::nearest(&self.bvh, p, |prim| {
+            self.objects[self.bounded[prim as usize] as usize].surface_distance(p)
+        });
+        best.min(bounded)
     }
 }

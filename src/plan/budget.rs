@@ -36,7 +36,7 @@ pub const EXTRACT_BYTES_PER_SAMPLE_MC: u64 = 9;
 /// As [`EXTRACT_BYTES_PER_SAMPLE_MC`], for dual contouring.
 pub const EXTRACT_BYTES_PER_SAMPLE_DC: u64 = 13;
 /// Bytes per sample while voxelizing (the f32 result, the voxel labels and the distance
-/// transform's working rows: see [`crate::geometry::grid::voxelize`]).
+/// transform's working rows: see [`crate::convert::mesh_to_grid::voxelize`]).
 pub const VOXELIZE_BYTES_PER_SAMPLE: u64 = 13;
 /// Bytes per triangle of the closest-point BVH and the fast winding number tree used when
 /// sampling a mesh exactly (an upper estimate).

@@ -9,13 +9,15 @@ use super::{
     plan_object,
 };
 use crate::convert::extract::{ExtractMethod, Field, extract, extract_object};
+use crate::convert::mesh_to_grid::band::{band_from_function, band_from_mesh};
+use crate::convert::mesh_to_grid::voxelize::voxelize_mesh;
+use crate::convert::mesh_to_grid::{sample_function, sample_mesh};
 use crate::convert::tessellate::{plane_view_mesh, tessellate};
 use crate::error::Result;
 use crate::geometry::analytic::AnalyticObject;
-use crate::geometry::grid::band::{BandGrid, band_from_function, band_from_mesh};
+use crate::geometry::grid::SdfGrid;
+use crate::geometry::grid::band::BandGrid;
 use crate::geometry::grid::object::{ClippedGrid, GridObject, GridStore};
-use crate::geometry::grid::voxelize::voxelize_mesh;
-use crate::geometry::grid::{SdfGrid, sample_function, sample_mesh};
 use crate::geometry::march::MarchParams;
 use crate::geometry::mesh::MeshGeometry;
 use crate::geometry::scene::SceneGeometry;
@@ -285,7 +287,7 @@ pub fn scene_mesh(scene: &Scene, repr: Representation) -> Option<TriangleMesh> {
 /// its grid cannot be built. Returns the realised plan.
 ///
 /// `fill` applies to mesh objects only: [`GridFill::Voxelize`] voxelizes them
-/// ([`crate::geometry::grid::voxelize`], about one voxel of error; a mesh that voxelizing
+/// ([`crate::convert::mesh_to_grid::voxelize`], about one voxel of error; a mesh that voxelizing
 /// finds open is sampled exactly instead, [`Fallback::OpenMeshSampled`]). Analytic objects
 /// (primitives, CSG, repetition) are always sampled exactly from their SDF. `storage`
 /// [`GridStorage::Band`] keeps only the bricks near the surface

@@ -7,9 +7,9 @@ use std::path::{Path, PathBuf};
 
 use sdfmesh::cli::commands::render_scene;
 use sdfmesh::convert::extract::ExtractMethod;
+use sdfmesh::convert::mesh_to_grid::sample_mesh;
 use sdfmesh::convert::tessellate::tessellate;
 use sdfmesh::geometry::grid::io::save_grid;
-use sdfmesh::geometry::grid::sample_mesh;
 use sdfmesh::geometry::march::MarchParams;
 use sdfmesh::plan::{GridFill, GridStorage, MeshMethod, Representation};
 use sdfmesh::scene::parse_scene;

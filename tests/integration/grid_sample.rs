@@ -6,12 +6,14 @@ use std::time::Instant;
 
 use glam::{UVec3, Vec3, Vec3A};
 use proptest::prelude::*;
-use sdfmesh::error::Error;
-use sdfmesh::geometry::grid::closest::{NodeStack, TriangleBvh, closest_point_on_triangle};
-use sdfmesh::geometry::grid::winding::{BETA, FastWinding, REFINE_BETA, exact_winding_number, is_closed};
-use sdfmesh::geometry::grid::{
-    DEFAULT_MAX_GRID_BYTES, SdfGrid, check_size, sample_mesh, sample_mesh_with_stats,
+use sdfmesh::convert::mesh_to_grid::closest::{NodeStack, TriangleBvh};
+use sdfmesh::convert::mesh_to_grid::winding::{
+    BETA, FastWinding, REFINE_BETA, exact_winding_number, is_closed,
 };
+use sdfmesh::convert::mesh_to_grid::{sample_mesh, sample_mesh_with_stats};
+use sdfmesh::error::Error;
+use sdfmesh::geometry::grid::{DEFAULT_MAX_GRID_BYTES, SdfGrid, check_size};
+use sdfmesh::geometry::mesh::triangle::closest_point_on_triangle;
 use sdfmesh::mesh::{TriangleMesh, load_mesh};
 
 use crate::util::{Lcg, box_sdf};

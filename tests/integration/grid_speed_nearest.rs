@@ -1,4 +1,4 @@
-//! The fast nearest-triangle paths of `sdfmesh::geometry::grid::closest` (bounding cylinders beside
+//! The fast nearest-triangle paths of `sdfmesh::convert::mesh_to_grid::closest` (bounding cylinders beside
 //! the boxes, leaf packets, group walks of up to `GROUP_MAX` points) and `sample_mesh`,
 //! which uses them, against an independent `f64` brute force, on smooth meshes (where the
 //! cylinders prune most) with points on, near, inside and far from the surface, hints that
@@ -6,8 +6,8 @@
 
 use glam::{DVec3, Vec3};
 use proptest::prelude::*;
-use sdfmesh::geometry::grid::closest::{GROUP_MAX, GroupStack, Nearest, NodeStack, TriangleBvh};
-use sdfmesh::geometry::grid::sample_mesh;
+use sdfmesh::convert::mesh_to_grid::closest::{GROUP_MAX, GroupStack, Nearest, NodeStack, TriangleBvh};
+use sdfmesh::convert::mesh_to_grid::sample_mesh;
 use sdfmesh::mesh::TriangleMesh;
 
 use crate::util::Lcg;

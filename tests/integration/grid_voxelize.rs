@@ -5,10 +5,11 @@ use std::path::Path;
 use std::time::Instant;
 
 use glam::Vec3;
+use sdfmesh::convert::mesh_to_grid::sample_mesh;
+use sdfmesh::convert::mesh_to_grid::voxelize::{voxelize_mesh, voxelize_mesh_with_stats};
 use sdfmesh::convert::tessellate::tessellate;
 use sdfmesh::error::Error;
-use sdfmesh::geometry::grid::voxelize::{voxelize_mesh, voxelize_mesh_with_stats};
-use sdfmesh::geometry::grid::{SdfGrid, sample_mesh};
+use sdfmesh::geometry::grid::SdfGrid;
 use sdfmesh::mesh::{TriangleMesh, load_mesh};
 use sdfmesh::scene::shape::Primitive;
 

@@ -5,8 +5,8 @@
 
 use glam::{DVec3, Vec3};
 use sdfmesh::convert::extract::{ExtractMethod, Field, extract};
+use sdfmesh::convert::mesh_to_grid::sample_mesh;
 use sdfmesh::geometry::Aabb;
-use sdfmesh::geometry::grid::sample_mesh;
 
 fn cube(h: f32) -> Aabb {
     Aabb::new(Vec3::splat(-h).into(), Vec3::splat(h).into())

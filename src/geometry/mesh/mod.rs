@@ -14,11 +14,10 @@ use glam::{DVec3, Vec3};
 use obvhs::BvhBuildParams;
 
 use crate::geometry::bvh2;
-use crate::geometry::grid::closest::closest_point_on_triangle;
-use crate::geometry::mesh::triangle::ShearedRay;
+use crate::geometry::mesh::triangle::{ShearedRay, closest_point_on_triangle};
 #[cfg(target_arch = "x86_64")]
-use crate::geometry::mesh::wide_bvh::BoxRayAvx2;
-use crate::geometry::mesh::wide_bvh::{BoxRay, BoxTest, LeafHit, WideBvh, closest_walk};
+use crate::geometry::mesh::wide_bvh::WideBoxRayAvx2;
+use crate::geometry::mesh::wide_bvh::{BoxTest, LeafHit, WideBoxRay, WideBvh, closest_walk};
 use crate::geometry::{Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, aabb, f32_error, max_abs};
 use crate::mesh::TriangleMesh;
 pub use crate::scene::shape::Shading;
@@ -180,13 +179,13 @@ impl MeshGeometry {
         t_max: f32,
         stats: &mut RayStats,
     ) -> Option<Hit> {
-        self.closest_hit_with::<BoxRayAvx2>(&Ray { origin, dir }, t_min, t_max, stats)
+        self.closest_hit_with::<WideBoxRayAvx2>(&Ray { origin, dir }, t_min, t_max, stats)
     }
 
     /// [`Geometry::closest_hit`] with the portable box test.
     #[inline(never)]
     fn closest_hit_portable(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
-        self.closest_hit_with::<BoxRay>(ray, t_min, t_max, stats)
+        self.closest_hit_with::<WideBoxRay>(ray, t_min, t_max, stats)
     }
 
     /// [`Geometry::closest_hit`] with the box test `B` (inlined, see [`closest_walk`]).

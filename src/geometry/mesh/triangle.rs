@@ -4,13 +4,14 @@
 //! between its triangles. [`ShearedRay::intersect4`] runs the same test on four triangles
 //! at once (structure-of-arrays, vectorised by the compiler) with bit-identical results,
 //! returning a hit mask and skipping the distances and their division when no lane's edge
-//! functions agree in sign.
+//! functions agree in sign. Also the exact closest point on a triangle
+//! ([`closest_point_on_triangle`]), for distance queries.
 
 use std::ops::{Add, Div, Mul, Sub};
 
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec3, Vec3A};
 
-use crate::geometry::mesh::wide_bvh::F4;
+use crate::simd::F4;
 
 /// Per-ray precomputation of the shear that maps the ray to the +z axis.
 #[derive(Clone, Copy, Debug)]
@@ -285,6 +286,55 @@ impl ShearedRay {
 pub fn double_area(v0: Vec3, v1: Vec3, v2: Vec3) -> f64 {
     let (a, b, c) = (DVec3::from(v0), DVec3::from(v1), DVec3::from(v2));
     (b - a).cross(c - a).length()
+}
+
+/// The closest point to `p` on the triangle `a, b, c`: Ericson's region-based method
+/// (Real-Time Collision Detection, 5.1.5). The query point is classified against the
+/// Voronoi regions of the triangle's corners and edges with dot products; in the face
+/// region the point is projected onto the triangle's plane (more accurate in `f32` than
+/// Ericson's barycentric form when the point is far from a small triangle).
+///
+/// The triangle must have non-zero area (the [`crate::mesh::TriangleMesh`] invariant).
+#[inline]
+pub fn closest_point_on_triangle(p: Vec3A, a: Vec3A, b: Vec3A, c: Vec3A) -> Vec3A {
+    let ab = b - a;
+    let ac = c - a;
+    let ap = p - a;
+    let d1 = ab.dot(ap);
+    let d2 = ac.dot(ap);
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a; // corner region A
+    }
+    let bp = p - b;
+    let d3 = ab.dot(bp);
+    let d4 = ac.dot(bp);
+    if d3 >= 0.0 && d4 <= d3 {
+        return b; // corner region B
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return a + ab * v; // edge region AB
+    }
+    let cp = p - c;
+    let d5 = ab.dot(cp);
+    let d6 = ac.dot(cp);
+    if d6 >= 0.0 && d5 <= d6 {
+        return c; // corner region C
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return a + ac * w; // edge region AC
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return b + (c - b) * w; // edge region BC
+    }
+    // Face region: project onto the plane.
+    let n = ab.cross(ac);
+    p - n * (ap.dot(n) / n.length_squared())
 }
 
 #[cfg(test)]

@@ -4,10 +4,9 @@
 //! instruction per step where the CPU has it, detected at run time, else two SSE halves),
 //! with leaves of up to eight triangles pre-gathered into one or two [`Tri4`] packets
 //! (tested together in one eight-lane AVX test, `ShearedRay::intersect8_avx`, where the
-//! CPU has it, else one [`ShearedRay::intersect4`] after the other). Owns the closest-hit,
-//! any-hit and nearest-point walks over it and their work counting, and [`F4`], the
-//! four-lane f32 vector the box and triangle tests use (SSE on x86_64, plain arrays
-//! elsewhere). The scene's top-level BVH over objects stays in [`crate::geometry::bvh2`].
+//! CPU has it ([`crate::simd::avx2`]), else one [`ShearedRay::intersect4`] after the
+//! other). Owns the closest-hit, any-hit and nearest-point walks over it and their work
+//! counting. The scene's top-level BVH over objects stays in [`crate::geometry::bvh2`].
 
 use std::mem::MaybeUninit;
 use std::ops::{Mul, Sub};
@@ -15,8 +14,10 @@ use std::ops::{Mul, Sub};
 use glam::{DVec3, Vec3};
 use obvhs::bvh2::Bvh2;
 
+use crate::geometry::bvh2;
 use crate::geometry::mesh::triangle::{ShearedRay, Tri4};
 use crate::geometry::{Aabb, RayStats, box_distance};
+use crate::simd::F4;
 
 /// Children per node. Eight rather than four (benches/primary_rays.rs, armadillo) cuts the
 /// nodes a primary ray visits from 3.4 to 2.5 and the depth from 11 to 7, and raised
@@ -37,7 +38,7 @@ const LEAF: u32 = 1 << 31;
 const LEAF_SHIFT: u32 = 5;
 const _: () = assert!(LEAF_MAX * LEAF_PACKETS <= 1 << LEAF_SHIFT);
 // Node references are byte offsets, and `WideBvh::node` checks them as such.
-const _: () = assert!(size_of::<Node>() == 256);
+const _: () = assert!(size_of::<WideNode>() == 256);
 /// Cost of a leaf test (one or two packets, one eight-lane test) relative to a node test
 /// in the surface area heuristic that groups the BVH2 into wide nodes
 /// ([`WideBvh::from_bvh2`]). It decides which subtrees of at most eight triangles become
@@ -54,7 +55,7 @@ const STACK: usize = 255;
 /// line).
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
-pub struct Node {
+pub struct WideNode {
     /// Child boxes, scene units: `bounds[0..3][lane]` are the minimum x, y, z and
     /// `bounds[3..6][lane]` the maximum; unused lanes are NaN (no ray enters them).
     pub bounds: [[f32; WIDTH]; 6],
@@ -92,7 +93,7 @@ pub struct LeafHit {
 #[derive(Clone, Debug, Default)]
 pub struct WideBvh {
     /// Inner nodes; node 0 is the root.
-    pub nodes: Vec<Node>,
+    pub nodes: Vec<WideNode>,
     /// Leaf packets.
     pub packets: Vec<Packet>,
     /// Deepest node level (root = 1), which bounds the traversal stack.
@@ -102,17 +103,17 @@ pub struct WideBvh {
     avx2: bool,
 }
 
-/// A ray prepared for the eight-box test of a [`Node`].
+/// A ray prepared for the eight-box test of a [`WideNode`].
 pub(crate) trait BoxTest: Copy {
     /// Prepares the ray `origin + t * dir`.
     fn new(origin: Vec3, dir: Vec3) -> Self;
     /// The lanes whose child box the ray enters within `[t_min, t_max]` (bit `l` for lane
     /// `l`) and the [`order_key`]s of the entry distances.
-    fn hit(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]);
+    fn hit(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]);
 
     /// [`BoxTest::hit`] for the root, the first node of every walk.
     #[inline(always)]
-    fn hit_root(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
+    fn hit_root(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
         self.hit(n, t_min, t_max)
     }
 
@@ -141,23 +142,23 @@ fn safe_inverse(dir: Vec3) -> [f32; 3] {
 
 /// The portable box test: each node as two halves of four lanes ([`F4`]).
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct BoxRay {
+pub(crate) struct WideBoxRay {
     origin: [F4; 3],
     inv: [F4; 3],
 }
 
-impl BoxTest for BoxRay {
+impl BoxTest for WideBoxRay {
     #[inline(always)]
     fn new(origin: Vec3, dir: Vec3) -> Self {
         let inv = safe_inverse(dir);
-        BoxRay {
+        WideBoxRay {
             origin: [F4::splat(origin.x), F4::splat(origin.y), F4::splat(origin.z)],
             inv: [F4::splat(inv[0]), F4::splat(inv[1]), F4::splat(inv[2])],
         }
     }
 
     #[inline(always)]
-    fn hit(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
+    fn hit(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
         let b = &n.bounds;
         let half = |h: usize| {
             let slab = |row: usize, a: usize| {
@@ -191,7 +192,7 @@ impl BoxTest for BoxRay {
 /// feature). Both rows of an axis sit at fixed offsets and are ordered by `min` and
 /// `max`, which keep an empty lane's NaN (as in the portable test), rather than rows
 /// chosen by the direction's signs: no row index to keep per ray. Shared by
-/// [`BoxRayAvx2::hit`] and [`BoxRayAvx2::hit_root`], which differ only in the slab
+/// [`WideBoxRayAvx2::hit`] and [`WideBoxRayAvx2::hit_root`], which differ only in the slab
 /// distance.
 #[cfg(target_arch = "x86_64")]
 macro_rules! box_test_avx {
@@ -241,7 +242,7 @@ macro_rules! box_test_avx {
 /// (a fused root made rays that miss slower than the unfused test).
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct BoxRayAvx2 {
+pub(crate) struct WideBoxRayAvx2 {
     origin: [core::arch::x86_64::__m256; 3],
     inv: [core::arch::x86_64::__m256; 3],
     /// Per bound row (minimum x, y, z, then maximum x, y, z): `origin * inv` of its axis,
@@ -251,7 +252,7 @@ pub(crate) struct BoxRayAvx2 {
 }
 
 #[cfg(target_arch = "x86_64")]
-impl BoxTest for BoxRayAvx2 {
+impl BoxTest for WideBoxRayAvx2 {
     #[inline(always)]
     fn new(origin: Vec3, dir: Vec3) -> Self {
         use core::arch::x86_64::_mm256_set1_ps;
@@ -268,7 +269,7 @@ impl BoxTest for BoxRayAvx2 {
             let e = (p.abs() * (2.0 * f32::EPSILON)).copysign(inv[a]);
             splat(if row < 3 { p + e } else { p - e })
         };
-        BoxRayAvx2 {
+        WideBoxRayAvx2 {
             origin: [splat(o[0]), splat(o[1]), splat(o[2])],
             inv: [splat(inv[0]), splat(inv[1]), splat(inv[2])],
             offset: [offset(0), offset(1), offset(2), offset(3), offset(4), offset(5)],
@@ -276,7 +277,7 @@ impl BoxTest for BoxRayAvx2 {
     }
 
     #[inline(always)]
-    fn hit(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
+    fn hit(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
         // SAFETY: as in `new`, the CPU has AVX and FMA (see the type's documentation).
         unsafe {
             use core::arch::x86_64::*;
@@ -290,7 +291,7 @@ impl BoxTest for BoxRayAvx2 {
     }
 
     #[inline(always)]
-    fn hit_root(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
+    fn hit_root(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
         // SAFETY: as in `hit`.
         unsafe {
             use core::arch::x86_64::*;
@@ -314,198 +315,6 @@ impl BoxTest for BoxRayAvx2 {
                 t[..LEAF_MAX].copy_from_slice(&t4);
                 (t, mask)
             }
-        }
-    }
-}
-
-/// Four f32 lanes: SSE on x86_64 (part of its baseline, so the intrinsics are safe to
-/// call), a plain array elsewhere. Arithmetic is IEEE single precision lane by lane, so
-/// results equal the scalar ones bit for bit.
-#[derive(Clone, Copy, Debug)]
-pub struct F4(
-    #[cfg(target_arch = "x86_64")] core::arch::x86_64::__m128,
-    #[cfg(not(target_arch = "x86_64"))] [f32; 4],
-);
-
-#[cfg(target_arch = "x86_64")]
-mod f4 {
-    use super::F4;
-    use core::arch::x86_64::*;
-
-    // SAFETY (every block below): SSE and SSE2 are part of the x86_64 baseline, so the
-    // intrinsics' target features are always present; loads and stores go through
-    // references to `[f32; 4]`.
-
-    impl F4 {
-        /// Loads four lanes.
-        #[inline(always)]
-        pub fn load(a: &[f32; 4]) -> F4 {
-            F4(unsafe { _mm_loadu_ps(a.as_ptr()) })
-        }
-        /// The same value in every lane.
-        #[inline(always)]
-        pub fn splat(x: f32) -> F4 {
-            F4(unsafe { _mm_set1_ps(x) })
-        }
-        /// The four lanes.
-        #[inline(always)]
-        pub fn to_array(self) -> [f32; 4] {
-            let mut a = [0.0f32; 4];
-            unsafe { _mm_storeu_ps(a.as_mut_ptr(), self.0) };
-            a
-        }
-        /// Lane-wise `if a < b { a } else { b }` (`b` where either is NaN).
-        #[inline(always)]
-        pub fn min(self, b: F4) -> F4 {
-            F4(unsafe { _mm_min_ps(self.0, b.0) })
-        }
-        /// Lane-wise `if a > b { a } else { b }` (`b` where either is NaN).
-        #[inline(always)]
-        pub fn max(self, b: F4) -> F4 {
-            F4(unsafe { _mm_max_ps(self.0, b.0) })
-        }
-        /// Bit `l` set where lane `l` has `a <= b`.
-        #[inline(always)]
-        pub fn le(self, b: F4) -> u32 {
-            unsafe { _mm_movemask_ps(_mm_cmple_ps(self.0, b.0)) as u32 }
-        }
-        /// Bit `l` set where lane `l` has `a < b`.
-        #[inline(always)]
-        pub fn lt(self, b: F4) -> u32 {
-            unsafe { _mm_movemask_ps(_mm_cmplt_ps(self.0, b.0)) as u32 }
-        }
-        /// Bit `l` set where lane `l` has `a == b`.
-        #[inline(always)]
-        pub fn eq(self, b: F4) -> u32 {
-            unsafe { _mm_movemask_ps(_mm_cmpeq_ps(self.0, b.0)) as u32 }
-        }
-    }
-
-    impl std::ops::Add for F4 {
-        type Output = F4;
-        /// Lane-wise `a + b`.
-        #[inline(always)]
-        fn add(self, b: F4) -> F4 {
-            F4(unsafe { _mm_add_ps(self.0, b.0) })
-        }
-    }
-
-    impl std::ops::Sub for F4 {
-        type Output = F4;
-        /// Lane-wise `a - b`.
-        #[inline(always)]
-        fn sub(self, b: F4) -> F4 {
-            F4(unsafe { _mm_sub_ps(self.0, b.0) })
-        }
-    }
-
-    impl std::ops::Mul for F4 {
-        type Output = F4;
-        /// Lane-wise `a * b`.
-        #[inline(always)]
-        fn mul(self, b: F4) -> F4 {
-            F4(unsafe { _mm_mul_ps(self.0, b.0) })
-        }
-    }
-
-    impl std::ops::Div for F4 {
-        type Output = F4;
-        /// Lane-wise `a / b`.
-        #[inline(always)]
-        fn div(self, b: F4) -> F4 {
-            F4(unsafe { _mm_div_ps(self.0, b.0) })
-        }
-    }
-}
-
-#[cfg(not(target_arch = "x86_64"))]
-mod f4 {
-    use super::F4;
-
-    fn zip(a: F4, b: F4, f: impl Fn(f32, f32) -> f32) -> F4 {
-        F4([f(a.0[0], b.0[0]), f(a.0[1], b.0[1]), f(a.0[2], b.0[2]), f(a.0[3], b.0[3])])
-    }
-
-    fn bits(a: F4, b: F4, f: impl Fn(f32, f32) -> bool) -> u32 {
-        (0..4).fold(0, |m, l| m | (u32::from(f(a.0[l], b.0[l])) << l))
-    }
-
-    impl F4 {
-        /// Loads four lanes.
-        #[inline(always)]
-        pub fn load(a: &[f32; 4]) -> F4 {
-            F4(*a)
-        }
-        /// The same value in every lane.
-        #[inline(always)]
-        pub fn splat(x: f32) -> F4 {
-            F4([x; 4])
-        }
-        /// The four lanes.
-        #[inline(always)]
-        pub fn to_array(self) -> [f32; 4] {
-            self.0
-        }
-        /// Lane-wise `if a < b { a } else { b }` (`b` where either is NaN).
-        #[inline(always)]
-        pub fn min(self, b: F4) -> F4 {
-            zip(self, b, |x, y| if x < y { x } else { y })
-        }
-        /// Lane-wise `if a > b { a } else { b }` (`b` where either is NaN).
-        #[inline(always)]
-        pub fn max(self, b: F4) -> F4 {
-            zip(self, b, |x, y| if x > y { x } else { y })
-        }
-        /// Bit `l` set where lane `l` has `a <= b`.
-        #[inline(always)]
-        pub fn le(self, b: F4) -> u32 {
-            bits(self, b, |x, y| x <= y)
-        }
-        /// Bit `l` set where lane `l` has `a < b`.
-        #[inline(always)]
-        pub fn lt(self, b: F4) -> u32 {
-            bits(self, b, |x, y| x < y)
-        }
-        /// Bit `l` set where lane `l` has `a == b`.
-        #[inline(always)]
-        pub fn eq(self, b: F4) -> u32 {
-            bits(self, b, |x, y| x == y)
-        }
-    }
-
-    impl std::ops::Add for F4 {
-        type Output = F4;
-        /// Lane-wise `a + b`.
-        #[inline(always)]
-        fn add(self, b: F4) -> F4 {
-            zip(self, b, |x, y| x + y)
-        }
-    }
-
-    impl std::ops::Sub for F4 {
-        type Output = F4;
-        /// Lane-wise `a - b`.
-        #[inline(always)]
-        fn sub(self, b: F4) -> F4 {
-            zip(self, b, |x, y| x - y)
-        }
-    }
-
-    impl std::ops::Mul for F4 {
-        type Output = F4;
-        /// Lane-wise `a * b`.
-        #[inline(always)]
-        fn mul(self, b: F4) -> F4 {
-            zip(self, b, |x, y| x * y)
-        }
-    }
-
-    impl std::ops::Div for F4 {
-        type Output = F4;
-        /// Lane-wise `a / b`.
-        #[inline(always)]
-        fn div(self, b: F4) -> F4 {
-            zip(self, b, |x, y| x / y)
         }
     }
 }
@@ -536,7 +345,7 @@ impl WideBvh {
         }
         w.nodes.shrink_to_fit();
         w.packets.shrink_to_fit();
-        w.avx2 = avx2_detected();
+        w.avx2 = crate::simd::avx2();
         w
     }
 
@@ -561,7 +370,7 @@ impl WideBvh {
             let b = *bvh.nodes[c].aabb();
             let reference = if packet {
                 prims.clear();
-                subtree_prims(bvh, c, &mut prims);
+                bvh2::subtree_primitives(bvh, c, &mut prims);
                 self.leaf(boxes, corners, &prims, depth + 1)
             } else {
                 let index = self.nodes.len();
@@ -614,7 +423,7 @@ impl WideBvh {
     /// Bytes held: the struct, nodes and packets.
     pub fn bytes_used(&self) -> usize {
         std::mem::size_of::<Self>()
-            + self.nodes.capacity() * std::mem::size_of::<Node>()
+            + self.nodes.capacity() * std::mem::size_of::<WideNode>()
             + self.packets.capacity() * std::mem::size_of::<Packet>()
     }
 
@@ -635,7 +444,7 @@ impl WideBvh {
             // SAFETY: `avx2` is only set where the CPU has AVX2, FMA, POPCNT and BMI1.
             return unsafe { self.closest_hit_avx2(origin, dir, t_min, t_max, stats) };
         }
-        closest_walk::<BoxRay>(self, origin, dir, t_min, t_max, stats)
+        closest_walk::<WideBoxRay>(self, origin, dir, t_min, t_max, stats)
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -648,7 +457,7 @@ impl WideBvh {
         t_max: f32,
         stats: &mut RayStats,
     ) -> Option<LeafHit> {
-        closest_walk::<BoxRayAvx2>(self, origin, dir, t_min, t_max, stats)
+        closest_walk::<WideBoxRayAvx2>(self, origin, dir, t_min, t_max, stats)
     }
 
     /// Whether any triangle is hit with `t` in `[t_min, t_max]`; stops at the first
@@ -660,13 +469,13 @@ impl WideBvh {
             // SAFETY: `avx2` is only set where the CPU has AVX2, FMA, POPCNT and BMI1.
             return unsafe { self.any_hit_avx2(origin, dir, t_min, t_max, stats) };
         }
-        any_walk::<BoxRay>(self, origin, dir, t_min, t_max, stats)
+        any_walk::<WideBoxRay>(self, origin, dir, t_min, t_max, stats)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,popcnt,bmi1")]
     fn any_hit_avx2(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
-        any_walk::<BoxRayAvx2>(self, origin, dir, t_min, t_max, stats)
+        any_walk::<WideBoxRayAvx2>(self, origin, dir, t_min, t_max, stats)
     }
 
     /// The node of inner-node reference `r` (its byte offset in [`WideBvh::nodes`]): one
@@ -675,7 +484,7 @@ impl WideBvh {
     /// compare and a branch that never goes the other way: rotated right by 8 bits, a
     /// multiple of 256 is its node's index, and any other offset has a low bit at the top.
     #[inline(always)]
-    fn node(&self, r: u32) -> &Node {
+    fn node(&self, r: u32) -> &WideNode {
         let at = r as usize;
         assert!(at.rotate_right(8) < self.nodes.len(), "node reference out of range");
         // SAFETY: by the check, `at` is 256 (the size of a node, asserted at compile time)
@@ -808,7 +617,7 @@ macro_rules! with_stack {
 
 /// [`WideBvh::closest_hit`] with the box test `B` and a stack from [`with_stack`]. Inlined
 /// into its callers, so that under `#[target_feature(enable = "avx2,fma,popcnt,bmi1")]` (which
-/// alone may use [`BoxRayAvx2`]) all of it is compiled with AVX2.
+/// alone may use [`WideBoxRayAvx2`]) all of it is compiled with AVX2.
 #[inline(always)]
 pub(crate) fn closest_walk<B: BoxTest>(
     bvh: &WideBvh,
@@ -828,7 +637,7 @@ pub(crate) fn closest_walk<B: BoxTest>(
 #[inline(always)]
 fn visit_node<B: BoxTest, const ROOT: bool>(
     br: &B,
-    n: &Node,
+    n: &WideNode,
     t_min: f32,
     t_max: f32,
     stack: &mut [MaybeUninit<Entry>],
@@ -1070,34 +879,8 @@ fn any_walk_in<B: BoxTest>(
     found
 }
 
-/// Whether the CPU has AVX2, FMA, POPCNT and BMI1 (the walks' fast box test).
-fn avx2_detected() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("popcnt")
-            && std::arch::is_x86_feature_detected!("bmi1")
-            && std::arch::is_x86_feature_detected!("fma")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
-}
-
-/// Appends the primitives of the BVH2 subtree at `node` to `out`.
-fn subtree_prims(bvh: &Bvh2, node: usize, out: &mut Vec<u32>) {
-    let n = &bvh.nodes[node];
-    if n.is_leaf() {
-        out.extend((n.first_index..n.first_index + n.prim_count).map(|i| bvh.primitive_indices[i as usize]));
-    } else {
-        subtree_prims(bvh, n.first_index as usize, out);
-        subtree_prims(bvh, n.first_index as usize + 1, out);
-    }
-}
-
 /// The SAH-optimal grouping of a BVH2 into wide nodes and packets
-/// ([`WideBvh::from_bvh2_sah`]). Per BVH2 node and slot budget `j` (1 to [`WIDTH`]), how its
+/// ([`WideBvh::from_bvh2`]). Per BVH2 node and slot budget `j` (1 to [`WIDTH`]), how its
 /// subtree is best covered by at most `j` child slots of a wide node.
 struct SahPlan {
     /// `choice[node][j - 1]`: [`SahPlan::PACKET`] (one slot, a leaf of one or two packets),
@@ -1119,17 +902,9 @@ impl SahPlan {
         let mut choice = vec![[Self::PACKET; WIDTH]; count];
         let mut wide = vec![0u8; count];
         let mut prims = vec![0u32; count];
-        // Parents before children; visited in reverse, children come first.
-        let mut order = Vec::with_capacity(count);
-        let mut stack = vec![0usize];
-        while let Some(i) = stack.pop() {
-            order.push(i);
-            let n = &bvh.nodes[i];
-            if !n.is_leaf() {
-                stack.extend([n.first_index as usize, n.first_index as usize + 1]);
-            }
-        }
-        for &i in order.iter().rev() {
+        // Children before parents.
+        for &i in bvh2::parents_first(bvh).iter().rev() {
+            let i = i as usize;
             let n = &bvh.nodes[i];
             let area = n.aabb().half_area();
             if n.is_leaf() {
@@ -1197,17 +972,17 @@ impl SahPlan {
 /// The reference of node `index`: its byte offset in [`WideBvh::nodes`]. Panics past
 /// 2^23 nodes (some 200 million triangles), where it would reach the [`LEAF`] bit.
 fn node_ref(index: usize) -> u32 {
-    let r = index * size_of::<Node>();
-    assert!(r < LEAF as usize, "more than {} BVH nodes", LEAF as usize / size_of::<Node>());
+    let r = index * size_of::<WideNode>();
+    assert!(r < LEAF as usize, "more than {} BVH nodes", LEAF as usize / size_of::<WideNode>());
     r as u32
 }
 
 /// A node with every lane unused: NaN boxes (never entered) and [`NONE`] references.
-fn empty_node() -> Node {
-    Node { bounds: [[f32::NAN; WIDTH]; 6], children: [NONE; WIDTH] }
+fn empty_node() -> WideNode {
+    WideNode { bounds: [[f32::NAN; WIDTH]; 6], children: [NONE; WIDTH] }
 }
 
-fn set_lane(n: &mut Node, lane: usize, b: &Aabb, reference: u32) {
+fn set_lane(n: &mut WideNode, lane: usize, b: &Aabb, reference: u32) {
     for a in 0..3 {
         n.bounds[a][lane] = b.min[a];
         n.bounds[a + 3][lane] = b.max[a];

@@ -1,10 +1,7 @@
-//! Exact closest points on triangles and the nearest-triangle query over a BVH.
+//! The nearest-triangle query over a BVH, for sampling a mesh's distance field.
 //!
-//! [`closest_point_on_triangle`] is Ericson's region-based method (Real-Time Collision
-//! Detection, 5.1.5): the query point is classified against the Voronoi regions of the
-//! triangle's corners and edges with dot products; in the face region the point is
-//! projected onto the triangle's plane (more accurate in `f32` than Ericson's barycentric
-//! form when the point is far from a small triangle).
+//! The exact closest point on one triangle is [`closest_point_on_triangle`] (in
+//! [`crate::geometry::mesh::triangle`], beside the ray/triangle test).
 //!
 //! [`TriangleBvh`] holds an obvhs [`Bvh2`] over a mesh's triangles with the corners stored
 //! in leaf order, and the same hierarchy collapsed to 4-wide nodes whose children's bounds
@@ -23,10 +20,13 @@
 //! far or than a caller-supplied upper bound. [`TriangleBvh::nearest_group`] answers up to
 //! [`GROUP_MAX`] nearby points in one walk (a node is opened when any of them needs it,
 //! each prunes by its own best), which shares the node loads and overlaps the points'
-//! independent arithmetic; where the CPU has AVX2 (detected at run time) its node and
+//! independent arithmetic; where the CPU has AVX2 ([`crate::simd::avx2`]) its node and
 //! leaf tests take two points per instruction, with the same operations in the same order
 //! as the portable ones (so the same results). Neither allocates: the caller passes a
-//! reusable [`NodeStack`] or [`GroupStack`].
+//! reusable [`NodeStack`] or [`GroupStack`]. The two walks over one tree are kept apart on
+//! purpose: answering one point as a group walk of one point (same results, bit for bit)
+//! made the one-point queries of [`super::MeshSampler`] about 25% slower on the bunny (1.1
+//! against 0.9 CPU-seconds for 96^3 serpentine queries) and `band_from_mesh` 10 to 15%.
 //! [`TriangleBvh::axis_segment_may_meet`] is a conservative segment test for signing by
 //! regions.
 
@@ -35,6 +35,7 @@ use obvhs::BvhBuildParams;
 use obvhs::bvh2::Bvh2;
 
 use crate::geometry::bvh2;
+use crate::geometry::mesh::triangle::closest_point_on_triangle;
 use crate::geometry::{Aabb, aabb};
 use crate::mesh::TriangleMesh;
 
@@ -42,51 +43,6 @@ use crate::mesh::TriangleMesh;
 /// (high 32 bits) and its index (low). Keep one per thread; it grows to the BVH's depth
 /// once and is then reused.
 pub type NodeStack = Vec<u64>;
-
-/// The closest point to `p` on the triangle `a, b, c` (Ericson's region-based method).
-///
-/// The triangle must have non-zero area (the [`TriangleMesh`] invariant).
-#[inline]
-pub fn closest_point_on_triangle(p: Vec3A, a: Vec3A, b: Vec3A, c: Vec3A) -> Vec3A {
-    let ab = b - a;
-    let ac = c - a;
-    let ap = p - a;
-    let d1 = ab.dot(ap);
-    let d2 = ac.dot(ap);
-    if d1 <= 0.0 && d2 <= 0.0 {
-        return a; // corner region A
-    }
-    let bp = p - b;
-    let d3 = ab.dot(bp);
-    let d4 = ac.dot(bp);
-    if d3 >= 0.0 && d4 <= d3 {
-        return b; // corner region B
-    }
-    let vc = d1 * d4 - d3 * d2;
-    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        let v = d1 / (d1 - d3);
-        return a + ab * v; // edge region AB
-    }
-    let cp = p - c;
-    let d5 = ab.dot(cp);
-    let d6 = ac.dot(cp);
-    if d6 >= 0.0 && d5 <= d6 {
-        return c; // corner region C
-    }
-    let vb = d5 * d2 - d1 * d6;
-    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        let w = d2 / (d2 - d6);
-        return a + ac * w; // edge region AC
-    }
-    let va = d3 * d6 - d5 * d4;
-    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
-        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        return b + (c - b) * w; // edge region BC
-    }
-    // Face region: project onto the plane.
-    let n = ab.cross(ac);
-    p - n * (ap.dot(n) / n.length_squared())
-}
 
 /// Squared distance from `p` to the box `[lo, hi]` (0 inside).
 #[inline]
@@ -195,7 +151,7 @@ pub struct TriangleBvh {
     /// cylinders in SIMD layout, for the nearest-triangle queries.
     wide: Vec<Node4>,
     /// The leaves' triangles in packets of four (in SIMD layout).
-    packets: Vec<Packet>,
+    packets: Vec<ClosestPacket>,
     /// Whether the group walks use the AVX2 node test (set where the CPU has it).
     avx2: bool,
 }
@@ -315,18 +271,18 @@ struct Node4 {
     leaves: u32,
 }
 
-/// A leaf packet: up to four triangles in SIMD layout (see [`Tri4`]) and their slots in
+/// A leaf packet: up to four triangles in SIMD layout (see [`PointTri4`]) and their slots in
 /// [`TriangleBvh::corners`]. A leaf of more than four triangles continues in the next
 /// packet while `more` is set.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(32))]
-struct Packet {
-    tri: Tri4,
+struct ClosestPacket {
+    tri: PointTri4,
     slot: [u32; 4],
     more: bool,
 }
 
-impl Packet {
+impl ClosestPacket {
     /// The packet's triangles' exact closest points to `q` (splatted), taken in lane order
     /// as the scalar loop would: each at most `best2` away replaces the best so far. Lowers
     /// `best2` and returns the last replacement (slot and closest point), if any.
@@ -352,13 +308,13 @@ impl Packet {
 }
 
 /// Four triangles of a leaf packet for the SIMD closest-point test
-/// ([`Tri4::closest`]): corners `a`, `b`, `c`, the normal `n = (b - a) x (c - a)` and
+/// ([`PointTri4::closest`]): corners `a`, `b`, `c`, the normal `n = (b - a) x (c - a)` and
 /// `|n|^2`, as structure of arrays (the normal and its square computed by glam exactly as
 /// [`closest_point_on_triangle`] computes them). An unused lane repeats lane 0 (triangle
 /// and slot), so it can only tie with it.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(16))]
-struct Tri4 {
+struct PointTri4 {
     a: [Vec4; 3],
     b: [Vec4; 3],
     c: [Vec4; 3],
@@ -366,11 +322,11 @@ struct Tri4 {
     nn: Vec4,
 }
 
-impl Tri4 {
+impl PointTri4 {
     /// The packet of `corners` (at least the first is `Some`).
-    fn new(corners: [Option<[Vec3A; 3]>; 4]) -> Tri4 {
+    fn new(corners: [Option<[Vec3A; 3]>; 4]) -> PointTri4 {
         let first = corners[0].expect("a packet has a triangle");
-        let mut t = Tri4 {
+        let mut t = PointTri4 {
             a: [Vec4::ZERO; 3],
             b: [Vec4::ZERO; 3],
             c: [Vec4::ZERO; 3],
@@ -517,24 +473,24 @@ const MAX_CYLINDER_TRIANGLES: u32 = 1 << 12;
 /// The 4-wide hierarchy and leaf packets of `bvh` (a [`Bvh2`] with fewer than `2^31`
 /// nodes and packets, whose `primitive_indices` are the identity into `corners`),
 /// parents before children.
-fn collapse(bvh: &Bvh2, corners: &[[Vec3A; 3]]) -> (Vec<Node4>, Vec<Packet>) {
+///
+/// The mesh tracer collapses its BVH2 too
+/// ([`crate::geometry::mesh::wide_bvh::WideBvh::from_bvh2`]); the two share the traversal
+/// orders of [`bvh2`] ([`bvh2::parents_first`], [`bvh2::subtree_primitives`]), not the
+/// grouping: that one chooses up to eight children per node and leaves of up to eight
+/// triangles by a surface area heuristic tuned for ray tests, this one opens the largest
+/// inner child until there are four (every BVH2 leaf a leaf of its own) and fits bounding
+/// cylinders. A shared grouping would change one of the two trees, and with it the speed
+/// each was measured at.
+fn collapse(bvh: &Bvh2, corners: &[[Vec3A; 3]]) -> (Vec<Node4>, Vec<ClosestPacket>) {
     let nodes = &bvh.nodes;
     let mut out: Vec<Node4> = Vec::with_capacity(nodes.len() / 2 + 1);
-    let mut packets: Vec<Packet> = Vec::with_capacity(corners.len() / 3 + 1);
+    let mut packets: Vec<ClosestPacket> = Vec::with_capacity(corners.len() / 3 + 1);
     // Per BVH2 node: the area-weighted normal sum and the triangle count of its subtree,
     // children before parents (the reverse of a depth-first pre-order).
     let mut normal = vec![DVec3::ZERO; nodes.len()];
     let mut count = vec![0u32; nodes.len()];
-    let mut order = Vec::with_capacity(nodes.len());
-    let mut todo = vec![0u32];
-    while let Some(i) = todo.pop() {
-        order.push(i);
-        let n = &nodes[i as usize];
-        if !n.is_leaf() {
-            todo.extend([n.first_index, n.first_index + 1]);
-        }
-    }
-    for &i in order.iter().rev() {
+    for &i in bvh2::parents_first(bvh).iter().rev() {
         let (i, n) = (i as usize, &nodes[i as usize]);
         if n.is_leaf() {
             for s in n.first_index..n.first_index + n.prim_count {
@@ -549,38 +505,30 @@ fn collapse(bvh: &Bvh2, corners: &[[Vec3A; 3]]) -> (Vec<Node4>, Vec<Packet>) {
         }
     }
     let mut slots: Vec<u32> = Vec::new();
-    let mut walk: Vec<u32> = Vec::new();
     let mut cylinder = |i: u32| {
         if count[i as usize] > MAX_CYLINDER_TRIANGLES {
             return Cylinder::NONE;
         }
+        // The subtree's slots (its primitive indices: the identity); the fit takes maxima
+        // and extents, so their order does not matter.
         slots.clear();
-        walk.clear();
-        walk.push(i);
-        while let Some(k) = walk.pop() {
-            let n = &nodes[k as usize];
-            if n.is_leaf() {
-                slots.extend(n.first_index..n.first_index + n.prim_count);
-            } else {
-                walk.extend([n.first_index, n.first_index + 1]);
-            }
-        }
+        bvh2::subtree_primitives(bvh, i as usize, &mut slots);
         let points = slots.iter().flat_map(|&s| corners[s as usize]);
         Cylinder::fit(points, normal[i as usize], None)
     };
-    let leaf = |i: u32, packets: &mut Vec<Packet>| {
+    let leaf = |i: u32, packets: &mut Vec<ClosestPacket>| {
         let n = &nodes[i as usize];
         let first = packets.len() as u32;
         let slots: Vec<u32> = (n.first_index..n.first_index + n.prim_count).collect();
         for (k, chunk) in slots.chunks(4).enumerate() {
-            // Unused lanes repeat the first triangle (see `Tri4`).
+            // Unused lanes repeat the first triangle (see `PointTri4`).
             let mut slot = [chunk[0]; 4];
             let mut tris = [None; 4];
             for (lane, &s) in chunk.iter().enumerate() {
                 slot[lane] = s;
                 tris[lane] = Some(corners[s as usize]);
             }
-            let p = Packet { tri: Tri4::new(tris), slot, more: (k + 1) * 4 < slots.len() };
+            let p = ClosestPacket { tri: PointTri4::new(tris), slot, more: (k + 1) * 4 < slots.len() };
             packets.push(p);
         }
         Node4::LEAF | first
@@ -769,13 +717,13 @@ unsafe fn avx2_node_within(
     }
 }
 
-/// [`Tri4::closest`] for two points at once (`q`: point `2 j` in the low four lanes,
+/// [`PointTri4::closest`] for two points at once (`q`: point `2 j` in the low four lanes,
 /// `2 j + 1` in the high four, as [`pair_coordinates`] gives them) with AVX: the same
 /// operations in the same order, so the same bits. Safety: only for code running with AVX
 /// enabled.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-unsafe fn avx2_tri_closest(t: &Tri4, q: &[__m256; 3]) -> (__m256, [__m256; 3]) {
+unsafe fn avx2_tri_closest(t: &PointTri4, q: &[__m256; 3]) -> (__m256, [__m256; 3]) {
     // SAFETY: AVX intrinsics; the caller runs with AVX enabled.
     unsafe {
         let sub = |u: [__m256; 3], v: [__m256; 3]| {
@@ -847,12 +795,12 @@ unsafe fn avx2_tri_closest(t: &Tri4, q: &[__m256; 3]) -> (__m256, [__m256; 3]) {
     }
 }
 
-/// [`Packet::improve`] for points `s` and `s + 1` (`s` even; those in `mask`) of a group
+/// [`ClosestPacket::improve`] for points `s` and `s + 1` (`s` even; those in `mask`) of a group
 /// walk at once, with AVX. Safety: only for code running with AVX2 enabled.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 unsafe fn avx2_improve_pair(
-    packet: &Packet,
+    packet: &ClosestPacket,
     q: &[__m256; 3],
     s: usize,
     mask: u32,
@@ -935,12 +883,7 @@ impl TriangleBvh {
         let corners: Vec<[Vec3A; 3]> = original.iter().map(|&i| tri(&mesh.triangles[i as usize])).collect();
         bvh.primitive_indices = (0..original.len() as u32).collect();
         let (wide, packets) = collapse(&bvh, &corners);
-        #[cfg(target_arch = "x86_64")]
-        let avx2 = std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("popcnt")
-            && std::arch::is_x86_feature_detected!("bmi1");
-        #[cfg(not(target_arch = "x86_64"))]
-        let avx2 = false;
+        let avx2 = crate::simd::avx2();
         TriangleBvh { bvh, corners, original, wide, packets, avx2 }
     }
 
@@ -963,7 +906,9 @@ impl TriangleBvh {
     /// [`TriangleBvh::nearest`], starting from the triangle at `hint` (an index into
     /// [`TriangleBvh::corners`], e.g. [`Nearest::slot`] of a neighbouring query): its
     /// distance bounds the search from the start, so that nodes farther than it are never
-    /// opened. The result is the same as without the hint (up to ties).
+    /// opened. The result is the same as without the hint (up to ties). A walk of its own
+    /// rather than [`TriangleBvh::nearest_group`] of one point, which is slower for one
+    /// point (see the module documentation).
     pub fn nearest_with_hint(
         &self,
         p: Vec3,
@@ -1072,7 +1017,8 @@ impl TriangleBvh {
     ) {
         #[cfg(target_arch = "x86_64")]
         if self.avx2 {
-            // SAFETY: `avx2` is only set where the CPU has AVX2.
+            // SAFETY: `avx2` is only set where the CPU has AVX2, POPCNT and BMI1
+            // (`crate::simd::avx2`).
             return unsafe { self.nearest_group_avx2(points, hints, out, stack, visited) };
         }
         self.group_walk::<false>(points, hints, out, stack, visited)
@@ -1105,7 +1051,7 @@ impl TriangleBvh {
     }
 
     /// The leaf `r` (a reference with [`Node4::LEAF`]) for the points in `mask` of a group
-    /// walk: each point's best improved by the leaf's triangles, as [`Packet::improve`]
+    /// walk: each point's best improved by the leaf's triangles, as [`ClosestPacket::improve`]
     /// does (with AVX2, two points per instruction, the same bits).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
@@ -1303,7 +1249,7 @@ impl TriangleBvh {
             + self.corners.capacity() * std::mem::size_of::<[Vec3A; 3]>()
             + self.original.capacity() * 4
             + self.wide.capacity() * std::mem::size_of::<Node4>()
-            + self.packets.capacity() * std::mem::size_of::<Packet>()
+            + self.packets.capacity() * std::mem::size_of::<ClosestPacket>()
     }
 }
 
@@ -1324,7 +1270,7 @@ mod tests {
         assert!((cp(Vec3A::new(0.2, 0.3, -4.0)) - Vec3A::new(0.2, 0.3, 0.0)).length() < 1e-6);
     }
 
-    /// [`Tri4::closest`] gives the bits of [`closest_point_on_triangle`] (distance and
+    /// [`PointTri4::closest`] gives the bits of [`closest_point_on_triangle`] (distance and
     /// point) in every lane: random triangles (some slivers, some far from the origin, some
     /// with corners on a coarse lattice so that ties and region borders are hit exactly),
     /// query points in every region, on corners and edges, with unused lanes.
@@ -1356,7 +1302,7 @@ mod tests {
             if tris[0].is_none() {
                 continue;
             }
-            let t4 = Tri4::new(tris);
+            let t4 = PointTri4::new(tris);
             let q = match round % 3 {
                 0 => offset + v() * 3.0,
                 1 => tris[0].unwrap()[round / 3 % 3],

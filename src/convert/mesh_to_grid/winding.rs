@@ -59,7 +59,7 @@ pub fn triangle_solid_angle(q: Vec3A, a: Vec3A, b: Vec3A, c: Vec3A) -> f32 {
 
 /// Per-node data of the expansion.
 #[derive(Clone, Copy, Debug, Default)]
-struct Node {
+struct WindingNode {
     /// Area-weighted centroid `p̃` of the node's triangles.
     centre: Vec3A,
     /// `N = Σ aₜ nₜ`: the sum of the triangles' area-weighted unit normals (half the
@@ -75,7 +75,7 @@ struct Node {
 /// Fast winding numbers over a [`TriangleBvh`] (see the module documentation).
 #[derive(Clone, Debug)]
 pub struct FastWinding {
-    nodes: Vec<Node>,
+    nodes: Vec<WindingNode>,
     second_order: bool,
 }
 
@@ -88,7 +88,7 @@ impl FastWinding {
     /// [`FastWinding::new`], choosing between the first-order (dipole only) and the
     /// second-order expansion.
     pub fn with_order(tree: &TriangleBvh, second_order: bool) -> Self {
-        let mut nodes = vec![Node::default(); tree.bvh.nodes.len()];
+        let mut nodes = vec![WindingNode::default(); tree.bvh.nodes.len()];
         if !nodes.is_empty() {
             let mut stack = vec![(0u32, false)];
             // Post-order without recursion: a node is finished after both children.
@@ -132,7 +132,7 @@ impl FastWinding {
                 let centre = centre.clamp(lo, hi);
                 let radius2 = (centre - lo).max(hi - centre).length_squared();
                 let moment = if second_order { raw - outer(normal, centre) } else { Mat3A::ZERO };
-                nodes[i as usize] = Node { centre, normal, radius2, moment };
+                nodes[i as usize] = WindingNode { centre, normal, radius2, moment };
             }
         }
         FastWinding { nodes, second_order }
@@ -218,7 +218,7 @@ impl FastWinding {
 
     /// Bytes held by the node data.
     pub fn bytes_used(&self) -> usize {
-        std::mem::size_of::<Self>() + self.nodes.capacity() * std::mem::size_of::<Node>()
+        std::mem::size_of::<Self>() + self.nodes.capacity() * std::mem::size_of::<WindingNode>()
     }
 }
 

@@ -43,8 +43,8 @@ use std::sync::atomic::{AtomicU8, Ordering};
 use glam::{UVec3, Vec3};
 use rayon::prelude::*;
 
-use super::{DEFAULT_MAX_GRID_BYTES, SdfGrid};
 use crate::error::{Error, Result};
+use crate::geometry::grid::{DEFAULT_MAX_GRID_BYTES, SdfGrid};
 use crate::mesh::TriangleMesh;
 
 /// The limit on the grid's own `f32` samples when voxelizing: voxelizing holds about 13
