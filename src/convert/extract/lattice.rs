@@ -156,7 +156,7 @@ pub(super) const BLOCK_CELLS: usize = 4;
 /// with a sign change, and the samples extraction reads around them (corners, ambiguous
 /// faces), are those of sampling every point; the far points only keep their sign. Around
 /// a surface this samples a shell about 2 √3 blocks thick: a sphere of radius 0.9 in a box
-/// of side 2 at 128 cells takes 16% of the full grid's evaluations (`tests/extract.rs`).
+/// of side 2 at 128 cells takes 16% of the full grid's evaluations (`tests/integration/extract.rs`).
 pub(super) struct Blocks {
     /// Blocks per axis (the last may be partial).
     pub(super) n: [usize; 3],

@@ -55,7 +55,7 @@
 //!   proven: on value noise at the cell scale a cell's one component can still touch
 //!   both sheets of an ambiguous face after the flip (joined through its other faces), and
 //!   when its neighbour's does too, the dual edge between them is used four times (one
-//!   mesh in ten of the noise fields of `tests/extract_mc.rs`);
+//!   mesh in ten of the noise fields of `tests/integration/extract_mc.rs`);
 //!   check with [`TriangleMesh::is_closed`] where it matters.
 //!
 //! Only cells with corners of both signs are visited: the samples' signs are packed 64

@@ -235,7 +235,7 @@ macro_rules! box_test_avx {
 /// twice `f32::EPSILON` of it and added to the entry offset and taken from the exit one,
 /// so the fused test shrinks no box beyond the rounding of its own result (which the
 /// unfused test has too) and grows one by about an ulp of the origin at most (without
-/// it, `tests/mesh_tracing.rs` finds rays through a mesh far from the origin that miss
+/// it, `tests/integration/mesh_tracing.rs` finds rays through a mesh far from the origin that miss
 /// their nearest triangle). A fused product is one operation of latency instead of two
 /// on each node of a hit ray's chain. The root, tested while `offset` is still being
 /// computed at the ray's start, uses `(bound - origin) * inv` as the portable test does
