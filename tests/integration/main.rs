@@ -30,3 +30,4 @@ mod representations;
 mod round_trip;
 mod scene_errors;
 mod tessellate;
+mod winding_sign;
