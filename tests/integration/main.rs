@@ -29,4 +29,5 @@ mod mesh_tracing;
 mod representations;
 mod round_trip;
 mod scene_errors;
+mod sdf_tape;
 mod tessellate;
