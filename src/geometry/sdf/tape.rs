@@ -823,16 +823,16 @@ impl F8 {
     #[inline(always)]
     fn map(self, f: impl Fn(f32) -> f32) -> F8 {
         let mut r = [0.0f32; 8];
-        for l in 0..8 {
-            r[l] = f(self.0[l]);
+        for (l, r) in r.iter_mut().enumerate() {
+            *r = f(self.0[l]);
         }
         F8(r)
     }
     #[inline(always)]
     fn zip(self, b: F8, f: impl Fn(f32, f32) -> f32) -> F8 {
         let mut r = [0.0f32; 8];
-        for l in 0..8 {
-            r[l] = f(self.0[l], b.0[l]);
+        for (l, r) in r.iter_mut().enumerate() {
+            *r = f(self.0[l], b.0[l]);
         }
         F8(r)
     }
@@ -906,8 +906,8 @@ impl Lane for F8 {
     #[inline(always)]
     fn select_lt(a: Self, b: Self, x: Self, y: Self) -> Self {
         let mut r = [0.0f32; 8];
-        for l in 0..8 {
-            r[l] = if a.0[l] < b.0[l] { x.0[l] } else { y.0[l] };
+        for (l, r) in r.iter_mut().enumerate() {
+            *r = if a.0[l] < b.0[l] { x.0[l] } else { y.0[l] };
         }
         F8(r)
     }
