@@ -29,5 +29,6 @@ mod mesh_tracing;
 mod representations;
 mod round_trip;
 mod scene_errors;
+mod sdf_tape;
 mod tessellate;
 mod winding_sign;

@@ -2,6 +2,10 @@
 //! exists, CSG (sharp and smooth), domain repetition and transforms, compiled into a tree
 //! that is evaluated without allocating. Each node knows whether it returns the exact
 //! Euclidean distance or only a Lipschitz-1 lower bound (safe for sphere tracing).
+//! [`tape`] compiles the tree into a flat f32 program evaluated one or eight points at a
+//! time (not used for rendering yet; the tree, in f64, is what the marcher evaluates).
+
+pub mod tape;
 
 use crate::geometry::march::MarchParams;
 use crate::geometry::marched::{DistanceField, Marched};
