@@ -36,6 +36,9 @@
 //! under `cargo test --all-targets`) it runs a quick smoke check on a small generated mesh
 //! instead. Without the `peers` feature it measures ours only.
 
+mod common;
+
+use common::{Out, Rng, header};
 use sdfmesh::metrics::median;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -88,37 +91,6 @@ const NEAR_VOXELS: f32 = 3.0;
 
 /// Points closer to the surface than this (in voxels) are not counted for signs.
 const SIGN_EPS_VOXELS: f32 = 1e-3;
-
-/// Output collected for the report file as it is printed.
-#[derive(Default)]
-struct Out {
-    text: String,
-}
-
-impl Out {
-    fn line(&mut self, s: impl AsRef<str>) {
-        println!("{}", s.as_ref());
-        self.text.push_str(s.as_ref());
-        self.text.push('\n');
-    }
-}
-
-/// SplitMix64: a small deterministic generator for the reference points.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-}
 
 /// The box `[-h, h]` with a dent-free closed surface (12 triangles) plus a second, open
 /// square sheet beside it: a tiny mesh for the smoke check.
@@ -597,27 +569,6 @@ fn bench_mesh(out: &mut Out, pool: &ThreadPool, name: &str, mesh: &TriangleMesh,
             sm / vm
         ));
     }
-}
-
-fn header() -> String {
-    let cmd = |c: &str, a: &[&str]| {
-        std::process::Command::new(c)
-            .args(a)
-            .output()
-            .ok()
-            .filter(|o| o.status.success())
-            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-            .unwrap_or_else(|| "?".into())
-    };
-    let dirty =
-        if cmd("git", &["status", "--porcelain", "--untracked-files=no"]).is_empty() { "" } else { "+dirty" };
-    format!(
-        "# {} {}; {} CPUs; git {}{dirty}",
-        cmd("date", &["-u", "+%Y-%m-%dT%H:%M:%SZ"]),
-        cmd("uname", &["-srm"]),
-        std::thread::available_parallelism().map_or(0, |n| n.get()),
-        cmd("git", &["rev-parse", "--short", "HEAD"])
-    )
 }
 
 fn main() {

@@ -20,6 +20,9 @@
 //! `reports/bench/sdf_eval.txt`; without `--bench` (as under `cargo test --all-targets`) it
 //! runs a quick smoke check with few points and short timings.
 
+mod common;
+
+use common::{Out, Rng, header};
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -46,38 +49,6 @@ struct Plan {
 
 const FULL: Plan = Plan { points: 8192, rounds: 5, secs: 0.2 };
 const SMOKE: Plan = Plan { points: 64, rounds: 1, secs: 0.0 };
-
-/// Collects the output to print and to write to the report.
-#[derive(Default)]
-struct Out {
-    text: String,
-}
-
-impl Out {
-    fn line(&mut self, s: impl AsRef<str>) {
-        println!("{}", s.as_ref());
-        self.text.push_str(s.as_ref());
-        self.text.push('\n');
-    }
-}
-
-/// SplitMix64: deterministic points.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 /// One object prepared for every evaluator: the tree, the tape, and the same points as
 /// world f64 points, tape-relative f32 points and eight-lane groups.
@@ -259,35 +230,6 @@ fn menger() -> Object {
         material: 0,
         label: "menger".into(),
     }
-}
-
-fn header() -> String {
-    let cmd = |c: &str, a: &[&str]| {
-        std::process::Command::new(c)
-            .args(a)
-            .output()
-            .ok()
-            .filter(|o| o.status.success())
-            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-            .unwrap_or_else(|| "?".into())
-    };
-    let dirty =
-        if cmd("git", &["status", "--porcelain", "--untracked-files=no"]).is_empty() { "" } else { "+dirty" };
-    let cpu = std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("model name"))
-                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
-        })
-        .unwrap_or_else(|| "?".into());
-    format!(
-        "# {} {}; {} CPUs ({cpu}); git {}{dirty}",
-        cmd("date", &["-u", "+%Y-%m-%dT%H:%M:%SZ"]),
-        cmd("uname", &["-srm"]),
-        std::thread::available_parallelism().map_or(0, |n| n.get()),
-        cmd("git", &["rev-parse", "--short", "HEAD"])
-    )
 }
 
 fn main() {
