@@ -278,6 +278,10 @@ struct MarchArgs {
     /// Relative hit tolerance of sphere tracing (times the distance travelled).
     #[arg(long, default_value_t = 1e-4)]
     epsilon: f64,
+    /// Largest hit tolerance of sphere tracing, in pixels at the hit's distance (the SDF
+    /// side's quality knob).
+    #[arg(long, default_value_t = 0.25)]
+    tolerance_px: f64,
     /// Step limit per sphere-traced ray.
     #[arg(long, default_value_t = 512)]
     max_steps: u32,
@@ -293,6 +297,7 @@ impl MarchArgs {
     fn params(&self) -> MarchParams {
         MarchParams {
             epsilon: self.epsilon,
+            tolerance_px: self.tolerance_px,
             max_steps: self.max_steps,
             relaxation: self.relax,
             ..MarchParams::default()

@@ -99,6 +99,9 @@ pub fn check_repr(repr: &Representation) -> Result<()> {
     if !(1.0..2.0).contains(&p.relaxation) {
         return Err(Error::Usage(format!("--relax must be in [1, 2), got {}", p.relaxation)));
     }
+    if !(p.tolerance_px > 0.0 && p.tolerance_px <= 16.0) {
+        return Err(Error::Usage(format!("--tolerance-px must be in (0, 16], got {}", p.tolerance_px)));
+    }
     if !(p.epsilon > 0.0 && p.epsilon < 1.0) {
         return Err(Error::Usage(format!("--epsilon must be in (0, 1), got {}", p.epsilon)));
     }

@@ -12,11 +12,14 @@ use crate::geometry::RayStats;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MarchParams {
     /// Relative hit tolerance: a march stops when `|d| < e * max(t, 1e-4 * size)` with
-    /// `e = min(epsilon, pixel_footprint / 4)`, so the tolerance grows with distance like a
-    /// pixel footprint and never exceeds a quarter of a pixel (which matters for a camera
-    /// with a narrow field of view: a 1e-3 object seen from 1e3 away); the floor only
-    /// matters for rays that start next to a surface. Default 1e-4.
+    /// `e = min(epsilon, tolerance_px * pixel_footprint)`, so the tolerance grows with
+    /// distance like a pixel footprint and never exceeds `tolerance_px` pixels (which
+    /// matters for a camera with a narrow field of view: a 1e-3 object seen from 1e3
+    /// away); the floor only matters for rays that start next to a surface. Default 1e-4.
     pub epsilon: f64,
+    /// The largest hit tolerance, in pixels (fractions of [`Self::pixel_footprint`] at the
+    /// hit's distance): the SDF side's quality knob. Default 0.25.
+    pub tolerance_px: f64,
     /// Maximum distance evaluations per march; a march that runs out is counted in
     /// [`RayStats::step_limit_hits`] and reported as a miss. Default 512.
     pub max_steps: u32,
@@ -35,7 +38,13 @@ pub struct MarchParams {
 
 impl Default for MarchParams {
     fn default() -> Self {
-        MarchParams { epsilon: 1e-4, max_steps: 512, relaxation: 1.0, pixel_footprint: 1e-3 }
+        MarchParams {
+            epsilon: 1e-4,
+            tolerance_px: 0.25,
+            max_steps: 512,
+            relaxation: 1.0,
+            pixel_footprint: 1e-3,
+        }
     }
 }
 
@@ -43,7 +52,7 @@ impl MarchParams {
     /// The hit tolerance at parameter `t` for an object of characteristic `size`.
     #[inline]
     pub fn tolerance(&self, t: f64, size: f64) -> f64 {
-        self.epsilon.min(0.25 * self.pixel_footprint) * t.max(1e-4 * size)
+        self.epsilon.min(self.tolerance_px * self.pixel_footprint) * t.max(1e-4 * size)
     }
 }
 
