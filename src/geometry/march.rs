@@ -72,75 +72,162 @@ pub struct Segment {
 
 /// Sphere traces the ray segment `seg` through the distance function `f` (exact or a
 /// Lipschitz-1 lower bound) with tolerances for an object of characteristic `size`.
+/// `f(p, tol)` is the distance at `p`, evaluated precisely enough that its error is at
+/// most a quarter of `tol`, the hit tolerance at that step (a field may answer in f32
+/// where that is enough, [`crate::geometry::sdf::SdfField`]).
 /// Returns the hit, or `None` for a miss. A march that exhausts its step budget reports its
 /// last point if that is within the pixel footprint of the surface, else a miss. A ray that
 /// starts inside the solid marches `|f|` and finds the exit. With `refine`, a converged
 /// march takes one more step onto the surface (not for unsigned fields, whose gradient is
 /// undefined there). [`crate::geometry::marched::Marched`] calls it for every marched
-/// representation.
+/// representation; its packets run the same steps through [`MarchLane`].
 pub fn sphere_trace(
-    f: &impl Fn(DVec3) -> f64,
+    f: &impl Fn(DVec3, f64) -> f64,
     seg: &Segment,
     size: f64,
     params: &MarchParams,
     refine: bool,
     stats: &mut RayStats,
 ) -> Option<MarchHit> {
-    let Segment { origin, dir, t0, t1 } = *seg;
-    stats.marched_rays += 1;
-    let mut omega = params.relaxation;
-    let mut t = t0;
-    let mut sign = 0.0;
-    let mut prev_t = t0;
-    let mut prev_r = 0.0;
-    let mut r = f64::INFINITY;
-    for _ in 0..params.max_steps {
-        stats.march_steps += 1;
-        let raw = f(origin + dir * t);
-        if sign == 0.0 {
-            sign = if raw < 0.0 { -1.0 } else { 1.0 };
+    let mut lane = MarchLane::new(seg, stats);
+    loop {
+        let raw = f(seg.origin + seg.dir * lane.t(), lane.tolerance(params, size));
+        if let Some(hit) = lane.feed(raw, seg, size, params, refine, stats) {
+            return hit;
         }
-        let d = sign * raw;
-        r = d.abs();
+    }
+}
+
+/// One ray's sphere trace as a state machine: [`MarchLane::t`] is where the distance is
+/// needed next, [`MarchLane::feed`] takes it and says whether the march is over. Scalar
+/// marching ([`sphere_trace`]) feeds one lane; packets feed eight lanes from one 8-wide
+/// evaluation. Every lane takes exactly the steps [`sphere_trace`] would.
+#[derive(Clone, Copy, Debug)]
+pub struct MarchLane {
+    /// Ray parameter to evaluate next.
+    t: f64,
+    /// Sign of the field at the first point (1 outside, -1 inside).
+    sign: f64,
+    prev_t: f64,
+    prev_r: f64,
+    r: f64,
+    omega: f64,
+    /// March evaluations so far (the step budget, [`MarchParams::max_steps`]).
+    iterations: u32,
+    /// While refining: the converged point `(t, residual, tolerance)` the refinement
+    /// step started from.
+    refining: Option<(f64, f64, f64)>,
+}
+
+impl MarchLane {
+    /// A lane at the start of `seg` (counts the ray in `stats.marched_rays`).
+    pub fn new(seg: &Segment, stats: &mut RayStats) -> Self {
+        stats.marched_rays += 1;
+        MarchLane {
+            t: seg.t0,
+            sign: 0.0,
+            prev_t: seg.t0,
+            prev_r: 0.0,
+            r: f64::INFINITY,
+            omega: 0.0,
+            iterations: 0,
+            refining: None,
+        }
+    }
+
+    /// Ray parameter where the distance is needed next.
+    #[inline]
+    pub fn t(&self) -> f64 {
+        self.t
+    }
+
+    /// The hit tolerance at [`Self::t`] (what the field's evaluation must resolve).
+    #[inline]
+    pub fn tolerance(&self, params: &MarchParams, size: f64) -> f64 {
+        match self.refining {
+            Some((_, _, eps)) => eps,
+            None => params.tolerance(self.t, size),
+        }
+    }
+
+    /// Takes the field's value `raw` at [`Self::t`]; returns `Some(outcome)` when the
+    /// march is over (`Some(None)`: a miss), `None` when it needs the next point.
+    #[inline]
+    pub fn feed(
+        &mut self,
+        raw: f64,
+        seg: &Segment,
+        size: f64,
+        params: &MarchParams,
+        refine: bool,
+        stats: &mut RayStats,
+    ) -> Option<Option<MarchHit>> {
+        if let Some((t, r, eps)) = self.refining {
+            // The refinement step along the ray (steps back if the point was past the
+            // surface): kept if it is closer to the surface and not before the segment.
+            let r2 = raw.abs();
+            return Some(Some(if r2 <= r && self.t >= seg.t0 - eps {
+                MarchHit { t: self.t, residual: r2 }
+            } else {
+                MarchHit { t, residual: r }
+            }));
+        }
+        if self.iterations == 0 {
+            self.omega = params.relaxation;
+        }
+        self.iterations += 1;
+        stats.march_steps += 1;
+        let t = self.t;
+        let eps = params.tolerance(t, size);
+        if self.sign == 0.0 {
+            self.sign = if raw < 0.0 { -1.0 } else { 1.0 };
+        }
+        let d = self.sign * raw;
+        self.r = d.abs();
         // With over-relaxation the step may jump over a surface; detect it by the two
         // unbounding spheres (radii prev_r and r) failing to cover the step, and go back
         // to the plain step from the previous point.
-        if omega > 1.0 && prev_r + r < t - prev_t {
-            omega = 1.0;
-            t = prev_t + prev_r;
-            continue;
+        if self.omega > 1.0 && self.prev_r + self.r < t - self.prev_t {
+            self.omega = 1.0;
+            self.t = self.prev_t + self.prev_r;
+            return self.budget(params, stats);
         }
-        let eps = params.tolerance(t, size);
-        if r < eps {
+        if self.r < eps {
             if !refine {
-                return Some(MarchHit { t, residual: r });
+                return Some(Some(MarchHit { t, residual: self.r }));
             }
-            // One refinement step along the ray (steps back if the point is past the surface).
-            let refined = t + d;
             stats.march_steps += 1;
-            let r2 = f(origin + dir * refined).abs();
-            return Some(if r2 <= r && refined >= t0 - eps {
-                MarchHit { t: refined, residual: r2 }
-            } else {
-                MarchHit { t, residual: r }
-            });
-        }
-        prev_t = t;
-        prev_r = r;
-        t += d * omega;
-        if t > t1 {
-            // A relaxed step past the end may have jumped a surface near the end: retry it
-            // as a plain step, which is safe.
-            if omega > 1.0 && prev_t + prev_r <= t1 {
-                omega = 1.0;
-                t = prev_t + prev_r;
-                continue;
-            }
+            self.refining = Some((t, self.r, eps));
+            self.t = t + d;
             return None;
         }
+        self.prev_t = t;
+        self.prev_r = self.r;
+        self.t = t + d * self.omega;
+        if self.t > seg.t1 {
+            // A relaxed step past the end may have jumped a surface near the end: retry it
+            // as a plain step, which is safe.
+            if self.omega > 1.0 && self.prev_t + self.prev_r <= seg.t1 {
+                self.omega = 1.0;
+                self.t = self.prev_t + self.prev_r;
+                return self.budget(params, stats);
+            }
+            return Some(None);
+        }
+        self.budget(params, stats)
     }
-    stats.step_limit_hits += 1;
-    (t > 0.0 && r < params.pixel_footprint * t).then_some(MarchHit { t, residual: r })
+
+    /// The end of a march that goes on: over when the step budget is spent (reported as a
+    /// hit only within the pixel footprint of the surface).
+    #[inline]
+    fn budget(&self, params: &MarchParams, stats: &mut RayStats) -> Option<Option<MarchHit>> {
+        if self.iterations < params.max_steps {
+            return None;
+        }
+        stats.step_limit_hits += 1;
+        let (t, r) = (self.t, self.r);
+        Some((t > 0.0 && r < params.pixel_footprint * t).then_some(MarchHit { t, residual: r }))
+    }
 }
 
 /// Where a march stopped.
@@ -152,17 +239,28 @@ pub struct MarchHit {
     pub residual: f64,
 }
 
-/// The unit gradient of `f` at `p` by the tetrahedron technique (four evaluations) with
-/// step `h`; falls back to +y where the gradient vanishes.
-pub fn gradient_normal(f: &impl Fn(DVec3) -> f64, p: DVec3, h: f64, stats: &mut RayStats) -> DVec3 {
-    const K: [DVec3; 4] = [
-        DVec3::new(1.0, -1.0, -1.0),
-        DVec3::new(-1.0, -1.0, 1.0),
-        DVec3::new(-1.0, 1.0, -1.0),
-        DVec3::new(1.0, 1.0, 1.0),
-    ];
+/// The four offsets of the tetrahedron technique: [`gradient_normal`] evaluates the field at
+/// `p + h * k` for each.
+pub const TETRAHEDRON: [DVec3; 4] = [
+    DVec3::new(1.0, -1.0, -1.0),
+    DVec3::new(-1.0, -1.0, 1.0),
+    DVec3::new(-1.0, 1.0, -1.0),
+    DVec3::new(1.0, 1.0, 1.0),
+];
+
+/// The unit gradient at `p` by the tetrahedron technique with step `h`: `f4` evaluates the
+/// field at the four points `p + h * k` ([`TETRAHEDRON`]) at once (a field may do that with
+/// one 8-wide evaluation); falls back to +y where the gradient vanishes.
+pub fn gradient_normal(
+    f4: &impl Fn(&[DVec3; 4]) -> [f64; 4],
+    p: DVec3,
+    h: f64,
+    stats: &mut RayStats,
+) -> DVec3 {
     stats.march_steps += 4;
-    let g = K.iter().fold(DVec3::ZERO, |acc, k| acc + *k * f(p + *k * h));
+    let points = TETRAHEDRON.map(|k| p + k * h);
+    let d = f4(&points);
+    let g = TETRAHEDRON.iter().zip(d).fold(DVec3::ZERO, |acc, (k, d)| acc + *k * d);
     g.try_normalize().unwrap_or(DVec3::Y)
 }
 
@@ -174,7 +272,7 @@ mod tests {
         Segment { origin, dir, t0, t1 }
     }
 
-    fn sphere(p: DVec3) -> f64 {
+    fn sphere(p: DVec3, _tol: f64) -> f64 {
         (p - DVec3::new(0.0, 0.0, 5.0)).length() - 1.0
     }
 
@@ -216,7 +314,7 @@ mod tests {
     #[test]
     fn over_relaxation_takes_fewer_steps_and_finds_the_same_hit() {
         // A thin slab seen at a slant: plain sphere tracing crawls along it.
-        let plane = |p: DVec3| p.y + 1.0;
+        let plane = |p: DVec3, _: f64| p.y + 1.0;
         let dir = DVec3::new(0.0, -0.05, 1.0).normalize();
         let (mut a, mut b) = (RayStats::default(), RayStats::default());
         let plain = MarchParams::default();
@@ -232,7 +330,7 @@ mod tests {
     #[test]
     fn over_relaxation_does_not_skip_a_thin_sheet() {
         // A sheet of thickness 0.02 behind a sphere that pulls relaxed steps long.
-        let f = |p: DVec3| (p.z - 3.0).abs() - 0.01;
+        let f = |p: DVec3, _: f64| (p.z - 3.0).abs() - 0.01;
         let relaxed = MarchParams { relaxation: 1.9, ..Default::default() };
         let mut s = RayStats::default();
         let t =

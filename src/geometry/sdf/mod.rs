@@ -3,7 +3,10 @@
 //! that is evaluated without allocating. Each node knows whether it returns the exact
 //! Euclidean distance or only a Lipschitz-1 lower bound (safe for sphere tracing).
 //! [`tape`] compiles the tree into a flat f32 program evaluated one or eight points at a
-//! time (not used for rendering yet; the tree, in f64, is what the marcher evaluates).
+//! time. [`SdfField`], the field the marcher traces, evaluates the tape wherever its f32
+//! error bound is within the hit tolerance the march asks for at that step, and the f64
+//! tree elsewhere (the radius-5000 ground sphere seen from nearby, a surface a secondary
+//! ray starts on); materials and the error measurements always use the tree.
 
 pub mod tape;
 
@@ -326,17 +329,70 @@ fn eval_repeat(period: Vec3, count: Option<UVec3>, child: &SdfNode, q: DVec3) ->
     best
 }
 
+/// Longest tape compiled for rendering; a longer one (nested repetition unrolls `2^k`
+/// copies per level) is not built and the tree is evaluated instead.
+pub const MAX_TAPE_OPS: usize = 1 << 16;
+
+/// The analytic field the marcher traces: the f64 [`SdfTree`] and, where it is not too
+/// long ([`MAX_TAPE_OPS`]), its compiled f32 [`Tape`](tape::Tape). Each distance asked for
+/// with a tolerance ([`DistanceField::distance_within`]) comes from the tape when the
+/// tape's error bound at that point ([`tape::Tape::error_bound`] of `|p - origin|`) is at
+/// most a quarter of the tolerance, from the tree otherwise.
+#[derive(Clone, Debug)]
+pub struct SdfField {
+    /// The f64 tree: the precise distance, materials, error measurements.
+    pub tree: SdfTree,
+    /// The compiled tape, `None` when longer than [`MAX_TAPE_OPS`].
+    pub tape: Option<tape::Tape>,
+}
+
+thread_local! {
+    /// Registers for evaluating tapes on this thread, grown to the largest tape seen
+    /// (built once per thread, never per evaluation).
+    static SCRATCH: std::cell::RefCell<tape::TapeScratch> = std::cell::RefCell::new(tape::TapeScratch::default());
+}
+
+impl SdfField {
+    /// Compiles `object`'s tree and tape, the tape relative to the centre of `bounds`.
+    pub fn new(object: &Object, bounds: Option<crate::geometry::Aabb>) -> Option<Self> {
+        let tree = SdfTree::new(object)?;
+        let tape = tape::Tape::compile(&tree, bounds);
+        let tape = (tape.ops().len() <= MAX_TAPE_OPS).then_some(tape);
+        Some(SdfField { tree, tape })
+    }
+
+    /// The tape's error bound at world point `p` when the tape may be used there for
+    /// `tolerance`, else `None`.
+    #[inline]
+    fn tape_for(&self, p: DVec3, tolerance: f64) -> Option<(&tape::Tape, f64)> {
+        let tape = self.tape.as_ref()?;
+        let err = tape.error_bound((p - tape.origin).length());
+        (err <= 0.25 * tolerance).then_some((tape, err))
+    }
+
+    /// The tape's distance at world point `p` (f32, widened).
+    #[inline]
+    fn eval_tape(tape: &tape::Tape, p: DVec3) -> f64 {
+        let rel = tape.relative(p);
+        SCRATCH.with(|s| {
+            let mut s = s.borrow_mut();
+            s.fit(tape);
+            tape.eval(rel, &mut s) as f64
+        })
+    }
+}
+
 /// An object tree rendered by sphere tracing its signed distance function: the one
-/// marcher over an [`SdfTree`], whose label says why the object is sphere traced.
-pub type SdfObject = Marched<SdfTree>;
+/// marcher over an [`SdfField`], whose label says why the object is sphere traced.
+pub type SdfObject = Marched<SdfField>;
 
 impl SdfObject {
     /// Compiles `object` for sphere tracing; `why` says why it is sphere traced. `None`
     /// when the object holds a mesh. Tolerances scale with the diagonal of the object's
     /// bounds (1 when unbounded); the march runs a little beyond them.
     pub fn new(object: &Object, march: MarchParams, why: String) -> Option<Self> {
-        let tree = SdfTree::new(object)?;
         let bounds = object.bounds();
+        let field = SdfField::new(object, bounds)?;
         let size = bounds.map_or(1.0, |b| b.diagonal().length() as f64);
         // March a little beyond the bounds so a hit on the box face is not lost.
         let bounds = bounds.map(|b| {
@@ -346,40 +402,71 @@ impl SdfObject {
                     + f32_error(max_abs(b.max.into()).max(max_abs(b.min.into()))),
             )
         });
-        Some(Marched::from_field(tree, bounds, size, march, why))
+        Some(Marched::from_field(field, bounds, size, march, why))
     }
 }
 
-/// The analytic field: distances from the tree (exact or Lipschitz-1 bounds, marched as
-/// they are), the material of the nearest surface at a hit.
-impl DistanceField for SdfTree {
+/// The analytic field: distances from the tape where f32 is precise enough for the
+/// tolerance asked, else from the tree (exact or Lipschitz-1 bounds, marched as they
+/// are); the material of the nearest surface at a hit from the tree.
+impl DistanceField for SdfField {
     #[inline]
     fn distance(&self, p: DVec3) -> f64 {
-        SdfTree::distance(self, p)
+        self.tree.distance(p)
+    }
+
+    #[inline]
+    fn distance_within(&self, p: DVec3, tolerance: f64) -> f64 {
+        match self.tape_for(p, tolerance) {
+            Some((tape, _)) => Self::eval_tape(tape, p),
+            None => self.tree.distance(p),
+        }
+    }
+
+    fn distance4_within(&self, points: &[DVec3; 4], tolerance: f64) -> [f64; 4] {
+        let Some(tape) = self.tape.as_ref() else {
+            return points.map(|p| self.tree.distance(p));
+        };
+        let far = points.iter().map(|p| (*p - tape.origin).length()).fold(0.0, f64::max);
+        if tape.error_bound(far) > 0.25 * tolerance {
+            return points.map(|p| self.tree.distance(p));
+        }
+        let (mut xs, mut ys, mut zs) = ([0.0f32; 8], [0.0f32; 8], [0.0f32; 8]);
+        for (i, p) in points.iter().enumerate() {
+            let r = tape.relative(*p);
+            (xs[i], ys[i], zs[i]) = (r.x, r.y, r.z);
+        }
+        let d = SCRATCH.with(|s| {
+            let mut s = s.borrow_mut();
+            s.fit(tape);
+            tape.eval8(&xs, &ys, &zs, &mut s)
+        });
+        [d[0] as f64, d[1] as f64, d[2] as f64, d[3] as f64]
     }
 
     fn is_signed(&self) -> bool {
-        self.signed
+        self.tree.signed
     }
 
     fn is_exact(&self) -> bool {
-        self.exact
+        self.tree.exact
     }
 
     fn normal_step(&self, p: DVec3, eps: f64) -> f64 {
         let floor = 1e-9 * (1.0 + p.abs().max_element());
         // An unsigned field (a triangle) has no gradient on the surface: sample closer than
         // the point's own distance so every sample lies on the ray's side.
-        if self.signed { 0.5 * eps } else { (0.25 * SdfTree::distance(self, p).abs()).min(0.5 * eps) }
+        if self.tree.signed { 0.5 * eps } else { (0.25 * self.tree.distance(p).abs()).min(0.5 * eps) }
             .max(floor)
     }
 
     fn material(&self, p: DVec3) -> MaterialId {
-        self.distance_material(p).1
+        self.tree.distance_material(p).1
     }
 
     fn heap_bytes(&self) -> usize {
-        self.bytes_used() - std::mem::size_of::<SdfTree>()
+        self.tree.bytes_used() - std::mem::size_of::<SdfTree>()
+            + self.tape.as_ref().map_or(0, |t| t.bytes_used())
     }
 
     fn census(&self) -> Census {
@@ -387,13 +474,16 @@ impl DistanceField for SdfTree {
     }
 
     fn surface_distance(&self, p: DVec3, size: f64) -> f64 {
-        let f = |q: DVec3| SdfTree::distance(self, q);
+        let f = |q: DVec3| self.tree.distance(q);
         distance_by_projection(&f, p, 1e-7 * size.max(p.abs().max_element()), 1e-9 * size)
     }
 
     fn describe(&self, why: &str) -> String {
-        let bound = if self.exact { "exact distance" } else { "Lipschitz bound" };
-        format!("{why} ({bound})")
+        let bound = if self.tree.exact { "exact distance" } else { "Lipschitz bound" };
+        match &self.tape {
+            Some(t) => format!("{why} ({bound}, f32 tape of {} ops)", t.ops().len()),
+            None => format!("{why} ({bound}, f64 tree: tape over {MAX_TAPE_OPS} ops)"),
+        }
     }
 }
 

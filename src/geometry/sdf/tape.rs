@@ -402,6 +402,20 @@ impl TapeScratch {
         }
     }
 
+    /// Grows this scratch to fit `tape` (allocates only when it does not fit yet).
+    #[inline]
+    pub fn fit(&mut self, tape: &Tape) {
+        if !self.fits(tape) {
+            let (vals, points) = (self.vals.len().max(tape.vals), self.pts.len().max(tape.points));
+            *self = TapeScratch {
+                vals: vec![0.0; vals],
+                pts: vec![[0.0; 3]; points],
+                vals8: vec![F8([0.0; 8]); vals],
+                pts8: vec![[F8([0.0; 8]); 3]; points],
+            };
+        }
+    }
+
     /// Whether this scratch has enough registers for `tape`.
     pub fn fits(&self, tape: &Tape) -> bool {
         self.vals.len() >= tape.vals && self.pts.len() >= tape.points
