@@ -13,8 +13,8 @@
 
 use glam::{DVec3, Vec3};
 
-use crate::geometry::march::{MarchHit, MarchParams, Segment, gradient_normal, sphere_trace};
-use crate::geometry::{Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, f32_error, max_abs};
+use crate::geometry::march::{MarchHit, MarchLane, MarchParams, Segment, gradient_normal, sphere_trace};
+use crate::geometry::{Aabb, Census, Geometry, Hit, MaterialId, PACKET, Ray, RayStats, f32_error, max_abs};
 
 /// A distance field that [`Marched`] sphere traces, in world space.
 pub trait DistanceField: Send + Sync {
@@ -36,6 +36,15 @@ pub trait DistanceField: Send + Sync {
     /// inside) has no gradient on the surface itself: its march takes no refinement step
     /// onto the surface, and its normal is sampled closer than the hit's own distance.
     fn is_signed(&self) -> bool;
+
+    /// [`Self::distance_within`] at eight points at once, each with its own tolerance
+    /// (a packet of marches, [`Marched`]'s [`Geometry::closest_hits`]); each lane's value
+    /// must be what [`Self::distance_within`] gives at that point alone. The default
+    /// evaluates them one by one.
+    #[inline]
+    fn distance8_within(&self, points: &[DVec3; 8], tolerances: &[f64; 8]) -> [f64; 8] {
+        std::array::from_fn(|i| self.distance_within(points[i], tolerances[i]))
+    }
 
     /// [`Self::distance_within`] at four points at once (the stencil of
     /// [`gradient_normal`]). The default evaluates them one by one.
@@ -113,26 +122,28 @@ impl<F: DistanceField> Marched<F> {
         self.field.is_exact()
     }
 
+    /// The piece of `ray` to march: clipped to the bounds when there are any, `None` when
+    /// it misses them.
+    #[inline]
+    fn segment(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Segment> {
+        let (t0, t1) =
+            if self.bounded { ray.clip_to_box(&self.bounds, t_min, t_max)? } else { (t_min, t_max) };
+        Some(Segment { origin: ray.origin.as_dvec3(), dir: ray.dir.as_dvec3(), t0: t0 as f64, t1: t1 as f64 })
+    }
+
     /// Sphere traces the world ray `ray` (unit direction) through the field, only inside
     /// the bounds when there are any, and keeps hits with `t` in `[t_min, t_max]`.
     fn march(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<MarchHit> {
-        let (t0, t1) =
-            if self.bounded { ray.clip_to_box(&self.bounds, t_min, t_max)? } else { (t_min, t_max) };
+        let segment = self.segment(ray, t_min, t_max)?;
         let f = |p: DVec3, tolerance: f64| self.field.distance_within(p, tolerance);
-        let segment =
-            Segment { origin: ray.origin.as_dvec3(), dir: ray.dir.as_dvec3(), t0: t0 as f64, t1: t1 as f64 };
         let hit = sphere_trace(&f, &segment, self.size, &self.march, self.field.is_signed(), stats)?;
         (hit.t >= t_min as f64 && hit.t <= t_max as f64).then_some(hit)
     }
-}
 
-impl<F: DistanceField> Geometry for Marched<F> {
-    fn bounds(&self) -> Option<Aabb> {
-        self.bounded.then_some(self.bounds)
-    }
-
-    fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
-        let MarchHit { t, residual } = self.march(ray, t_min, t_max, stats)?;
+    /// The hit record of a converged march of `ray`: point, normal from the gradient,
+    /// material and error bound.
+    fn hit(&self, ray: &Ray, hit: MarchHit, stats: &mut RayStats) -> Hit {
+        let MarchHit { t, residual } = hit;
         let p = ray.origin.as_dvec3() + ray.dir.as_dvec3() * t;
         let eps = self.march.tolerance(t, self.size).max(residual);
         let h = self.field.normal_step(p, eps);
@@ -144,14 +155,84 @@ impl<F: DistanceField> Geometry for Marched<F> {
         let normal = gradient_normal(&f4, p, h, stats).as_vec3();
         let material = self.field.material(p);
         let point: Vec3 = p.as_vec3();
-        Some(Hit {
+        Hit {
             t: t as f32,
             point,
             normal,
             shading_normal: normal,
             material,
             error: 4.0 * eps as f32 + f32_error(max_abs(point)),
-        })
+        }
+    }
+}
+
+impl<F: DistanceField> Geometry for Marched<F> {
+    fn bounds(&self) -> Option<Aabb> {
+        self.bounded.then_some(self.bounds)
+    }
+
+    fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
+        let hit = self.march(ray, t_min, t_max, stats)?;
+        Some(self.hit(ray, hit, stats))
+    }
+
+    fn prefers_packets(&self) -> bool {
+        true
+    }
+
+    /// Marches the packet's rays side by side, one 8-wide field evaluation per step for
+    /// every lane still marching ([`DistanceField::distance8_within`]); each lane takes
+    /// the steps of its own scalar march ([`MarchLane`]), so the hits are those of
+    /// [`Geometry::closest_hit`].
+    fn closest_hits(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: &mut [f32],
+        hits: &mut [Option<Hit>],
+        stats: &mut RayStats,
+    ) {
+        debug_assert!(rays.len() <= PACKET && t_max.len() == rays.len() && hits.len() == rays.len());
+        let refine = self.field.is_signed();
+        let mut lanes: [Option<(MarchLane, Segment)>; PACKET] = [None; PACKET];
+        for (i, ray) in rays.iter().enumerate().take(PACKET) {
+            if let Some(seg) = self.segment(ray, t_min, t_max[i]) {
+                lanes[i] = Some((MarchLane::new(&seg, stats), seg));
+            }
+        }
+        let mut points = [DVec3::ZERO; PACKET];
+        let mut tolerances = [f64::INFINITY; PACKET];
+        loop {
+            let mut first = None;
+            for (i, lane) in lanes.iter().enumerate() {
+                if let Some((lane, seg)) = lane {
+                    points[i] = seg.origin + seg.dir * lane.t();
+                    tolerances[i] = lane.tolerance(&self.march, self.size);
+                    first.get_or_insert(i);
+                }
+            }
+            let Some(first) = first else { break };
+            // Idle lanes evaluate a copy of a live lane's point with no tolerance to meet.
+            for (i, lane) in lanes.iter().enumerate() {
+                if lane.is_none() {
+                    points[i] = points[first];
+                    tolerances[i] = f64::INFINITY;
+                }
+            }
+            let d = self.field.distance8_within(&points, &tolerances);
+            for i in 0..PACKET {
+                let Some((lane, seg)) = &mut lanes[i] else { continue };
+                let Some(outcome) = lane.feed(d[i], seg, self.size, &self.march, refine, stats) else {
+                    continue;
+                };
+                lanes[i] = None;
+                if let Some(mh) = outcome.filter(|h| h.t >= t_min as f64 && h.t <= t_max[i] as f64) {
+                    let hit = self.hit(&rays[i], mh, stats);
+                    t_max[i] = hit.t;
+                    hits[i] = Some(hit);
+                }
+            }
+        }
     }
 
     fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {

@@ -78,6 +78,9 @@ impl Ray {
     }
 }
 
+/// Rays per packet of [`Geometry::closest_hits`]: the width of an 8-wide f32 evaluation.
+pub const PACKET: usize = 8;
+
 /// A ray/surface intersection in world space.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {
@@ -141,8 +144,37 @@ pub trait Geometry: Send + Sync {
     /// The closest hit with `t` in `[t_min, t_max]`, if any.
     fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit>;
 
+    /// The closest hits of a packet of up to [`PACKET`] rays (coherent primary rays):
+    /// for each lane `i`, a hit with `t` in `[t_min, t_max[i]]` nearer than any found so
+    /// far replaces `hits[i]` and lowers `t_max[i]` to its `t`, so calls over several
+    /// geometries compose into the nearest hit. Every lane's result is the one
+    /// [`Self::closest_hit`] gives for that ray alone (the contract suite checks it); the
+    /// default is exactly that loop, and marched fields override it to evaluate their
+    /// distance for eight points at once. `rays`, `t_max` and `hits` have the same length.
+    fn closest_hits(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: &mut [f32],
+        hits: &mut [Option<Hit>],
+        stats: &mut RayStats,
+    ) {
+        for ((ray, t_max), hit) in rays.iter().zip(t_max.iter_mut()).zip(hits.iter_mut()) {
+            if let Some(h) = self.closest_hit(ray, t_min, *t_max, stats) {
+                *t_max = h.t;
+                *hit = Some(h);
+            }
+        }
+    }
+
     /// Whether any surface is hit with `t` in `[t_min, t_max]` (shadow rays). May stop at
     /// the first hit found.
+    /// Whether [`Self::closest_hits`] is faster than its rays one by one (true for marched
+    /// fields); an aggregate marches packets only through geometries that say so.
+    fn prefers_packets(&self) -> bool {
+        false
+    }
+
     fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
         self.closest_hit(ray, t_min, t_max, stats).is_some()
     }

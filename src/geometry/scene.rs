@@ -7,7 +7,7 @@ use obvhs::BvhBuildParams;
 use obvhs::bvh2::Bvh2;
 
 use crate::geometry::bvh2;
-use crate::geometry::{Aabb, Census, Geometry, Hit, Ray, RayStats};
+use crate::geometry::{Aabb, Census, Geometry, Hit, PACKET, Ray, RayStats};
 
 /// The whole scene as one geometry: a top-level BVH over the bounded objects plus a list of
 /// unbounded ones (infinite planes, unbounded repetition) that every ray tests.
@@ -45,6 +45,10 @@ impl SceneGeometry {
     }
 }
 
+/// Most bounded objects a packet marches together ([`SceneGeometry`]'s
+/// [`Geometry::closest_hits`]); a packet whose rays reach more goes ray by ray.
+const PACKET_CANDIDATES: usize = 32;
+
 impl Geometry for SceneGeometry {
     fn bounds(&self) -> Option<Aabb> {
         if !self.unbounded.is_empty() {
@@ -71,6 +75,58 @@ impl Geometry for SceneGeometry {
             }))
         });
         best
+    }
+
+    fn prefers_packets(&self) -> bool {
+        self.objects.iter().any(|o| o.prefers_packets())
+    }
+
+    /// Packets go ray by ray (front to back through the top-level BVH, as
+    /// [`Geometry::closest_hit`]) unless an object prefers packets. Then the bounded objects
+    /// that any ray of the packet reaches (up to [`PACKET_CANDIDATES`]) and the unbounded
+    /// ones each take the whole packet, nearest hits composing through `t_max`.
+    fn closest_hits(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: &mut [f32],
+        hits: &mut [Option<Hit>],
+        stats: &mut RayStats,
+    ) {
+        let one_by_one = |t_max: &mut [f32], hits: &mut [Option<Hit>], stats: &mut RayStats| {
+            for ((ray, t_max), hit) in rays.iter().zip(t_max.iter_mut()).zip(hits.iter_mut()) {
+                if let Some(h) = self.closest_hit(ray, t_min, *t_max, stats) {
+                    *t_max = h.t;
+                    *hit = Some(h);
+                }
+            }
+        };
+        if rays.len() > PACKET || !self.prefers_packets() {
+            return one_by_one(t_max, hits, stats);
+        }
+        let mut candidates = [0u32; PACKET_CANDIDATES];
+        let mut count = 0usize;
+        let mut overflow = false;
+        for (ray, &reach) in rays.iter().zip(t_max.iter()) {
+            bvh2::traverse(&self.bvh, ray, t_min, reach, stats, |prim, _, _| {
+                let object = self.bounded[prim as usize];
+                if !candidates[..count].contains(&object) {
+                    if count == PACKET_CANDIDATES {
+                        overflow = true;
+                        return Err(());
+                    }
+                    candidates[count] = object;
+                    count += 1;
+                }
+                Ok(None)
+            });
+            if overflow {
+                return one_by_one(t_max, hits, stats);
+            }
+        }
+        for &i in self.unbounded.iter().chain(&candidates[..count]) {
+            self.objects[i as usize].closest_hits(rays, t_min, t_max, hits, stats);
+        }
     }
 
     fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {

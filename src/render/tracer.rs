@@ -5,7 +5,7 @@
 
 use glam::Vec3;
 
-use crate::geometry::{Geometry, Hit, Ray, RayStats, max_abs};
+use crate::geometry::{Geometry, Hit, PACKET, Ray, RayStats, max_abs};
 use crate::scene::{Light, Material, Scene};
 
 /// Contributions weighing less than this (a fraction of the pixel) are not traced.
@@ -39,6 +39,25 @@ impl<'a> Tracer<'a> {
     /// The colour seen along `ray` (unit direction), linear RGB, not clamped.
     pub fn trace(&self, ray: &Ray, stats: &mut RayStats) -> Vec3 {
         self.trace_rec(ray, self.scene.settings.max_depth, 1.0, stats)
+    }
+
+    /// The colours seen along a packet of up to [`PACKET`] primary rays: their closest hits
+    /// found together ([`Geometry::closest_hits`]), then each shaded as [`Self::trace`]
+    /// does (shadow and secondary rays one by one). `out[i]` is exactly `trace(&rays[i])`.
+    pub fn trace_packet(&self, rays: &[Ray], out: &mut [Vec3], stats: &mut RayStats) {
+        debug_assert!(rays.len() <= PACKET && out.len() == rays.len());
+        let n = rays.len().min(PACKET);
+        let mut t_max = [self.scene.settings.max_distance; PACKET];
+        let mut hits: [Option<Hit>; PACKET] = [None; PACKET];
+        stats.rays += n as u64;
+        self.geometry.closest_hits(&rays[..n], 0.0, &mut t_max[..n], &mut hits[..n], stats);
+        let depth = self.scene.settings.max_depth;
+        for i in 0..n {
+            out[i] = match &hits[i] {
+                Some(hit) => self.shade(&rays[i], hit, depth, 1.0, stats),
+                None => self.scene.settings.background,
+            };
+        }
     }
 
     fn trace_rec(&self, ray: &Ray, depth: u32, weight: f32, stats: &mut RayStats) -> Vec3 {
