@@ -234,3 +234,52 @@ def test_report_puts_the_answer_first(tmp_path):
     # the per-input appendix uses one replicate: each row label once per input
     appendix = text[text.index("## Results per input (replicate 0)"):]
     assert "### `smooth_in0` (smooth)" in appendix
+
+
+# ---------------------------------------------------------------------------------------
+# tools/gen-scenes
+
+
+def _gen():
+    import importlib.machinery
+    import importlib.util
+
+    path = str(report.Path(__file__).resolve().parents[1] / "gen-scenes")
+    loader = importlib.machinery.SourceFileLoader("gen_scenes", path)
+    spec = importlib.util.spec_from_loader("gen_scenes", loader)
+    mod = importlib.util.module_from_spec(spec)
+    loader.exec_module(mod)
+    return mod
+
+
+def test_generated_scenes_are_current_and_stems_unique():
+    import subprocess
+    import sys
+
+    root = report.Path(__file__).resolve().parents[2]
+    r = subprocess.run([sys.executable, str(root / "tools" / "gen-scenes"), "--check"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+    stems = [p.stem for p in (root / "data" / "scenes").rglob("*.toml")]
+    assert len(stems) == len(set(stems)), "two inputs share a file stem (the CSV's input column)"
+    classes = {p.parent.name for p in (root / "data" / "scenes").rglob("*.toml")} - {"scenes"}
+    for cls in ("blend", "repeat", "fractal", "many", "thin", "cad", "smooth", "csg"):
+        assert cls in classes
+        assert len(list((root / "data" / "scenes" / cls).glob("*.toml"))) >= 3, cls
+
+
+def test_menger_cross_arms_reach_past_the_box():
+    gen = _gen()
+    for level in (1, 2, 3, 4):
+        node = gen.menger(level)
+        assert node["children"][0]["half_size"] == [1, 1, 1]
+        for i, cutter in enumerate(node["children"][1:]):
+            if cutter["type"] == "repeat":
+                period, count = cutter["period"][0], cutter["count"][0]
+                cross = cutter["child"]
+            else:
+                period, count, cross = 2.0, 1, cutter
+            edge = period * (count - 1) / 2  # centre of the outermost copy
+            arm = max(cross["children"][0]["half_size"])
+            # past the face by a margin, never ending on it
+            assert edge + arm > 1 + 1e-3, (level, i)
