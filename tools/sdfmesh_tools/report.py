@@ -290,9 +290,9 @@ def cost_section(model, image, out) -> str:
         f"{100 * model['median_err']:.3g}%, 90th percentile {100 * model['p90_err']:.3g}% "
         f"(fit half: median {100 * model['median_err_fit']:.3g}%)"
         + (f"; worst input `{model['worst'][0]}` (median {100 * model['worst'][1]:.3g}%)" if model["worst"] else "")
-        + ". A distance evaluation's cost depends on the SDF tree's size, which the model does not "
-        "see, so inputs with large trees (unions of many children, many metaballs) are where it "
-        "errs most.\n\n",
+        + ". The model has one cost per distance evaluation, whatever the SDF tree's size, and one "
+        "per BVH node, whatever the leaves hold; the error above is what that simplification "
+        "costs on inputs it was not fitted on.\n\n",
     ]
     if image:
         L.append(f"{_img(image, out)}\n")
