@@ -253,7 +253,9 @@ def families_section(fams, images_by_class, out) -> str:
         for key, what in (("frame_ms_median", "frame time"), ("total_bytes", "bytes")):
             d = f[key]
             wins = ", ".join(f"{x:g}: {w or '–'}" for x, w in zip(f["xs"], d["winner"]))
-            if d["crossovers"]:
+            if not any(d["winner"]):
+                parts.append(f"{what}: no run of either side meets the level")
+            elif d["crossovers"]:
                 ch = "; ".join(f"between {a:g} and {b:g} from {o} to {n}" for a, b, o, n in d["crossovers"])
                 parts.append(f"{what}: the winner changes {ch} (winners {wins})")
             else:
@@ -401,7 +403,7 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
 
     n_classes = len(analysis.classes(all_rows))
     L = ["# sdfmesh: ray marching SDFs vs ray tracing meshes\n"]
-    L.append(f"{len(data.inputs(all_rows))} inputs in {n_classes} classes, {len(reps)} replicate(s) "
+    L.append(f"{len(data.inputs(all_rows))} inputs in {n_classes} class(es), {len(reps)} replicate(s) "
              f"(separate processes), {len(all_rows)} runs; commit "
              f"{', '.join(f'`{c}`' for c in uniq('commit')) or '–'}. Report written "
              f"{datetime.now(timezone.utc).strftime('%Y-%m-%dT%H:%M:%SZ')} by "
