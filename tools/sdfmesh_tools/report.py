@@ -222,9 +222,10 @@ def answer_table(verdicts) -> str:
         cls = f"**{v['class']}** ({len(t['inputs'])})" if v["class"] != last else ""
         n = f"{t['n_inputs']}"
         last = v["class"]
-        trows.append((cls, n, f"≤ {v['level']:g} px", analysis.verdict_text(t, "time"),
+        spread = f"×/÷{t['run_spread']:.3g}" if t["run_spread"] else "–"
+        trows.append((cls, n, f"≤ {v['level']:g} px", analysis.verdict_text(t, "time"), spread,
                       analysis.verdict_text(v["bytes"], "bytes")))
-    return md_table(["class (inputs)", "compared", "quality", "frame time", "bytes"], trows)
+    return md_table(["class (inputs)", "compared", "quality", "frame time", "run-to-run", "bytes"], trows)
 
 
 def answer_legend(rows, verdicts) -> str:
@@ -241,7 +242,8 @@ def answer_legend(rows, verdicts) -> str:
         f"replication; each input's mean carries its run-to-run noise); a class with one input gets "
         f"a t-interval over its replicates (run-to-run noise only). **within noise**: the interval "
         f"contains 1. Class (inputs); \"compared\": inputs where both sides meet the level in "
-        f"frame time.{spread}\n")
+        f"frame time; \"run-to-run\": exp of the pooled standard deviation of an input's log time "
+        f"ratio between replicates (the noise of one process's ratio; inputs fixed).{spread}\n")
 
 
 def families_section(fams, images_by_class, out) -> str:

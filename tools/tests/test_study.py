@@ -225,6 +225,7 @@ def test_report_puts_the_answer_first(tmp_path):
     head = text[:text.index("## Crossovers")]
     assert "**smooth** (3)" in head and "**csg** (4)" in head and "**scan** (1)" in head
     assert "**SDF 2" in head and "within noise" in head
+    assert "| run-to-run |" in head and "×/÷1.0" in head
     assert "between 10 and 100 from mesh to sdf" in text
     assert "(family_repeat.png)" in text and "(family_scan.png)" in text
     assert (out / "family_repeat.png").is_file() and (out / "cost_model.png").is_file()
