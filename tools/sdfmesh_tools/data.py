@@ -1,4 +1,5 @@
-"""Reading the CSVs that `toolkit compare` writes (schema version 1).
+"""Reading the CSVs that `toolkit compare` writes (schema version 2; version 1 rows read too,
+with the columns version 2 added left empty).
 
 Rows are dicts of strings; `num` and `samples` turn cells into numbers and tolerate
 missing columns and empty cells (both give None / an empty list).
@@ -12,12 +13,25 @@ from collections import OrderedDict
 from pathlib import Path
 
 COMPARE_COLUMNS = (
+    "input class replicate repr method resolution tolerance_px relaxation reference triangles "
+    "grid_cells_stored geometry_bytes accel_bytes total_bytes build_ms frame_ms_median "
+    "frame_ms_min frame_ms_max frames mrays_per_s steps_per_ray nodes_per_ray image_rmse "
+    "image_psnr_db image_ssim flip_mean silhouette_mismatch_pct px_err_mean px_err_p95 "
+    "px_err_max quality_px chamfer_rel hausdorff_rel peak_rss_bytes threads width height depth "
+    "commit timestamp frame_ms_samples schema_version note"
+).split()
+
+# Schema version 1, for the synthetic CSVs of older tests.
+COMPARE_COLUMNS_V1 = (
     "input repr method resolution reference triangles grid_cells_stored geometry_bytes "
     "accel_bytes total_bytes build_ms frame_ms_median frame_ms_min frame_ms_max frames "
     "mrays_per_s steps_per_ray nodes_per_ray image_rmse image_psnr_db image_ssim "
     "hit_mismatch_pct chamfer_rel hausdorff_rel peak_rss_bytes threads width height depth "
     "commit timestamp frame_ms_samples schema_version"
 ).split()
+
+# The quality levels of schema 2: `quality_px` is the smallest of these a run meets.
+QUALITY_LEVELS = (0.5, 1.0, 2.0)
 
 SCALING_COLUMNS = (
     "primitive repr method count triangles total_bytes build_ms frame_ms_median frame_ms_min "
@@ -40,9 +54,36 @@ def read_csv(path: str | Path | None) -> list[dict[str, str]]:
     with p.open(newline="") as f:
         rows = [dict(r) for r in csv.DictReader(f)]
     version = {r.get("schema_version", "") for r in rows} - {"", None}
-    if version and version != {"1"}:
-        print(f"note: {p} has schema_version {sorted(version)}; this reader knows version 1")
+    if version - {"1", "2"}:
+        print(f"note: {p} has schema_version {sorted(version)}; this reader knows versions 1 and 2")
     return rows
+
+
+def class_of(row: dict) -> str:
+    """The `class` column (data/scenes/<class>/, `scenes`, `scan`); `unclassified` if empty."""
+    return (row.get("class") or "").strip() or "unclassified"
+
+
+def replicate_of(row: dict) -> str:
+    """The `replicate` column as a string ("0" when missing or empty)."""
+    return (row.get("replicate") or "").strip() or "0"
+
+
+def side(row: dict) -> str | None:
+    """`sdf` for ray-marched rows (analytic SDF, grids), `mesh` for triangle meshes (the
+    original of a scanned mesh included), None for the closed-form reference of scenes."""
+    rep = row.get("repr", "")
+    if rep in SDF_REPRS:
+        return "sdf"
+    if rep in MESH_REPRS:
+        return "mesh"
+    return None
+
+
+def meets(row: dict, level: float) -> bool:
+    """Whether a run meets the quality level (`quality_px` <= level; empty: it meets none)."""
+    q = num(row, "quality_px")
+    return q is not None and q <= level + 1e-12
 
 
 def num(row: dict, col: str) -> float | None:
@@ -76,10 +117,15 @@ def samples(row: dict, col: str = "frame_ms_samples") -> list[float]:
 
 
 def label(row: dict) -> str:
-    """`repr/method` or `repr/method@res`."""
+    """`repr/method`, `repr/method@res`, plus ` tol=T relax=R` for swept sphere tracing."""
     res = num(row, "resolution")
     base = f"{row.get('repr', '?')}/{row.get('method', '?')}"
-    return f"{base}@{int(res)}" if res is not None else base
+    base = f"{base}@{int(res)}" if res is not None else base
+    tol, rel = num(row, "tolerance_px"), num(row, "relaxation")
+    if row.get("repr") == "sdf" and (tol is not None or rel is not None):
+        base += f" tol={tol:g}" if tol is not None else ""
+        base += f" relax={rel:g}" if rel is not None else ""
+    return base
 
 
 def group(rows, *cols) -> "OrderedDict[tuple, list[dict]]":

@@ -415,6 +415,117 @@ def sdf_grid_views(artifacts: Path, out: Path, max_per_input: int = 2):
     return written
 
 
+SIDE_STYLE = {"sdf": {"color": "tab:blue", "marker": "o", "label": "best SDF (sdf, grid)"},
+              "mesh": {"color": "tab:orange", "marker": "s", "label": "best mesh"}}
+
+
+def _family_axis(ax, xs) -> None:
+    """Ticks at the family's parameter values, log-spaced when they span 10x or more."""
+    from matplotlib import ticker
+
+    if min(xs) > 0 and max(xs) / min(xs) >= 10:
+        ax.set_xscale("log")
+    ax.xaxis.set_major_locator(ticker.FixedLocator(xs))
+    ax.xaxis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.xaxis.set_minor_locator(ticker.NullLocator())
+
+
+def _bytes_axis(axis) -> None:
+    """Log axis of bytes labelled in B, KiB, MiB, GiB at the powers of 4."""
+    from matplotlib import ticker
+
+    def fmt(v, _):
+        for unit, k in (("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
+            if v >= k:
+                return f"{v / k:g} {unit}"
+        return f"{v:g} B"
+
+    axis.set_major_locator(ticker.LogLocator(base=4))
+    axis.set_major_formatter(ticker.FuncFormatter(fmt))
+    axis.set_minor_locator(ticker.NullLocator())
+    axis.set_minor_formatter(ticker.NullFormatter())
+
+
+def family_plots(fams, out: Path) -> list[Path]:
+    """One PNG per class: per family, frame time (top) and bytes (bottom) of the best SDF
+    and the best mesh run against the family parameter (median over replicates, bars from
+    the fastest to the slowest replicate), a dotted line where the winner changes."""
+    out = Path(out)
+    written = []
+    by_class: dict[str, list[dict]] = {}
+    for f in fams:
+        by_class.setdefault(f["class"], []).append(f)
+    for cls, fs in by_class.items():
+        n = len(fs)
+        fig, axes = plt.subplots(2, n, figsize=(4.6 * n, 7.2), squeeze=False)
+        for j, f in enumerate(fs):
+            for i, (key, ylabel) in enumerate((("frame_ms_median", "frame time (ms, median)"),
+                                               ("total_bytes", "bytes (geometry + BVH)"))):
+                ax = axes[i][j]
+                d = f[key]
+                for side in ("sdf", "mesh"):
+                    pts = [(x, p) for x, p in zip(f["xs"], d[side]) if p is not None and p[0] > 0]
+                    if not pts:
+                        continue
+                    xs = [x for x, _ in pts]
+                    med = np.array([p[0] for _, p in pts])
+                    lo = med - np.array([p[1] for _, p in pts])
+                    hi = np.array([p[2] for _, p in pts]) - med
+                    st = SIDE_STYLE[side]
+                    ax.errorbar(xs, med, yerr=[lo, hi], color=st["color"], marker=st["marker"],
+                                label=st["label"], lw=1.4, ms=5, capsize=3)
+                for xa, xb, old, new in d["crossovers"]:
+                    xm = math.sqrt(xa * xb) if xa > 0 and xb > 0 else (xa + xb) / 2
+                    ax.axvline(xm, color="k", ls=":", lw=1)
+                    ax.annotate(f"{old}→{new}", (xm, 0.97), xycoords=("data", "axes fraction"),
+                                ha="center", va="top", fontsize=8,
+                                bbox={"boxstyle": "round", "fc": "white", "alpha": 0.8})
+                _family_axis(ax, f["xs"])
+                ax.set_yscale("log")
+                if key == "total_bytes":
+                    _bytes_axis(ax.yaxis)
+                else:
+                    _log_axis(ax.yaxis)
+                ax.grid(True, which="both", alpha=0.3)
+                ax.set_xlabel(f["axis"])
+                ax.set_ylabel(ylabel)
+                lvl = f"runs meeting {f['level']:g} px" if f["level"] is not None else "best at each resolution, any quality"
+                ax.set_title(f"{f['family']}: {lvl}", fontsize=9)
+                if ax.get_legend_handles_labels()[0]:
+                    ax.legend(fontsize=7, loc="best")
+                else:
+                    ax.text(0.5, 0.5, "no run meets the level", ha="center", va="center",
+                            transform=ax.transAxes)
+        fig.suptitle(f"class {cls}: crossovers along the families")
+        written.append(_save(fig, out / f"family_{cls}.png"))
+    return written
+
+
+def cost_model_plot(model, out: Path) -> list[Path]:
+    """Predicted against measured frame time, fit half and check half."""
+    if not model:
+        return []
+    fig, ax = plt.subplots(figsize=(5.5, 5))
+    for half, color in (("fit", "tab:gray"), ("check", "tab:red")):
+        pts = [(t, p) for t, p, h in model["points"] if h == half and t > 0 and p > 0]
+        if pts:
+            ax.scatter(*zip(*pts), s=10, color=color, alpha=0.6, label=f"{half} half ({len(pts)} runs)")
+    allv = [v for t, p, _ in model["points"] for v in (t, p) if v > 0]
+    if allv:
+        lo, hi = min(allv), max(allv)
+        ax.plot([lo, hi], [lo, hi], "k--", lw=1)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    _log_axis(ax.xaxis)
+    _log_axis(ax.yaxis)
+    ax.set_xlabel("measured frame time (ms)")
+    ax.set_ylabel("predicted frame time (ms)")
+    ax.set_title("cost model: a·steps + b·nodes + d·rays + c")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    return [_save(fig, Path(out) / "cost_model.png")]
+
+
 def all_plots(rows, scaling_rows, artifacts, out: Path) -> list[Path]:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

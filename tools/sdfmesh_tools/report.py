@@ -10,7 +10,6 @@ about the outcome is written by hand here.
 from __future__ import annotations
 
 import argparse
-import fnmatch
 import json
 import math
 import os
@@ -23,51 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import data, plots, stats
+from . import analysis, data, plots, stats
 from .data import num
 
 THRESHOLDS = (1e-2, 3e-3, 1e-3)
-
-FEW = "few smooth primitives"
-CSG = "CSG and smooth blends"
-REP = "repetition"
-MANY = "many primitives"
-ORGANIC = "scanned organic meshes"
-CAD = "sharp CAD edges"
-THIN = "thin features"
-MIXED = "mixed (every feature)"
-OTHER = "other (not in the mapping)"
-
-# Input name (a glob pattern) -> kind of scene. First match wins.
-KIND_MAP = (
-    ("thesis_sdf_spheres", FEW),
-    ("thesis_rt", FEW),
-    ("coursework_primitives", FEW),
-    ("coursework_reflect", FEW),
-    ("thesis_sdf_tori", FEW),  # four tori, no repeat node
-    ("thesis_sdf_csg", CSG),
-    ("*csg*", CSG),
-    ("*blend*", CSG),
-    ("coursework_mirrors", REP),  # uses a `repeat` node
-    ("*repeat*", REP),
-    ("*repetition*", REP),
-    ("scaling*", MANY),
-    ("*bunny*", ORGANIC),
-    ("armadillo*", ORGANIC),
-    ("spot*", ORGANIC),
-    ("fertility*", ORGANIC),
-    ("dragon*", ORGANIC),
-    ("lucy*", ORGANIC),
-    ("happy*", ORGANIC),
-    ("thesis_sdf_boxes", CAD),
-    ("thesis_sdf_plane_cylinders", FEW),  # capped cylinders on an infinite plane
-    ("showcase", MIXED),
-)
-KIND_ORDER = (FEW, CSG, REP, MANY, ORGANIC, CAD, THIN, MIXED, OTHER)
-
-# Which hypothesis speaks about a kind, and the direction it predicts for
-# time(SDF marching) / time(mesh): "<1" (SDF faster) or ">1" (mesh faster).
-HYPOTHESIS_OF_KIND = {FEW: ("H1", "<1"), ORGANIC: ("H2", ">1")}
 
 HYPOTHESIS = (
     "- **H1:** for scenes made of few smooth analytic primitives, sphere tracing the analytic "
@@ -76,13 +34,6 @@ HYPOTHESIS = (
     "sampled SDF grid of equal error, and smaller.\n"
     "- **H0 for the test:** the frame-time ratio (SDF marching / mesh) is 1.\n"
 )
-
-
-def kind_of(name: str) -> str:
-    for pattern, kind in KIND_MAP:
-        if fnmatch.fnmatch(name, pattern):
-            return kind
-    return OTHER
 
 
 # ---------------------------------------------------------------------------------------
@@ -258,6 +209,119 @@ def scaling_summary(rows):
 
 
 # ---------------------------------------------------------------------------------------
+# The study's sections (schema 2): the answer per class, families, cost model
+
+
+def answer_table(verdicts) -> str:
+    """The verdict table: per class and quality level, who wins in time and in bytes."""
+    if not verdicts:
+        return "No class could be compared (no rows with `quality_px`).\n"
+    trows, last = [], None
+    for v in verdicts:
+        t = v["time"]
+        cls = f"**{v['class']}** ({len(t['inputs'])})" if v["class"] != last else ""
+        n = f"{t['n_inputs']}"
+        last = v["class"]
+        spread = f"×/÷{t['run_spread']:.3g}" if t["run_spread"] else "–"
+        trows.append((cls, n, f"≤ {v['level']:g} px", analysis.verdict_text(t, "time"), spread,
+                      analysis.verdict_text(v["bytes"], "bytes")))
+    return md_table(["class (inputs)", "compared", "quality", "frame time", "run-to-run", "bytes"], trows)
+
+
+def answer_legend(rows, verdicts) -> str:
+    reps = sorted({data.replicate_of(r) for r in rows})
+    spreads = [v["time"]["run_spread"] for v in verdicts if v["time"]["run_spread"]]
+    spread = (f" The run-to-run factor (pooled over inputs, between the separate processes) is "
+              f"×/÷{float(np.median(spreads)):.3g} at the median class and level.") if spreads else ""
+    return (
+        f"Best run of a side at a level: the fastest (or smallest) run whose `quality_px` is at most "
+        f"the level; SDF = `sdf` and `grid` runs, mesh = `mesh` runs (the scanned mesh itself "
+        f"included). Factor: geometric mean over the class's inputs of best-SDF / best-mesh, each "
+        f"input's ratio first averaged (geometrically) over {len(reps)} replicate(s) run as separate "
+        f"processes in different orders. 95% CI: t-interval over inputs (inputs are the unit of "
+        f"replication; each input's mean carries its run-to-run noise); a class with one input gets "
+        f"a t-interval over its replicates (run-to-run noise only). **within noise**: the interval "
+        f"contains 1. Class (inputs); \"compared\": inputs where both sides meet the level in "
+        f"frame time; \"run-to-run\": exp of the pooled standard deviation of an input's log time "
+        f"ratio between replicates (the noise of one process's ratio; inputs fixed).{spread}\n")
+
+
+def families_section(fams, images_by_class, out) -> str:
+    if not fams:
+        return "No family (inputs of one class whose names differ only in a trailing number) in this run.\n"
+    L = []
+    for f in fams:
+        parts = []
+        for key, what in (("frame_ms_median", "frame time"), ("total_bytes", "bytes")):
+            d = f[key]
+            wins = ", ".join(f"{x:g}: {w or '–'}" for x, w in zip(f["xs"], d["winner"]))
+            if not any(d["winner"]):
+                parts.append(f"{what}: no run of either side meets the level")
+            elif d["crossovers"]:
+                ch = "; ".join(f"between {a:g} and {b:g} from {o} to {n}" for a, b, o, n in d["crossovers"])
+                parts.append(f"{what}: the winner changes {ch} (winners {wins})")
+            else:
+                parts.append(f"{what}: no change of winner (winners {wins})")
+        lvl = f"at ≤ {f['level']:g} px" if f["level"] is not None else "best run per resolution, any quality"
+        L.append(f"- `{f['class']}/{f['family']}` ({f['axis']}, {lvl}): " + "; ".join(parts) + ".\n")
+    L.append("\nA winner needs its whole replicate range (min to max) below the other's; where the "
+             "ranges overlap the lower median wins. Plots: frame time (top) and bytes (bottom) per "
+             "class.\n\n")
+    for cls, paths in images_by_class.items():
+        for p in paths:
+            L.append(f"{_img(p, out)}\n\n")
+    return "".join(L)
+
+
+def cost_section(model, image, out) -> str:
+    if not model:
+        return "Not fitted: fewer than 5 runs with `mrays_per_s` on one of the halves.\n"
+    a, b, d, c = model["coef"]
+    L = [
+        "frame_ms ≈ a·(rays·steps_per_ray) + b·(rays·nodes_per_ray) + d·rays + c, non-negative least "
+        "squares of the relative error over "
+        f"every run of half the inputs ({len(model['inputs_fit'])} inputs, {model['n_fit']} runs; "
+        "alternate inputs of each class by name), checked on the other half "
+        f"({len(model['inputs_check'])} inputs, {model['n_check']} runs). rays = mrays_per_s × frame "
+        "time (every ray of the frame).\n\n",
+        md_table(["term", "value"], [
+            ("a: per distance evaluation", f"{a * 1e6:.3g} ns"),
+            ("b: per BVH node visited", f"{b * 1e6:.3g} ns"),
+            ("d: per ray (shading, setup)", f"{d * 1e6:.3g} ns"),
+            ("c: per frame", f"{c:.3g} ms"),
+        ]),
+        f"\nError |predicted − measured| / measured on the check half: median "
+        f"{100 * model['median_err']:.3g}%, 90th percentile {100 * model['p90_err']:.3g}% "
+        f"(fit half: median {100 * model['median_err_fit']:.3g}%)"
+        + (f"; worst input `{model['worst'][0]}` (median {100 * model['worst'][1]:.3g}%)" if model["worst"] else "")
+        + ". The model has one cost per distance evaluation, whatever the SDF tree's size, and one "
+        "per BVH node, whatever the leaves hold; the error above is what that simplification "
+        "costs on inputs it was not fitted on.\n\n",
+    ]
+    if image:
+        L.append(f"{_img(image, out)}\n")
+    return "".join(L)
+
+
+def hypotheses_outcome(verdicts) -> str:
+    """H1 (smooth: SDF faster and smaller) and H2 (scan: mesh faster) from the verdicts."""
+    L = []
+    for h, cls, want in (("H1", "smooth", "sdf"), ("H2", "scan", "mesh")):
+        vs = [v for v in verdicts if v["class"] == cls]
+        if not vs:
+            L.append(f"- {h}: class `{cls}` not measured in this run.")
+            continue
+        cells = []
+        for v in vs:
+            w = analysis.winner(v["time"])
+            res = ("supports" if w == want else "undecided (within noise)" if w == "noise"
+                   else "not compared" if w is None else "contradicts")
+            cells.append(f"≤ {v['level']:g} px: {res}")
+        L.append(f"- {h} (class `{cls}`, time): " + "; ".join(cells) + ".")
+    return "\n".join(L) + "\n"
+
+
+# ---------------------------------------------------------------------------------------
 # The report
 
 
@@ -273,81 +337,10 @@ def _img(path: Path, out: Path) -> str:
     return f"![{Path(rel).stem}]({rel})"
 
 
-def _comparison_sentence(c: dict, t: float) -> str:
-    s, m = c["sdf"], c["mesh"]
-    ci = f"95% CI [{c['lo']:.3g}, {c['hi']:.3g}]" if c["lo"] is not None else "no CI (no per-frame samples)"
-    br = f"{c['bytes_ratio']:.3g}" if c["bytes_ratio"] is not None else "–"
-    return (
-        f"at chamfer_rel ≤ {t:g}, the fastest SDF-marching row `{data.label(s)}` "
-        f"({fmt_ms(num(s, 'frame_ms_median'))} ms, {fmt_bytes(num(s, 'total_bytes'))}) against the fastest "
-        f"mesh row `{data.label(m)}` ({fmt_ms(num(m, 'frame_ms_median'))} ms, "
-        f"{fmt_bytes(num(m, 'total_bytes'))}): time ratio SDF/mesh {c['ratio']:.3g} ({ci}, "
-        f"Mann-Whitney p = {fmt_p(c['p'])}), memory ratio SDF/mesh {br}: **{verdict(c)}**"
-    )
-
-
-def _hyp_outcome(kind: str, c: dict) -> str:
-    if kind not in HYPOTHESIS_OF_KIND:
-        return "No hypothesis was stated for this kind."
-    h, direction = HYPOTHESIS_OF_KIND[kind]
-    if c["lo"] is None:
-        return f"{h} cannot be tested here (no per-frame samples)."
-    faster_ok = c["hi"] < 1 if direction == "<1" else c["lo"] > 1
-    faster_bad = c["lo"] > 1 if direction == "<1" else c["hi"] < 1
-    br = c["bytes_ratio"]
-    smaller_ok = None if br is None else (br < 1 if direction == "<1" else br > 1)
-    if faster_ok and smaller_ok is not False:
-        return f"This supports {h} (H0 rejected in the predicted direction" + (
-            ", and the predicted representation is also smaller)." if smaller_ok else ").")
-    if faster_ok:
-        return f"The time part of {h} holds (H0 rejected as predicted) but the memory part does not."
-    if faster_bad:
-        return f"This contradicts {h}: H0 is rejected in the opposite direction."
-    return f"H0 is not rejected, so this run does not decide {h}."
-
-
-def answer_section(rows, scaling_rows, tests) -> str:
-    by_kind: OrderedDict[str, list[str]] = OrderedDict((k, []) for k in KIND_ORDER)
-    for name in data.inputs(rows):
-        by_kind[kind_of(name)].append(name)
-    paras = []
-    for kind in KIND_ORDER:
-        names = by_kind[kind]
-        if kind == MANY:
-            paras.append(_answer_many(scaling_rows, names))
-            continue
-        if not names:
-            if kind not in (OTHER, MIXED):
-                paras.append(f"**{kind}:** not measured in this run.")
-            continue
-        parts, n_sdf_fast, n_mesh_fast, n_sdf_small, n_tested = [], 0, 0, 0, 0
-        for name in names:
-            # the tightest threshold both an SDF-marching and a mesh row meet
-            best = [(t, c) for t, c in tests.get(name, []) if c is not None]
-            if not best:
-                parts.append(f"On `{name}` no SDF-marching row and mesh row both reach "
-                             f"chamfer_rel ≤ {max(THRESHOLDS):g}, so they cannot be compared at equal error.")
-                continue
-            t, c = min(best, key=lambda tc: tc[0])
-            n_tested += 1
-            v = verdict(c)
-            n_sdf_fast += v.startswith("SDF")
-            n_mesh_fast += v.startswith("mesh")
-            n_sdf_small += bool(c["bytes_ratio"] is not None and c["bytes_ratio"] < 1)
-            parts.append(f"On `{name}`, {_comparison_sentence(c, t)}. {_hyp_outcome(kind, c)}")
-        head = f"**{kind}** ({', '.join(f'`{n}`' for n in names)}): "
-        if n_tested:
-            head += (f"SDF marching was significantly faster on {n_sdf_fast} and the mesh on "
-                     f"{n_mesh_fast} of {n_tested} input(s) compared at equal error; the SDF "
-                     f"representation was smaller on {n_sdf_small} of {n_tested}. ")
-        paras.append(head + " ".join(parts))
-    return "\n\n".join(paras) + "\n"
-
-
 def _answer_many(scaling_rows, names) -> str:
     if not scaling_rows:
         extra = f" (inputs {', '.join(names)} are in the compare CSV)" if names else ""
-        return f"**{MANY}:** not measured in this run{extra}."
+        return f"**many primitives:** not measured in this run{extra}."
     parts = []
     for prim, slopes, comp in scaling_summary(scaling_rows):
         sl = ", ".join(f"`{k}` {s:.2f}" for k, s, _ in slopes if s is not None) or "no slopes"
@@ -357,11 +350,11 @@ def _answer_many(scaling_rows, names) -> str:
             ci = f"95% CI [{c['lo']:.3g}, {c['hi']:.3g}]" if c["lo"] is not None else "no CI"
             txt += (f"; at {n} primitives the time ratio SDF/mesh (`{data.label(c['sdf'])}` vs "
                     f"`{data.label(c['mesh'])}`) is {c['ratio']:.3g} ({ci}, p = {fmt_p(c['p'])}): "
-                    f"**{verdict(c)}**. {_hyp_outcome(MANY, c)}")
+                    f"**{verdict(c)}**.")
         else:
             txt += "; no count has both an SDF-marching and a mesh row"
         parts.append(txt if txt.endswith(".") else txt + ".")
-    return f"**{MANY}** (scaling CSV): " + " ".join(parts)
+    return "**many primitives** (scaling CSV): " + " ".join(parts)
 
 
 def _blank_lines_around_headings(text: str) -> str:
@@ -384,19 +377,49 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
                  invocation=None, hard=None) -> Path:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    rows = data.read_csv(csv_path)
+    all_rows = data.read_csv(csv_path)
     scaling_rows = data.read_csv(scaling)
-    images = plots.all_plots(rows, scaling_rows, artifacts, out)
+    # the per-input tables and plots of the appendix use one replicate (the first)
+    reps = sorted({data.replicate_of(r) for r in all_rows}, key=lambda x: (len(x), x))
+    rows = [r for r in all_rows if data.replicate_of(r) == reps[0]] if reps else []
+    verdicts = analysis.class_verdicts(all_rows) if any(
+        num(r, "quality_px") is not None for r in all_rows) else []
+    fams = analysis.families(all_rows)
+    model = analysis.cost_model(all_rows)
+    fam_images: dict = {}
+    for p in plots.family_plots(fams, out):
+        fam_images.setdefault(p.stem.removeprefix("family_"), []).append(p)
+    cost_images = plots.cost_model_plot(model, out)
+    # the per-input plots of the appendix: the first input of each class (48 panels per
+    # figure would take minutes to draw and be unreadable)
+    first: dict[str, str] = {}
+    for r in rows:
+        first.setdefault(data.class_of(r), r.get("input", ""))
+    plot_rows = [r for r in rows if r.get("input") in set(first.values())]
+    images = plots.all_plots(plot_rows, scaling_rows, artifacts, out)
     tests = hypothesis_tests(rows)
     m = machine_info()
 
-    def uniq(col, src=rows + scaling_rows):
+    def uniq(col, src=all_rows + scaling_rows):
         return sorted({r.get(col, "") for r in src} - {"", None})
 
+    n_classes = len(analysis.classes(all_rows))
     L = ["# sdfmesh: ray marching SDFs vs ray tracing meshes\n"]
-    L.append(f"Report written {datetime.now(timezone.utc).strftime('%Y-%m-%dT%H:%M:%SZ')} by "
-             "`python -m sdfmesh_tools.report`.\n")
-    L.append("## Machine and run\n")
+    L.append(f"{len(data.inputs(all_rows))} inputs in {n_classes} class(es), {len(reps)} replicate(s) "
+             f"(separate processes), {len(all_rows)} runs; commit "
+             f"{', '.join(f'`{c}`' for c in uniq('commit')) or '–'}. Report written "
+             f"{datetime.now(timezone.utc).strftime('%Y-%m-%dT%H:%M:%SZ')} by "
+             "`python -m sdfmesh_tools.report`; every number below comes from the CSVs of this run.\n")
+    L.append("\n## The answer\n\n")
+    L.append("Which representation wins, per class of input and quality level (`quality_px`: the "
+             "largest geometric error in pixels a run is allowed), in frame time and in bytes:\n\n")
+    L.append(answer_table(verdicts))
+    L.append("\n" + answer_legend(all_rows, verdicts))
+    L.append("\n## Crossovers along the families\n\n")
+    L.append(families_section(fams, fam_images, out))
+    L.append("\n## Cost model\n\n")
+    L.append(cost_section(model, cost_images[0] if cost_images else None, out))
+    L.append("\n## Machine and run\n")
     L.append(md_table(["what", "value"], [
         ("CPU", m["cpu"]), ("logical cores", m["cores"]), ("RAM", fmt_bytes(m["ram"])), ("OS", m["os"]),
         ("commit", ", ".join(f"`{c}`" for c in uniq("commit")) or "–"),
@@ -421,32 +444,46 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
 
     L.append("\n## Method\n")
     L.append(
-        "Every input (a scene file or a mesh file) is rendered in each representation: `analytic` "
-        "(closed-form ray–primitive intersection), `sdf` (sphere tracing the analytic SDF), `mesh` "
-        "(BVH ray tracing of a tessellated or extracted triangle mesh at a resolution) and `grid` "
-        "(sphere tracing a sampled SDF grid at a resolution). Each row is timed over several frames "
-        "(`frame_ms_samples`); memory is `total_bytes` (geometry plus acceleration structure). "
-        "Error is measured against the reference row of the input (`reference` column): "
-        "`chamfer_rel` is the chamfer distance between the visible surfaces divided by the "
-        "reference's bounding-box diagonal, `image_rmse` the RGB error of the image. "
-        "A representation *meets* a threshold when `chamfer_rel ≤ threshold`. The hypothesis test "
-        "compares, per input, the fastest SDF-marching row (`sdf` or `grid`) with the fastest `mesh` "
-        "row meeting the threshold: the ratio of median frame times with a percentile bootstrap 95% "
-        "confidence interval (4000 resamples of each row's per-frame samples) and a two-sided "
-        "Mann–Whitney U test of the per-frame samples.\n")
+        "Every input (a scene file or a mesh file; its `class` is its folder under data/scenes, "
+        "`scan` for scanned meshes) is rendered in each representation: `analytic` "
+        "(closed-form ray–primitive intersection, the reference of scenes), `sdf` (sphere tracing "
+        "the analytic SDF, swept over the hit tolerance `tolerance_px` and the over-relaxation "
+        "`relaxation`), `mesh` (BVH ray tracing of a tessellated or extracted triangle mesh at a "
+        "resolution; for scanned meshes the original mesh is the reference) and `grid` (sphere "
+        "tracing a sampled SDF grid at a resolution). The whole sweep runs in separate processes "
+        "(`replicate` 0, 1, 2, ...), each in its own shuffled order (`--order-seed`), so that "
+        "run-to-run noise (frequency scaling, cache state, other load) shows between replicates. "
+        "Each run is timed over several frames (`frame_ms_samples`); memory is `total_bytes` "
+        "(geometry plus acceleration structure). Error is measured against the input's reference: "
+        "`px_err_*` is the geometric error of the visible surface in pixels at its distance and "
+        "`quality_px` the smallest of 0.5, 1 and 2 px the run meets (empty: none); `chamfer_rel` "
+        "is the chamfer distance divided by the reference's bounding-box diagonal. The answer "
+        "compares the best runs of each side meeting a quality level (see its legend). The "
+        "per-input appendix keeps the earlier per-frame test: per input, the fastest SDF-marching "
+        "row against the fastest mesh row meeting a `chamfer_rel` threshold, ratio of median frame "
+        "times with a percentile bootstrap 95% confidence interval (4000 resamples of each row's "
+        "per-frame samples) and a two-sided Mann–Whitney U test of the per-frame samples.\n")
 
     L.append("\n## Hypothesis (stated before the results)\n\n" + HYPOTHESIS)
-    L.append("\nKinds of scene, by input name (first match wins; the hypotheses speak about the kinds "
-             "marked):\n\n")
-    L.append(md_table(["input name pattern", "kind", "hypothesis"],
-                      [(f"`{p}`", k, HYPOTHESIS_OF_KIND.get(k, ("–",))[0]) for p, k in KIND_MAP]))
+    L.append("\nOutcome, from the answer table (H1 speaks about class `smooth`, H2 about class "
+             "`scan`):\n\n" + hypotheses_outcome(verdicts))
 
-    L.append("\n## Results\n")
+    if hard and Path(hard).is_file():
+        L.append("\n## Hard cases\n\n")
+        L.append("Which numerically hard cases each representation passes (`toolkit hard`, "
+                 "data/hard/README.md explains each case and each known limit), measured in this "
+                 "run at 96x96 against the analytic reference:\n\n")
+        L.append(Path(hard).read_text().rstrip() + "\n")
+
+    L.append("\n## Many primitives: the scaling experiment\n\n")
+    L.append(_answer_many(scaling_rows, []) + "\n")
+
+    L.append(f"\n## Results per input (replicate {reps[0] if reps else '–'})\n")
     if not rows:
         L.append("No compare rows were read.\n")
     for name in data.inputs(rows):
         sub = [r for r in rows if r.get("input") == name]
-        L.append(f"\n### `{name}` ({kind_of(name)})\n\n")
+        L.append(f"\n### `{name}` ({data.class_of(sub[0])})\n\n")
         refs = sorted({r.get("reference", "") for r in sub} - {""})
         if refs:
             L.append(f"Reference: `{', '.join(refs)}`.\n\n")
@@ -492,7 +529,7 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
               fmt_g(num(r, "image_ssim"))) for r in sub]))
         L.append("\n</details>\n")
 
-    L.append("\n## Hypothesis test\n\n")
+    L.append("\n## Per-input test at chamfer thresholds\n\n")
     L.append("Time ratio = median frame time of the fastest SDF-marching row / that of the fastest "
              "mesh row, both meeting the threshold; < 1 means SDF marching is faster. H0: ratio = 1.\n\n")
     hrows = []
@@ -518,18 +555,10 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
                          f"[{c['lo']:.3g}, {c['hi']:.3g}] (n = {c['n_sdf']} and {c['n_mesh']} frames)")
     L.append("\n")
 
-    L.append("\n## The answer\n\n")
-    L.append("Generated from the numbers above, one paragraph per kind of scene.\n\n")
-    L.append(answer_section(rows, scaling_rows, tests))
-
-    if hard and Path(hard).is_file():
-        L.append("\n## Hard cases\n\n")
-        L.append("Which numerically hard cases each representation passes (`toolkit hard`, "
-                 "data/hard/README.md explains each case and each known limit), measured in this "
-                 "run at 96x96 against the analytic reference:\n\n")
-        L.append(Path(hard).read_text().rstrip() + "\n")
 
     L.append("\n## Plots\n\n")
+    L.append("Per-input plots of replicate " + (reps[0] if reps else "–") + " for the first input of "
+             "each class: " + ", ".join(f"`{v}`" for v in first.values()) + ".\n\n")
     if images:
         for p in images:
             L.append(f"{_img(p, out)}\n\n")

@@ -175,8 +175,9 @@ def test_report_contents(run):
     assert "H1:" in text and "H2:" in text and "H0" in text
     assert COMMIT in text and STAMP in text
     assert "toolkit compare --csv compare.csv" in text
-    # kinds with no input in the CSV are reported as not measured
-    assert "**sharp CAD edges:** not measured in this run." in text
+    # the hypotheses' classes are absent from this schema-1 CSV: said so, not guessed
+    assert "H1: class `smooth` not measured in this run." in text
+    assert "No class could be compared" in text
     # every PNG is linked relatively
     for name in EXPECTED:
         assert f"]({name})" in text, name
@@ -222,8 +223,13 @@ def test_ratio_ci_covers_the_true_ratio():
     assert stats.ratio_of_medians_ci([1.0], [2.0]) == (0.5, None, None)
 
 
-def test_kind_mapping():
-    assert report.kind_of("thesis_sdf_spheres") == report.FEW
-    assert report.kind_of("bunny") == report.ORGANIC
-    assert report.kind_of("thesis_sdf_boxes") == report.CAD
-    assert report.kind_of("something_else") == report.OTHER
+def test_labels_and_sides():
+    r = {"repr": "sdf", "method": "sphere-trace", "resolution": "", "tolerance_px": "1",
+         "relaxation": "1.6"}
+    assert data.label(r) == "sdf/sphere-trace tol=1 relax=1.6"
+    assert data.label({"repr": "mesh", "method": "parametric", "resolution": "64"}) == "mesh/parametric@64"
+    assert data.side(r) == "sdf" and data.side({"repr": "grid"}) == "sdf"
+    assert data.side({"repr": "mesh"}) == "mesh" and data.side({"repr": "analytic"}) is None
+    assert data.meets({"quality_px": "1"}, 1.0) and not data.meets({"quality_px": "2"}, 1.0)
+    assert not data.meets({"quality_px": ""}, 2.0)
+    assert data.class_of({}) == "unclassified" and data.replicate_of({"replicate": ""}) == "0"
