@@ -1273,18 +1273,24 @@ mod tests {
 
     #[test]
     fn every_scene_in_data_parses() {
+        // data/scenes and its generated families one folder down (tools/gen-scenes).
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/scenes");
         let mut count = 0;
-        for entry in std::fs::read_dir(&dir).unwrap() {
-            let path = entry.unwrap().path();
-            if path.extension().is_some_and(|e| e == "toml") {
-                let scene = load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
-                assert!(!scene.objects.is_empty(), "{}", path.display());
-                assert!(!scene.lights.is_empty(), "{}", path.display());
-                count += 1;
+        let mut folders = vec![dir.clone()];
+        while let Some(folder) = folders.pop() {
+            for entry in std::fs::read_dir(&folder).unwrap() {
+                let path = entry.unwrap().path();
+                if path.is_dir() {
+                    folders.push(path);
+                } else if path.extension().is_some_and(|e| e == "toml") {
+                    let scene = load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
+                    assert!(!scene.objects.is_empty(), "{}", path.display());
+                    assert!(!scene.lights.is_empty(), "{}", path.display());
+                    count += 1;
+                }
             }
         }
-        assert!(count >= 10, "only {count} scenes in {}", dir.display());
+        assert!(count >= 40, "only {count} scenes in {}", dir.display());
     }
 
     #[test]
