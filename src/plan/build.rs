@@ -21,7 +21,7 @@ use crate::geometry::grid::object::{ClippedGrid, GridObject, GridStore};
 use crate::geometry::march::MarchParams;
 use crate::geometry::mesh::MeshGeometry;
 use crate::geometry::scene::SceneGeometry;
-use crate::geometry::sdf::{SdfObject, SdfTree};
+use crate::geometry::sdf::{SdfObject, SdfTree, sdf_geometry};
 use crate::geometry::{Geometry, aabb};
 use crate::mesh::TriangleMesh;
 use crate::scene::Scene;
@@ -136,8 +136,8 @@ fn sphere_traced(
             format!("{kind} '{}': sphere traced ({why})", o.label)
         }
     };
-    match SdfObject::new(o, march, why) {
-        Some(s) => Box::new(s),
+    match sdf_geometry(o, march, why) {
+        Some(s) => s,
         None => unreachable!("meshes and grid files are never sphere traced"),
     }
 }

@@ -341,7 +341,12 @@ pub fn plan_object(scene: &Scene, o: &Object, repr: Representation) -> ObjectPla
             ObjectKind::Primitive(_) => ObjectPlan::as_asked(Build::ClosedForm),
             _ => marched(Some(Fallback::NoClosedForm { kind: o.kind_name() })),
         },
-        Representation::Sdf { .. } => marched(None),
+        // Unbounded planes have a closed form in every representation but the mesh (a
+        // disc out to the far distance): never marched to the horizon.
+        Representation::Sdf { .. } => match o.kind {
+            ObjectKind::Primitive(Primitive::Plane { .. }) => ObjectPlan::as_asked(Build::ClosedForm),
+            _ => marched(None),
+        },
         Representation::Mesh { resolution, shading, method, .. } => match (&o.kind, method) {
             (ObjectKind::Primitive(Primitive::Plane { .. }), _) => {
                 ObjectPlan::as_asked(Build::PlaneDisc { resolution })
@@ -361,7 +366,11 @@ pub fn plan_object(scene: &Scene, o: &Object, repr: Representation) -> ObjectPla
         Representation::Grid { resolution, fill, storage, march } => {
             let grid = |fill, clip| Build::Grid { resolution, fill, storage, march, clip };
             let Some(b) = o.bounds() else {
-                let build = if is_mesh { Build::MeshTriangles } else { Build::Marched { march } };
+                let build = match o.kind {
+                    _ if is_mesh => Build::MeshTriangles,
+                    ObjectKind::Primitive(Primitive::Plane { .. }) => Build::ClosedForm,
+                    _ => Build::Marched { march },
+                };
                 return ObjectPlan::fallback(build, Fallback::Unbounded);
             };
             if is_mesh {
@@ -455,8 +464,11 @@ mod tests {
             };
             assert_eq!(p, expect, "{}", o.label);
         }
-        for p in plan_scene(&s, Representation::Sdf { march: MarchParams::default() }) {
-            assert_eq!(p, ObjectPlan::as_asked(Build::Marched { march }));
+        for (o, p) in
+            s.objects.iter().zip(plan_scene(&s, Representation::Sdf { march: MarchParams::default() }))
+        {
+            let build = if kind(o) == "plane" { Build::ClosedForm } else { Build::Marched { march } };
+            assert_eq!(p, ObjectPlan::as_asked(build), "{}", o.label);
         }
         let mc = ExtractMethod::MarchingCubes;
         for (o, p) in s.objects.iter().zip(plan_scene(&s, mesh(MeshMethod::Parametric))) {
@@ -477,7 +489,7 @@ mod tests {
         }
         for (o, p) in s.objects.iter().zip(plan_scene(&s, grid(GridFill::Voxelize))) {
             let expect = match kind(o) {
-                "plane" => ObjectPlan::fallback(Build::Marched { march }, Fallback::Unbounded),
+                "plane" => ObjectPlan::fallback(Build::ClosedForm, Fallback::Unbounded),
                 "triangle" => ObjectPlan::fallback(Build::Marched { march }, Fallback::Unsigned),
                 // Analytic objects are always sampled.
                 _ => ObjectPlan::as_asked(Build::Grid {

@@ -1,6 +1,6 @@
 //! The `Geometry` contract (`src/geometry/mod.rs`), checked once for every representation
 //! (closed form, analytic SDF, relaxed SDF, dense grid, narrow-band grid, tessellated mesh)
-//! on every test scene (single primitives, CSG, a mesh read from a file, and a scene of
+//! on every test scene (single primitives, CSG, a union of 9 primitives, a mesh read from a file, and a scene of
 //! several objects with an infinite plane): each object's geometry and the scene aggregate
 //! (`SceneGeometry`). `contract_tests!` writes one `#[test]` per scene x representation.
 //!
@@ -15,7 +15,10 @@
 //! - `hit.point` is `ray.at(hit.t)` within `1e-4 * (1 + t + size)` (f32 rounding of a
 //!   point computed in an object's frame and transformed back);
 //! - an interval ending before a hit or starting after it never returns that hit;
-//! - `bytes_used()` is positive and the same before and after tracing.
+//! - `bytes_used()` is positive and the same before and after tracing;
+//! - packets: `closest_hits` over up to 8 of these rays gives every lane exactly the hit
+//!   `closest_hit` gives for that ray alone (marched fields march packets with 8-wide
+//!   evaluations, the aggregate gathers the objects a packet reaches).
 //!
 //! For the aggregate, its closest hit is also the nearest of its objects' closest hits.
 
@@ -126,6 +129,29 @@ fn csg() -> Scene {
     let s = object(Primitive::Sphere { radius: 1.0 }, Vec3::new(0.4, 0.4, -0.4), Vec3::ZERO, Vec3::ONE);
     let kind = ObjectKind::Csg { op: CsgOp::Subtraction, children: vec![b, s] };
     lit_scene(vec![with(kind, Vec3::new(0.0, 0.1, 0.0), Vec3::new(0.0, 25.0, 0.0))], PIXELS)
+}
+
+/// A sharp union of 9 primitives, some overlapping, under a rotation: the SDF side traces
+/// it as one part per child under a BVH (`sdf_geometry`), which must be the same surface.
+fn big_union() -> Scene {
+    let children: Vec<Object> = (0..9)
+        .map(|i| {
+            let (x, z) = ((i % 3) as f32 * 0.7 - 0.7, (i / 3) as f32 * 0.7 - 0.7);
+            let prim = if i % 2 == 0 {
+                Primitive::Sphere { radius: 0.4 }
+            } else {
+                Primitive::Box { half: Vec3::new(0.3, 0.25, 0.35) }
+            };
+            object(
+                prim,
+                Vec3::new(x, 0.1 * i as f32 - 0.4, z),
+                Vec3::new(0.0, 10.0 * i as f32, 0.0),
+                Vec3::ONE,
+            )
+        })
+        .collect();
+    let kind = ObjectKind::Csg { op: CsgOp::Union, children };
+    lit_scene(vec![with(kind, Vec3::new(0.1, 0.0, 0.0), Vec3::new(15.0, 20.0, 0.0))], PIXELS)
 }
 
 /// A triangle mesh read from an OBJ file through the scene parser (a mesh object: traced
@@ -312,6 +338,7 @@ fn check_geometry(what: &str, g: &dyn Geometry, marched: bool, centre: Vec3, siz
             queue.extend(rays_from_hit(&hit, size, &mut rng));
         }
     }
+    check_packets(what, g, &queue);
     eprintln!(
         "{what}: {hits} hits of {} rays, worst surface distance {worst:.3} of the tolerance, {} step-limit marches",
         queue.len(),
@@ -321,6 +348,48 @@ fn check_geometry(what: &str, g: &dyn Geometry, marched: bool, centre: Vec3, siz
     assert_eq!(g.census(), census, "{what}: census changes after tracing");
     assert_eq!(g.bounds(), bounds, "{what}: bounds change after tracing");
     hits
+}
+
+/// `closest_hits` on packets of up to 8 consecutive rays (sharing `t_min`) agrees lane by
+/// lane, exactly, with `closest_hit`; a packet's lanes may start with hits already found
+/// (a `t_max` lowered by another geometry), which a farther hit must not replace.
+fn check_packets(what: &str, g: &dyn Geometry, queue: &[(Ray, f32, f32)]) {
+    let mut stats = RayStats::default();
+    let mut start = 0;
+    let mut packets = 0;
+    while start < queue.len() {
+        let t_min = queue[start].1;
+        let mut end = start + 1;
+        while end < queue.len() && end - start < 8 && queue[end].1 == t_min {
+            end += 1;
+        }
+        let chunk = &queue[start..end];
+        let rays: Vec<Ray> = chunk.iter().map(|c| c.0).collect();
+        let mut t_max: Vec<f32> = chunk.iter().map(|c| c.2).collect();
+        let expect: Vec<Option<Hit>> =
+            chunk.iter().map(|c| g.closest_hit(&c.0, c.1, c.2, &mut stats)).collect();
+        let mut hits = vec![None; chunk.len()];
+        // Every third packet: lane 0 already holds a nearer hit from elsewhere.
+        let sentinel = (packets % 3 == 2).then(|| expect[0].map(|h| Hit { t: h.t * 0.5, ..h })).flatten();
+        if let Some(h) = sentinel {
+            t_max[0] = h.t;
+            hits[0] = Some(h);
+        }
+        g.closest_hits(&rays, t_min, &mut t_max, &mut hits, &mut stats);
+        for (i, (got, want)) in hits.iter().zip(&expect).enumerate() {
+            let want = if i == 0 && sentinel.is_some() { &sentinel } else { want };
+            assert_eq!(
+                got, want,
+                "{what}: packet lane {i} of ray {:?} dir {:?}",
+                rays[i].origin, rays[i].dir
+            );
+            if let Some(h) = got {
+                assert_eq!(t_max[i], h.t, "{what}: packet lane {i}: t_max not lowered to the hit");
+            }
+        }
+        packets += 1;
+        start = end;
+    }
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -438,4 +507,4 @@ macro_rules! contract_tests {
     )*};
 }
 
-contract_tests!(sphere, rotated_box, torus, cylinder_and_cone, csg, mesh_file, several_with_plane);
+contract_tests!(sphere, rotated_box, torus, cylinder_and_cone, csg, big_union, mesh_file, several_with_plane);

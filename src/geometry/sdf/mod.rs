@@ -12,7 +12,8 @@ pub mod tape;
 
 use crate::geometry::march::MarchParams;
 use crate::geometry::marched::{DistanceField, Marched};
-use crate::geometry::{Census, distance_by_projection, f32_error, max_abs};
+use crate::geometry::scene::SceneGeometry;
+use crate::geometry::{Census, Geometry, Hit, Ray, RayStats, distance_by_projection, f32_error, max_abs};
 use crate::scene::shape::grow;
 use glam::{DVec2, DVec3, UVec3, Vec3};
 
@@ -438,6 +439,103 @@ impl SdfObject {
             )
         });
         Some(Marched::from_field(field, bounds, size, march, why))
+    }
+}
+
+/// Fewest children of a sharp union that [`sdf_geometry`] splits into parts under a BVH.
+pub const SPLIT_UNION_CHILDREN: usize = 8;
+
+/// How an object's analytic SDF is traced: one [`SdfObject`], or, for a sharp union of at
+/// least [`SPLIT_UNION_CHILDREN`] bounded children, an [`SdfUnion`] of one [`SdfObject`]
+/// per child under a BVH. The surface of `min(a, b)` is the union of the children's
+/// surfaces, so the nearest hit of the union is the nearest of the children's hits, with
+/// the nearest child's material and normal, as the single field gives; but a ray now
+/// evaluates only the children whose bounds it reaches, not every child at every step
+/// (the SDF side's bounding volume hierarchy). `None` when the object holds a mesh.
+pub fn sdf_geometry(object: &Object, march: MarchParams, why: String) -> Option<Box<dyn Geometry>> {
+    if let ObjectKind::Csg { op: CsgOp::Union, children } = &object.kind
+        && children.len() >= SPLIT_UNION_CHILDREN
+    {
+        // Each child keeps the union's transform above its own (a union of one child).
+        let parts: Option<Vec<Object>> = children
+            .iter()
+            .map(|c| {
+                let part = Object {
+                    kind: ObjectKind::Csg { op: CsgOp::Union, children: vec![c.clone()] },
+                    transform: object.transform.clone(),
+                    material: object.material,
+                    label: c.label.clone(),
+                };
+                part.bounds().is_some().then_some(part)
+            })
+            .collect();
+        if let Some(parts) = parts {
+            let geometries: Option<Vec<Box<dyn Geometry>>> = parts
+                .iter()
+                .map(|p| SdfObject::new(p, march, why.clone()).map(|g| Box::new(g) as Box<dyn Geometry>))
+                .collect();
+            return Some(Box::new(SdfUnion {
+                parts: SceneGeometry::new(geometries?),
+                label: format!(
+                    "{why} (a union of {} children, each sphere traced in its bounds under a BVH)",
+                    children.len()
+                ),
+            }));
+        }
+    }
+    Some(Box::new(SdfObject::new(object, march, why)?))
+}
+
+/// A sharp union traced as its children under a BVH ([`sdf_geometry`]).
+pub struct SdfUnion {
+    /// One [`SdfObject`] per child.
+    parts: SceneGeometry,
+    /// What [`Geometry::describe`] says.
+    label: String,
+}
+
+impl Geometry for SdfUnion {
+    fn bounds(&self) -> Option<crate::geometry::Aabb> {
+        self.parts.bounds()
+    }
+
+    fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
+        self.parts.closest_hit(ray, t_min, t_max, stats)
+    }
+
+    fn prefers_packets(&self) -> bool {
+        true
+    }
+
+    fn closest_hits(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: &mut [f32],
+        hits: &mut [Option<Hit>],
+        stats: &mut RayStats,
+    ) {
+        self.parts.closest_hits(rays, t_min, t_max, hits, stats)
+    }
+
+    fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
+        self.parts.any_hit(ray, t_min, t_max, stats)
+    }
+
+    fn bytes_used(&self) -> usize {
+        std::mem::size_of::<Self>() + self.parts.bytes_used() + self.label.capacity()
+    }
+
+    fn describe(&self) -> String {
+        self.label.clone()
+    }
+
+    fn census(&self) -> Census {
+        self.parts.census()
+    }
+
+    fn surface_distance(&self, p: DVec3) -> f64 {
+        self.parts.surface_distance(p)
     }
 }
 
