@@ -462,7 +462,7 @@ pub fn sdf_geometry(object: &Object, march: MarchParams, why: String) -> Option<
             .map(|c| {
                 let part = Object {
                     kind: ObjectKind::Csg { op: CsgOp::Union, children: vec![c.clone()] },
-                    transform: object.transform.clone(),
+                    transform: object.transform,
                     material: object.material,
                     label: c.label.clone(),
                 };
