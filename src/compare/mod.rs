@@ -1058,10 +1058,14 @@ fn save_artifacts(
     is_reference: bool,
 ) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    let base = match run.resolution {
+    let mut base = match run.resolution {
         Some(r) => format!("{}-{}-{r}", run.repr, run.method),
         None => format!("{}-{}", run.repr, run.method),
     };
+    // The SDF sweep's runs differ only in their knob.
+    if let (RunRepr::Sdf, Some((t, r))) = (run.repr, run.knob()) {
+        base = format!("{base}-tol{t}-relax{r}");
+    }
     write_png(image, &dir.join(format!("{base}.png")))?;
     if is_reference && let Some(mesh) = mesh_input(scene) {
         save_mesh(mesh, &dir.join("reference.ply"))?;
