@@ -284,14 +284,22 @@ pub struct QualityLevel {
     pub max_flip_mean: f64,
 }
 
-/// The quality levels, finest first. The silhouette and FLIP bounds are calibrated on the
-/// bundled scenes (see the README's compare schema): runs that look like the reference pass
-/// level 2 or better, runs with a visible defect (a lost mirror, a blob instead of a shape,
-/// a wrong reflection) fail every level.
+/// The quality levels, finest first. The silhouette and FLIP bounds were calibrated on the
+/// bundled scenes at 256x256 pixels (the study's image size) with `--res 16,64`: every
+/// sphere-traced run at 0.25 px that looks like the reference meets 0.5 px or 1 px (FLIP
+/// 0.007-0.047, silhouette <= 0.5%); runs with a visible defect fail every level: grids of
+/// `coursework_mirrors` that lost both thin mirrors (silhouette 23.6%), grids of `showcase`
+/// with a garbled mirror (FLIP 0.12-0.13), `showcase` sphere traced at 1 px with speckles
+/// on edges (FLIP 0.124), a radius-5000 ground sphere tessellated into facets (`thesis_rt`,
+/// p95 16-10^4 px). A tolerance of L pixels fattens silhouettes by up to L pixels, so the
+/// silhouette bound grows with L; its share of the image halves when the image's side
+/// doubles, so at much smaller images the bounds are stricter than intended. Not caught: a
+/// wrong colour on a small part of the image (a CSG part given its parent's material in
+/// `thesis_sdf_csg` meshes and grids, FLIP 0.05).
 pub const QUALITY_LEVELS: [QualityLevel; 3] = [
-    QualityLevel { px: 0.5, max_silhouette_pct: 0.5, max_flip_mean: 0.02 },
-    QualityLevel { px: 1.0, max_silhouette_pct: 1.0, max_flip_mean: 0.04 },
-    QualityLevel { px: 2.0, max_silhouette_pct: 2.0, max_flip_mean: 0.08 },
+    QualityLevel { px: 0.5, max_silhouette_pct: 0.5, max_flip_mean: 0.05 },
+    QualityLevel { px: 1.0, max_silhouette_pct: 1.5, max_flip_mean: 0.08 },
+    QualityLevel { px: 2.0, max_silhouette_pct: 4.0, max_flip_mean: 0.1 },
 ];
 
 impl QualityLevel {
@@ -312,15 +320,18 @@ pub fn quality_px(px_err_p95: Option<f64>, silhouette_mismatch_pct: f64, flip_me
 /// The bounding-box diagonal of the points that lie on bounded objects of `objects` (the
 /// scale of relative surface errors), or `None` when no point does. An object is unbounded
 /// when its `bounds()` is `None` or when its box's diagonal exceeds 100 times the median
-/// diagonal of the objects with bounds (a radius-5000 ground sphere); a point lies on an
+/// diagonal of the objects with bounds (the lower median: with a sphere on a radius-5000
+/// ground sphere, the sphere's); a point lies on an
 /// object when it is inside the object's box grown by 1e-6 of its diagonal (and by the f32
 /// rounding of the point). Infinite planes and ground spheres would otherwise make the scale
 /// the distance to the horizon.
 pub fn bounded_diagonal(objects: &[Box<dyn Geometry>], points: &[DVec3]) -> Option<f64> {
     let boxes: Vec<(DVec3, DVec3)> =
         objects.iter().filter_map(|o| o.bounds()).map(|b| (b.min.as_dvec3(), b.max.as_dvec3())).collect();
-    let diagonals: Vec<f64> = boxes.iter().map(|(lo, hi)| (*hi - *lo).length()).collect();
-    let limit = 100.0 * median(&diagonals);
+    let mut diagonals: Vec<f64> = boxes.iter().map(|(lo, hi)| (*hi - *lo).length()).collect();
+    diagonals.sort_by(f64::total_cmp);
+    // The lower median: with two objects, a sphere and a ground, the sphere's.
+    let limit = 100.0 * diagonals.get(diagonals.len().saturating_sub(1) / 2).copied().unwrap_or(0.0);
     let bounded: Vec<(DVec3, DVec3)> = boxes
         .into_iter()
         .filter(|(lo, hi)| (*hi - *lo).length() <= limit)

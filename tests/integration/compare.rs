@@ -254,7 +254,9 @@ fn resume_key_includes_replicate_and_march_knob() {
     std::fs::write(&scene, SCENE).unwrap();
     let csv = dir.join("out.csv");
     let sweep = |tol: &str| ["--res", "8", "--sdf-tolerance-px", tol, "--sdf-relax", "1"].map(String::from);
-    let args = |extra: &[String]| extra.iter().map(String::as_str).collect::<Vec<_>>();
+    fn args(extra: &[String]) -> Vec<&str> {
+        extra.iter().map(String::as_str).collect()
+    }
     let first = sweep("1");
     let out = run_compare(&scene, &csv, &args(&first));
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
@@ -289,7 +291,7 @@ fn order_seed_shuffles_the_runs_after_the_reference() {
     std::fs::write(&scene, SCENE).unwrap();
     let order = |seed: &str, name: &str| -> Vec<String> {
         let csv = dir.join(name);
-        let out = run_compare(&scene, &csv, &["--res", "8", "--frames", "1", "--order-seed", seed]);
+        let out = run_compare(&scene, &csv, &["--res", "8", "--order-seed", seed]);
         assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
         read_rows(&csv).unwrap().iter().map(|r| format!("{:?}", r.key())).collect()
     };
