@@ -78,13 +78,14 @@ enum Command {
         #[arg(long, default_value_t = 0)]
         band: u32,
     },
-    /// Render scenes and meshes in every representation across a resolution sweep and write
-    /// one CSV row per run (error, frame time, build time, bytes; schema in the README), then
-    /// print which representation is fastest and smallest at each error threshold.
+    /// Render scenes and meshes in every representation across a resolution sweep (sphere
+    /// tracing across --sdf-tolerance-px and --sdf-relax) and write one CSV row per run
+    /// (error, quality level, frame time, build time, bytes; schema in the README), then print
+    /// which representation is fastest and smallest at each quality level.
     #[command(allow_negative_numbers = true)]
     Compare {
-        /// Scene files and mesh files (default: every scene in data/scenes and
-        /// ../shared/meshes/stanford-bunny.obj where it exists).
+        /// Scene files and mesh files, with different stems (default: every scene under
+        /// data/scenes, recursively, and ../shared/meshes/stanford-bunny.obj where it exists).
         inputs: Vec<PathBuf>,
         /// Output CSV (rows are appended and flushed as each run finishes).
         #[arg(long)]

@@ -1,13 +1,16 @@
 //! `toolkit compare`: renders each input in every representation across a resolution
-//! sweep under one camera, lights, materials, image size and depth, and writes one CSV row
-//! per run (schema [`COLUMNS`], version [`SCHEMA_VERSION`], documented in the README): image
-//! and geometric error against the input's reference, frame time (median of K frames after
-//! a warm-up frame, build time separate), bytes, rays per second, steps and nodes per ray.
+//! sweep (and sphere tracing across a sweep of hit tolerances and over-relaxation factors)
+//! under one camera, lights, materials, image size and depth, and writes one CSV row per run
+//! (schema [`COLUMNS`], version [`SCHEMA_VERSION`], documented in the README): image error
+//! (RMSE, PSNR, SSIM, FLIP), silhouette mismatch, geometric error in pixels and relative to
+//! the visible bounded objects, all against the input's reference, the quality level met
+//! ([`crate::metrics::QUALITY_LEVELS`]), frame time (median of K frames after a warm-up
+//! frame, build time separate), bytes, rays per second, steps and nodes per ray.
 //!
 //! Rows are appended and flushed as each run finishes, so an interrupted run keeps every
-//! finished row and `--resume` skips them. [`summary`] answers, per input and error
-//! threshold, which representation is fastest and which is smallest; [`scaling`] is the
-//! coursework's frame time against primitive count experiment.
+//! finished row and `--resume` skips them (matched by [`RowKey`]). [`summary`] answers, per
+//! input and quality level, which representation is fastest and which is smallest;
+//! [`scaling`] is the coursework's frame time against primitive count experiment.
 
 pub mod hard;
 pub mod scaling;
