@@ -391,3 +391,34 @@ fn scaling_experiment_writes_a_row_per_primitive_count_and_representation() {
         assert_eq!(tris("5", prim), 5 * tris("2", prim) / 2, "{prim}");
     }
 }
+
+/// Without inputs, compare runs every scene under `data/scenes` (relative to the working
+/// folder), class folders included, each row naming its class; two scenes of one stem in
+/// different folders are refused.
+#[test]
+fn default_inputs_are_searched_recursively_with_their_class() {
+    let dir = temp_dir("default_inputs");
+    let scenes = dir.join("data/scenes");
+    std::fs::create_dir_all(scenes.join("blend")).unwrap();
+    std::fs::write(scenes.join("top.toml"), SCENE).unwrap();
+    std::fs::write(scenes.join("blend/inner.toml"), SCENE).unwrap();
+    let run = |csv: &str| {
+        Command::new(env!("CARGO_BIN_EXE_toolkit"))
+            .current_dir(&dir)
+            .args(["compare", "--csv", csv, "--res", "8", "--frames", "1", "--quiet"])
+            .args(["--sdf-tolerance-px", "1", "--sdf-relax", "1"])
+            .output()
+            .unwrap()
+    };
+    let out = run("a.csv");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let rows = read_rows(&dir.join("a.csv")).unwrap();
+    let mut classes: Vec<(String, String)> =
+        rows.iter().map(|r| (r.input.clone(), r.class.clone())).collect();
+    classes.dedup();
+    assert_eq!(classes, vec![("inner".into(), "blend".into()), ("top".into(), "scenes".into())]);
+    std::fs::write(scenes.join("blend/top.toml"), SCENE).unwrap();
+    let out = run("b.csv");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("`top`"));
+}
