@@ -78,13 +78,14 @@ enum Command {
         #[arg(long, default_value_t = 0)]
         band: u32,
     },
-    /// Render scenes and meshes in every representation across a resolution sweep and write
-    /// one CSV row per run (error, frame time, build time, bytes; schema in the README), then
-    /// print which representation is fastest and smallest at each error threshold.
+    /// Render scenes and meshes in every representation across a resolution sweep (sphere
+    /// tracing across --sdf-tolerance-px and --sdf-relax) and write one CSV row per run
+    /// (error, quality level, frame time, build time, bytes; schema in the README), then print
+    /// which representation is fastest and smallest at each quality level.
     #[command(allow_negative_numbers = true)]
     Compare {
-        /// Scene files and mesh files (default: every scene in data/scenes and
-        /// ../shared/meshes/stanford-bunny.obj where it exists).
+        /// Scene files and mesh files, with different stems (default: every scene under
+        /// data/scenes, recursively, and ../shared/meshes/stanford-bunny.obj where it exists).
         inputs: Vec<PathBuf>,
         /// Output CSV (rows are appended and flushed as each run finishes).
         #[arg(long)]
@@ -113,6 +114,21 @@ enum Command {
         /// Surface points sampled per side for the Chamfer and Hausdorff distances.
         #[arg(long, default_value_t = 20_000)]
         surface_samples: usize,
+        /// Hit tolerances of the SDF sweep, pixels, comma-separated: one sdf/sphere-trace run
+        /// per tolerance and --sdf-relax factor (grid and mesh runs use --tolerance-px).
+        #[arg(long, value_delimiter = ',', default_values_t = sdfmesh::compare::DEFAULT_SDF_TOLERANCES_PX)]
+        sdf_tolerance_px: Vec<f64>,
+        /// Over-relaxation factors of the SDF sweep, comma-separated, each in [1, 2).
+        #[arg(long, value_delimiter = ',', default_values_t = sdfmesh::compare::DEFAULT_SDF_RELAXATIONS)]
+        sdf_relax: Vec<f64>,
+        /// Replicate number written to every row (part of the --resume key): run the whole
+        /// experiment K times into one CSV to see run-to-run variation.
+        #[arg(long, default_value_t = 0)]
+        replicate: u32,
+        /// Shuffle each input's runs after the reference with this seed (deterministic), so
+        /// that replicates interleave the representations differently.
+        #[arg(long)]
+        order_seed: Option<u64>,
         /// Run the coursework's scaling experiment instead: frame time against the number of
         /// spheres, cubes, cylinders and cones (image 320x240 unless --width/--height).
         #[arg(long)]
@@ -275,9 +291,11 @@ struct MarchArgs {
     /// Over-relaxation factor for sphere tracing, in [1, 2); 1 = plain sphere tracing.
     #[arg(long, default_value_t = 1.0)]
     relax: f64,
-    /// Relative hit tolerance of sphere tracing (times the distance travelled).
-    #[arg(long, default_value_t = 1e-4)]
-    epsilon: f64,
+    /// Relative hit tolerance of sphere tracing (times the distance travelled; the tolerance
+    /// is the smaller of this and --tolerance-px) [default: 1e-4; compare: 0.5, so that the
+    /// pixel tolerance is the knob]
+    #[arg(long)]
+    epsilon: Option<f64>,
     /// Largest hit tolerance of sphere tracing, in pixels at the hit's distance (the SDF
     /// side's quality knob).
     #[arg(long, default_value_t = 0.25)]
@@ -295,8 +313,13 @@ impl SettingArgs {
 
 impl MarchArgs {
     fn params(&self) -> MarchParams {
+        self.params_or_epsilon(MarchParams::default().epsilon)
+    }
+
+    /// The parameters, with `epsilon` where --epsilon is not given.
+    fn params_or_epsilon(&self, epsilon: f64) -> MarchParams {
         MarchParams {
-            epsilon: self.epsilon,
+            epsilon: self.epsilon.unwrap_or(epsilon),
             tolerance_px: self.tolerance_px,
             max_steps: self.max_steps,
             relaxation: self.relax,
@@ -345,6 +368,10 @@ fn main() -> ExitCode {
             summary_json,
             artifacts,
             surface_samples,
+            sdf_tolerance_px,
+            sdf_relax,
+            replicate,
+            order_seed,
             scaling,
             counts,
             scaling_res,
@@ -373,7 +400,11 @@ fn main() -> ExitCode {
                             resume,
                             overwrite,
                             overrides: settings.overrides(),
-                            march: march.params(),
+                            march: march.params_or_epsilon(sdfmesh::compare::COMPARE_EPSILON),
+                            sdf_tolerances_px: sdf_tolerance_px,
+                            sdf_relaxations: sdf_relax,
+                            replicate,
+                            order_seed,
                             band_cells: band,
                             summary_json,
                             artifacts,

@@ -1,8 +1,11 @@
-//! Error metrics between a rendering and its reference: image error (RMSE, PSNR, SSIM),
-//! silhouette disagreement (pixels where one representation hits a surface and the other
-//! does not) and geometric error between two surfaces (symmetric Chamfer and Hausdorff
-//! distances over points sampled on each surface, measured with the other surface's exact
-//! distance query, [`crate::geometry::Geometry::surface_distance`]).
+//! Error metrics between a rendering and its reference: image error (RMSE, PSNR, SSIM, and
+//! FLIP, an estimate of the error a viewer sees), silhouette disagreement (pixels where one
+//! representation hits a surface and the other does not), geometric error in pixels (per
+//! pixel, how far apart the two surfaces are in units of the pixel footprint at that depth)
+//! and geometric error between two surfaces (symmetric Chamfer and Hausdorff distances over
+//! points sampled on each surface, measured with the other surface's exact distance query,
+//! [`crate::geometry::Geometry::surface_distance`]). [`QualityLevel`] turns the pixel, the
+//! silhouette and the FLIP error into one grade, `quality_px`.
 //!
 //! Surfaces are sampled where the camera sees them: the first hits of the camera's primary
 //! rays ([`probe`]). This is representation-agnostic (every geometry answers rays), covers
@@ -126,8 +129,16 @@ pub fn ssim(a: &RgbImage, b: &RgbImage) -> f64 {
 pub struct Probe {
     /// Per pixel (row-major), whether the primary ray hits a surface.
     pub hits: Vec<bool>,
-    /// Hit points of the primary rays that hit, world space.
+    /// Hit points of the primary rays that hit, world space, in pixel order (the `i`-th
+    /// point belongs to the `i`-th pixel whose `hits` is true).
     pub points: Vec<DVec3>,
+}
+
+/// The angle one pixel subtends at the image centre, radians: `2 tan(fov_y / 2) / height`
+/// (the same footprint [`crate::plan::Representation::with_pixel_footprint`] gives the
+/// marcher). A pixel seen at distance `t` covers about `t * pixel_angle` scene units.
+pub fn pixel_angle(camera: &Camera) -> f64 {
+    2.0 * ((camera.fov_y_deg as f64).to_radians() * 0.5).tan() / camera.height.max(1) as f64
 }
 
 /// Casts one primary ray per pixel of `camera` into `geometry` (closest hits up to
@@ -159,14 +170,183 @@ pub fn probe(camera: &Camera, geometry: &dyn Geometry, max_distance: f32) -> Pro
     probe
 }
 
-/// Percentage of pixels where exactly one of the two probes hits a surface.
+/// Percentage of pixels where exactly one of the two probes hits a surface (the silhouettes
+/// differ there).
 ///
 /// # Panics
 /// When the probes have different pixel counts.
-pub fn hit_mismatch_pct(a: &Probe, b: &Probe) -> f64 {
+pub fn silhouette_mismatch_pct(a: &Probe, b: &Probe) -> f64 {
     assert_eq!(a.hits.len(), b.hits.len(), "probes of different cameras");
     let n = a.hits.len().max(1) as f64;
     100.0 * a.hits.iter().zip(&b.hits).filter(|(x, y)| x != y).count() as f64 / n
+}
+
+/// Geometric error in pixels over the pixels where both a run and its reference hit a
+/// surface with the primary ray (see [`pixel_error`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelError {
+    /// Mean over those pixels, pixels.
+    pub mean: f64,
+    /// 95th percentile (nearest rank), pixels.
+    pub p95: f64,
+    /// Largest, pixels.
+    pub max: f64,
+    /// Pixels measured (both hit).
+    pub pixels: usize,
+}
+
+/// Geometric error in pixels: for every pixel where the primary rays of both `candidate`
+/// and `reference` hit a surface, the distance between the two surfaces at that pixel over
+/// the pixel footprint at the reference hit's depth (`t * pixel_angle`, `t` the distance from
+/// `origin`, the camera position). `None` when no pixel is hit by both.
+///
+/// The distance at a pixel is `max(reference.surface_distance(c), candidate.surface_distance(r))`
+/// with `c`, `r` the candidate's and the reference's hit points. Each one-sided term alone
+/// misses an error: the first is 0 when the candidate lost a front surface and its ray hits
+/// another part of the reference behind it (`c` lies on the reference); the second is 0 when
+/// the candidate grew a surface in front of the reference one (`r` lies on the candidate, which
+/// still holds it). The maximum is 0 only when each hit lies on the other's surface, and for a
+/// surface displaced by `d` along its normal it is `d` (up to the curvature of the surfaces).
+/// Both distances are exact or upper bounds ([`Geometry::surface_distance`]).
+///
+/// # Panics
+/// When the probes have different pixel counts.
+pub fn pixel_error(
+    candidate: &dyn Geometry,
+    candidate_probe: &Probe,
+    reference: &dyn Geometry,
+    reference_probe: &Probe,
+    origin: DVec3,
+    pixel_angle: f64,
+) -> Option<PixelError> {
+    assert_eq!(candidate_probe.hits.len(), reference_probe.hits.len(), "probes of different cameras");
+    // Pair the hit points of the pixels both hit (points are stored in pixel order).
+    let mut pairs = Vec::new();
+    let (mut ic, mut ir) = (0, 0);
+    for (&hc, &hr) in candidate_probe.hits.iter().zip(&reference_probe.hits) {
+        if hc && hr {
+            pairs.push((candidate_probe.points[ic], reference_probe.points[ir]));
+        }
+        ic += hc as usize;
+        ir += hr as usize;
+    }
+    if pairs.is_empty() {
+        return None;
+    }
+    let mut err: Vec<f64> = pairs
+        .par_iter()
+        .map(|&(c, r)| {
+            let d = reference.surface_distance(c).max(candidate.surface_distance(r));
+            let footprint = ((r - origin).length() * pixel_angle).max(f64::MIN_POSITIVE);
+            d / footprint
+        })
+        .collect();
+    err.sort_by(f64::total_cmp);
+    let n = err.len();
+    Some(PixelError {
+        mean: err.iter().sum::<f64>() / n as f64,
+        p95: err[((0.95 * n as f64).ceil() as usize).clamp(1, n) - 1],
+        max: err[n - 1],
+        pixels: n,
+    })
+}
+
+/// Mean FLIP error (Andersson et al. 2020, NVIDIA's LDR-FLIP through the `nv-flip` crate) of
+/// `test` against `reference`, in [0, 1]: 0 for identical images. Both images are taken as
+/// sRGB; the viewing condition is FLIP's default, [`nv_flip::DEFAULT_PIXELS_PER_DEGREE`]
+/// (about 67 pixels per degree: a 0.7 m wide 3840-pixel monitor seen from 0.7 m), so a pixel
+/// is judged as it would look on a desktop display. 0 for empty images.
+///
+/// # Panics
+/// When the sizes differ.
+pub fn flip_mean(test: &RgbImage, reference: &RgbImage) -> f64 {
+    assert_eq!(test.dimensions(), reference.dimensions(), "images of different sizes");
+    let (w, h) = test.dimensions();
+    if w == 0 || h == 0 {
+        return 0.0;
+    }
+    let r = nv_flip::FlipImageRgb8::with_data(w, h, reference.as_raw());
+    let t = nv_flip::FlipImageRgb8::with_data(w, h, test.as_raw());
+    let map = nv_flip::flip(r, t, nv_flip::DEFAULT_PIXELS_PER_DEGREE).to_vec();
+    map.iter().map(|&v| v as f64).sum::<f64>() / map.len() as f64
+}
+
+/// One grade of `quality_px`: a run meets it when its 95th-percentile pixel error is at most
+/// `px` pixels, at most `max_silhouette_pct` percent of the pixels differ in silhouette, and
+/// its mean FLIP is at most `max_flip_mean`. The bounds are [`QUALITY_LEVELS`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct QualityLevel {
+    /// Largest `px_err_p95`, pixels (the level's name).
+    pub px: f64,
+    /// Largest `silhouette_mismatch_pct`, percent of the image's pixels.
+    pub max_silhouette_pct: f64,
+    /// Largest `flip_mean`.
+    pub max_flip_mean: f64,
+}
+
+/// The quality levels, finest first. The silhouette and FLIP bounds were calibrated on the
+/// bundled scenes at 256x256 pixels (the study's image size) with `--res 16,64`: every
+/// sphere-traced run at 0.25 px that looks like the reference meets 0.5 px or 1 px (FLIP
+/// 0.007-0.047, silhouette <= 0.5%); runs with a visible defect fail every level: grids of
+/// `coursework_mirrors` that lost both thin mirrors (silhouette 23.6%), grids of `showcase`
+/// with a garbled mirror (FLIP 0.12-0.13), `showcase` sphere traced at 1 px with speckles
+/// on edges (FLIP 0.124), a radius-5000 ground sphere tessellated into facets (`thesis_rt`,
+/// p95 16-10^4 px). A tolerance of L pixels fattens silhouettes by up to L pixels, so the
+/// silhouette bound grows with L; its share of the image halves when the image's side
+/// doubles, so at much smaller images the bounds are stricter than intended. Not caught: a
+/// wrong colour on a small part of the image (a CSG part given its parent's material in
+/// `thesis_sdf_csg` meshes and grids, FLIP 0.05).
+pub const QUALITY_LEVELS: [QualityLevel; 3] = [
+    QualityLevel { px: 0.5, max_silhouette_pct: 0.5, max_flip_mean: 0.05 },
+    QualityLevel { px: 1.0, max_silhouette_pct: 1.5, max_flip_mean: 0.08 },
+    QualityLevel { px: 2.0, max_silhouette_pct: 4.0, max_flip_mean: 0.1 },
+];
+
+impl QualityLevel {
+    /// Whether a run with these errors meets this level (`px_err_p95` `None`: no pixel hit by
+    /// both, which meets no level).
+    pub fn met(&self, px_err_p95: Option<f64>, silhouette_mismatch_pct: f64, flip_mean: f64) -> bool {
+        px_err_p95.is_some_and(|p| p <= self.px)
+            && silhouette_mismatch_pct <= self.max_silhouette_pct
+            && flip_mean <= self.max_flip_mean
+    }
+}
+
+/// `quality_px`: the finest of [`QUALITY_LEVELS`] that a run meets (its `px`), or `None`.
+pub fn quality_px(px_err_p95: Option<f64>, silhouette_mismatch_pct: f64, flip_mean: f64) -> Option<f64> {
+    QUALITY_LEVELS.iter().find(|l| l.met(px_err_p95, silhouette_mismatch_pct, flip_mean)).map(|l| l.px)
+}
+
+/// The bounding-box diagonal of the points that lie on bounded objects of `objects` (the
+/// scale of relative surface errors), or `None` when no point does. An object is unbounded
+/// when its `bounds()` is `None` or when its box's diagonal exceeds 100 times the median
+/// diagonal of the objects with bounds (the lower median: with a sphere on a radius-5000
+/// ground sphere, the sphere's); a point lies on an
+/// object when it is inside the object's box grown by 1e-6 of its diagonal (and by the f32
+/// rounding of the point). Infinite planes and ground spheres would otherwise make the scale
+/// the distance to the horizon.
+pub fn bounded_diagonal(objects: &[Box<dyn Geometry>], points: &[DVec3]) -> Option<f64> {
+    let boxes: Vec<(DVec3, DVec3)> =
+        objects.iter().filter_map(|o| o.bounds()).map(|b| (b.min.as_dvec3(), b.max.as_dvec3())).collect();
+    let mut diagonals: Vec<f64> = boxes.iter().map(|(lo, hi)| (*hi - *lo).length()).collect();
+    diagonals.sort_by(f64::total_cmp);
+    // The lower median: with two objects, a sphere and a ground, the sphere's.
+    let limit = 100.0 * diagonals.get(diagonals.len().saturating_sub(1) / 2).copied().unwrap_or(0.0);
+    let bounded: Vec<(DVec3, DVec3)> = boxes
+        .into_iter()
+        .filter(|(lo, hi)| (*hi - *lo).length() <= limit)
+        .map(|(lo, hi)| {
+            let pad = 1e-6 * (hi - lo).length() + 1e-6 * lo.abs().max(hi.abs()).max_element();
+            (lo - DVec3::splat(pad), hi + DVec3::splat(pad))
+        })
+        .collect();
+    let (lo, hi) = points
+        .iter()
+        .filter(|p| bounded.iter().any(|(lo, hi)| p.cmpge(*lo).all() && p.cmple(*hi).all()))
+        .fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(l, h), &p| {
+            (l.min(p), h.max(p))
+        });
+    (lo.x <= hi.x).then(|| (hi - lo).length())
 }
 
 /// Symmetric distances between two surfaces, in scene units.

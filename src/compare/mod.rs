@@ -1,13 +1,16 @@
 //! `toolkit compare`: renders each input in every representation across a resolution
-//! sweep under one camera, lights, materials, image size and depth, and writes one CSV row
-//! per run (schema [`COLUMNS`], version [`SCHEMA_VERSION`], documented in the README): image
-//! and geometric error against the input's reference, frame time (median of K frames after
-//! a warm-up frame, build time separate), bytes, rays per second, steps and nodes per ray.
+//! sweep (and sphere tracing across a sweep of hit tolerances and over-relaxation factors)
+//! under one camera, lights, materials, image size and depth, and writes one CSV row per run
+//! (schema [`COLUMNS`], version [`SCHEMA_VERSION`], documented in the README): image error
+//! (RMSE, PSNR, SSIM, FLIP), silhouette mismatch, geometric error in pixels and relative to
+//! the visible bounded objects, all against the input's reference, the quality level met
+//! ([`crate::metrics::QUALITY_LEVELS`]), frame time (median of K frames after a warm-up
+//! frame, build time separate), bytes, rays per second, steps and nodes per ray.
 //!
 //! Rows are appended and flushed as each run finishes, so an interrupted run keeps every
-//! finished row and `--resume` skips them. [`summary`] answers, per input and error
-//! threshold, which representation is fastest and which is smallest; [`scaling`] is the
-//! coursework's frame time against primitive count experiment.
+//! finished row and `--resume` skips them (matched by [`RowKey`]). [`summary`] answers, per
+//! input and quality level, which representation is fastest and which is smallest;
+//! [`scaling`] is the coursework's frame time against primitive count experiment.
 
 pub mod hard;
 pub mod scaling;
@@ -36,22 +39,26 @@ use crate::mesh::{TriangleMesh, save_mesh};
 use crate::metrics::{self, Probe};
 use crate::plan::budget::{MemoryBudget, reextract_bytes, scene_bytes};
 use crate::plan::{
-    Fallback, GridFill, GridStorage, MeshMethod, ObjectPlan, Representation, build_scene_with_plans,
-    reextract_mesh,
+    Build as PlanBuild, Fallback, GridFill, GridStorage, MeshMethod, ObjectPlan, Representation,
+    build_scene_with_plans, reextract_mesh,
 };
 use crate::render::{Frame, render, write_png};
 use crate::scene::Scene;
 use crate::scene::shape::{ObjectKind, Shading};
 
 /// Version of the CSV schema; bumped whenever a column changes meaning or order.
-pub const SCHEMA_VERSION: u32 = 1;
+pub const SCHEMA_VERSION: u32 = 2;
 
 /// The CSV columns, in order (units in the names; see the README).
-pub const COLUMNS: [&str; 34] = [
+pub const COLUMNS: [&str; 43] = [
     "input",
+    "class",
+    "replicate",
     "repr",
     "method",
     "resolution",
+    "tolerance_px",
+    "relaxation",
     "reference",
     "triangles",
     "grid_cells_stored",
@@ -69,7 +76,12 @@ pub const COLUMNS: [&str; 34] = [
     "image_rmse",
     "image_psnr_db",
     "image_ssim",
-    "hit_mismatch_pct",
+    "flip_mean",
+    "silhouette_mismatch_pct",
+    "px_err_mean",
+    "px_err_p95",
+    "px_err_max",
+    "quality_px",
     "chamfer_rel",
     "hausdorff_rel",
     "peak_rss_bytes",
@@ -87,14 +99,25 @@ pub const COLUMNS: [&str; 34] = [
 /// One CSV row. Field order is [`COLUMNS`]; `None` is an empty cell (not applicable).
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Row {
-    /// Input name: the scene or mesh file's stem.
+    /// Input name: the scene or mesh file's stem (unique among the inputs).
     pub input: String,
+    /// Kind of input ([`input_class`]): the scene's folder under `data/scenes` (`scenes`
+    /// for a scene directly in it), `scan` for a mesh file.
+    pub class: String,
+    /// Replicate number (`--replicate`): which repetition of the whole experiment.
+    pub replicate: u32,
     /// `analytic`, `sdf`, `mesh` or `grid`.
     pub repr: String,
     /// How the representation was made (see the README's schema).
     pub method: String,
     /// Cells along the longest axis (grids, extraction) or segments (parametric meshes).
     pub resolution: Option<u32>,
+    /// The largest hit tolerance of the run's sphere tracing, pixels
+    /// ([`MarchParams::tolerance_px`]); empty when the run marches nothing.
+    pub tolerance_px: Option<f64>,
+    /// The over-relaxation factor of the run's sphere tracing ([`MarchParams::relaxation`],
+    /// 1 = plain); empty when the run marches nothing.
+    pub relaxation: Option<f64>,
     /// `repr/method` of the reference row.
     pub reference: String,
     /// Triangles stored.
@@ -129,10 +152,24 @@ pub struct Row {
     pub image_psnr_db: f64,
     /// SSIM against the reference image.
     pub image_ssim: f64,
-    /// Pixels where exactly one of this run and the reference hits a surface, percent.
-    pub hit_mismatch_pct: f64,
+    /// Mean FLIP error against the reference image ([`metrics::flip_mean`]), [0, 1].
+    pub flip_mean: f64,
+    /// Pixels where exactly one of this run and the reference hits a surface with the
+    /// primary ray, percent of all pixels.
+    pub silhouette_mismatch_pct: f64,
+    /// Mean geometric error in pixels over the pixels both hit ([`metrics::pixel_error`]);
+    /// empty when no pixel is hit by both.
+    pub px_err_mean: Option<f64>,
+    /// 95th percentile of the same, pixels.
+    pub px_err_p95: Option<f64>,
+    /// Largest of the same, pixels.
+    pub px_err_max: Option<f64>,
+    /// The finest quality level met ([`metrics::quality_px`]: 0.5, 1 or 2 pixels); empty
+    /// when none is.
+    pub quality_px: Option<f64>,
     /// Chamfer distance to the reference surface over the bounding-box diagonal of what the
-    /// camera sees of it; empty when nothing is visible.
+    /// camera sees of the reference's bounded objects ([`metrics::bounded_diagonal`]); empty
+    /// when no bounded object is visible.
     pub chamfer_rel: Option<f64>,
     /// Hausdorff distance likewise.
     pub hausdorff_rel: Option<f64>,
@@ -162,12 +199,42 @@ pub struct Row {
 impl Row {
     /// The key that `--resume` matches rows by.
     pub fn key(&self) -> RowKey {
-        (self.input.clone(), self.repr.clone(), self.method.clone(), self.resolution)
+        RowKey {
+            input: self.input.clone(),
+            replicate: self.replicate,
+            repr: self.repr.clone(),
+            method: self.method.clone(),
+            resolution: self.resolution,
+            knob: self.tolerance_px.zip(self.relaxation).map(|(t, r)| (t.to_bits(), r.to_bits())),
+        }
     }
 }
 
-/// What identifies a run: input, repr, method, resolution.
-pub type RowKey = (String, String, String, Option<u32>);
+/// What identifies a run: input, replicate, repr, method, resolution and the march knob.
+#[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct RowKey {
+    /// Input name.
+    pub input: String,
+    /// Replicate number.
+    pub replicate: u32,
+    /// `repr` column.
+    pub repr: String,
+    /// `method` column.
+    pub method: String,
+    /// `resolution` column.
+    pub resolution: Option<u32>,
+    /// Bits of `tolerance_px` and `relaxation`; `None` for a run that marches nothing.
+    pub knob: Option<(u64, u64)>,
+}
+
+impl RowKey {
+    /// Whether a planned run with this key (knob as asked) is among `done`: a finished row
+    /// has this key, or the same key without a knob (the run turned out to march nothing, so
+    /// its knob changes nothing).
+    pub fn is_done(&self, done: &HashSet<RowKey>) -> bool {
+        done.contains(self) || done.contains(&RowKey { knob: None, ..self.clone() })
+    }
+}
 
 /// Options of `toolkit compare`.
 #[derive(Clone, Debug)]
@@ -186,8 +253,19 @@ pub struct CompareOptions {
     pub overwrite: bool,
     /// Image size and depth overrides (the same for every run of an input).
     pub overrides: Overrides,
-    /// Sphere tracing parameters.
+    /// Sphere tracing parameters of the grid and mesh runs (and the defaults of the others:
+    /// the reference and the SDF sweep change only `tolerance_px` and `relaxation`).
     pub march: MarchParams,
+    /// The SDF sweep's hit tolerances, pixels: one `sdf/sphere-trace` run per pair of these
+    /// and `sdf_relaxations`.
+    pub sdf_tolerances_px: Vec<f64>,
+    /// The SDF sweep's over-relaxation factors.
+    pub sdf_relaxations: Vec<f64>,
+    /// Written to every row's `replicate` column (and part of the resume key).
+    pub replicate: u32,
+    /// Shuffle each input's runs after the reference with this seed ([`run_order`]);
+    /// `None`: the planned order.
+    pub order_seed: Option<u64>,
     /// Half-width of narrow-band grids, cells.
     pub band_cells: u32,
     /// Also write the summary as JSON here.
@@ -202,18 +280,46 @@ pub struct CompareOptions {
     pub budget: MemoryBudget,
 }
 
-/// The default inputs: every scene in `data/scenes` (sorted) and the Stanford bunny from
-/// `../shared/meshes` where it exists, relative to the working directory.
+/// The default hit tolerances of the SDF sweep, pixels.
+pub const DEFAULT_SDF_TOLERANCES_PX: [f64; 3] = [0.25, 1.0, 2.0];
+
+/// The default over-relaxation factors of the SDF sweep.
+pub const DEFAULT_SDF_RELAXATIONS: [f64; 2] = [1.0, 1.6];
+
+/// The reference's hit tolerance, pixels (or the sweep's smallest, if that is smaller), so
+/// that the reference marches (CSG, repetition) finer than every run.
+pub const REFERENCE_TOLERANCE_PX: f64 = 0.05;
+
+/// `MarchParams::epsilon` of every compare run unless `--epsilon` says otherwise: large
+/// enough that the hit tolerance `min(epsilon, tolerance_px * pixel_footprint) * t` is
+/// `tolerance_px` pixels for any camera (the pixel term exceeds 0.5 only for a footprint
+/// over 0.5 / tolerance_px radians), so `tolerance_px` alone is the knob. With `render`'s
+/// 1e-4 the relative cap binds first at usual image sizes (0.25 px of a 45-degree, 128-pixel
+/// camera is 1.6e-3) and the sweep would change nothing.
+pub const COMPARE_EPSILON: f64 = 0.5;
+
+/// The default inputs: every scene under `data/scenes`, searched recursively (sorted by
+/// path), and the Stanford bunny from `../shared/meshes` where it exists, relative to the
+/// working directory.
 ///
 /// # Errors
-/// When `data/scenes` cannot be read.
+/// When `data/scenes` or a folder in it cannot be read.
 pub fn default_inputs() -> Result<Vec<PathBuf>> {
-    let dir = Path::new("data/scenes");
-    let mut inputs: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(|e| Error::io(dir, format!("{e} (run from the repository root or name the inputs)")))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-        .collect();
+    fn collect(dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
+        let entries = std::fs::read_dir(dir)
+            .map_err(|e| Error::io(dir, format!("{e} (run from the repository root or name the inputs)")))?;
+        for entry in entries {
+            let path = entry.map_err(|e| Error::io(dir, e))?.path();
+            if path.is_dir() {
+                collect(&path, out)?;
+            } else if path.extension().is_some_and(|e| e == "toml") {
+                out.push(path);
+            }
+        }
+        Ok(())
+    }
+    let mut inputs = Vec::new();
+    collect(Path::new("data/scenes"), &mut inputs)?;
     inputs.sort();
     let bunny = Path::new("../shared/meshes/stanford-bunny.obj");
     if bunny.exists() {
@@ -270,6 +376,50 @@ impl fmt::Display for RunRepr {
     }
 }
 
+/// The `class` column of an input: for a scene file under a `data/scenes` folder, its
+/// folder relative to `data/scenes` (`data/scenes/blend/metaballs_16.toml` -> `blend`;
+/// `scenes` for a file directly in `data/scenes`); `scan` for a mesh file (any extension but
+/// `.toml`); otherwise the name of the file's folder (`scenes` when it has none).
+pub fn input_class(path: &Path) -> String {
+    if path.extension().is_none_or(|e| e != "toml") {
+        return "scan".into();
+    }
+    let parent = path.parent().unwrap_or(Path::new(""));
+    let parts: Vec<String> =
+        parent.components().map(|c| c.as_os_str().to_string_lossy().into_owned()).collect();
+    if let Some(i) = parts.windows(2).rposition(|w| w[0] == "data" && w[1] == "scenes") {
+        let rest = &parts[i + 2..];
+        return if rest.is_empty() { "scenes".into() } else { rest.join("/") };
+    }
+    parts.last().filter(|p| !p.is_empty() && *p != ".").cloned().unwrap_or_else(|| "scenes".into())
+}
+
+/// The order in which the `n` runs of input `input` are run: the reference (0) first, the
+/// rest in plan order without a seed, or shuffled (Fisher-Yates on a SplitMix64 stream seeded
+/// by `seed` and the input's name, so inputs get different orders) with one. Deterministic:
+/// the same seed gives the same order in every process.
+pub fn run_order(n: usize, seed: Option<u64>, input: &str) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..n).collect();
+    let Some(seed) = seed else { return order };
+    // FNV-1a of the name, mixed into the seed.
+    let name =
+        input.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3));
+    let mut state = seed ^ name.rotate_left(17);
+    let mut next = || {
+        state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    };
+    for i in (2..n).rev() {
+        // Positions 1..=i; the modulo bias (under 2^-50 here) is immaterial.
+        let j = 1 + (next() % i as u64) as usize;
+        order.swap(i, j);
+    }
+    order
+}
+
 /// One planned run.
 #[derive(Clone, Debug)]
 struct Run {
@@ -277,6 +427,17 @@ struct Run {
     method: &'static str,
     resolution: Option<u32>,
     build: Build,
+}
+
+impl Run {
+    /// The march knob asked for: `(tolerance_px, relaxation)`; `None` for re-extracted
+    /// meshes, which march nothing.
+    fn knob(&self) -> Option<(f64, f64)> {
+        match self.build {
+            Build::Scene(r) => Some((r.march().tolerance_px, r.march().relaxation)),
+            Build::Reextract { .. } => None,
+        }
+    }
 }
 
 fn mesh_input(scene: &Scene) -> Option<&Arc<TriangleMesh>> {
@@ -292,6 +453,8 @@ fn mesh_input(scene: &Scene) -> Option<&Arc<TriangleMesh>> {
 /// The runs for one input: the reference first.
 fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
     let march = opts.march;
+    let finest = opts.sdf_tolerances_px.iter().copied().fold(REFERENCE_TOLERANCE_PX, f64::min);
+    let reference_march = MarchParams { tolerance_px: finest, relaxation: 1.0, ..march };
     let band = GridStorage::Band { cells: opts.band_cells };
     let grid =
         |resolution, fill, storage| Build::Scene(Representation::Grid { resolution, fill, storage, march });
@@ -301,7 +464,7 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
             repr: RunRepr::Mesh,
             method: "original",
             resolution: None,
-            build: Build::Scene(Representation::Analytic { march }),
+            build: Build::Scene(Representation::Analytic { march: reference_march }),
         });
         for &r in &opts.resolutions {
             let res = Some(r);
@@ -341,14 +504,20 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
             repr: RunRepr::Analytic,
             method: "closed-form",
             resolution: None,
-            build: Build::Scene(Representation::Analytic { march }),
+            build: Build::Scene(Representation::Analytic { march: reference_march }),
         });
-        runs.push(Run {
-            repr: RunRepr::Sdf,
-            method: "sphere-trace",
-            resolution: None,
-            build: Build::Scene(Representation::Sdf { march }),
-        });
+        for &tolerance_px in &opts.sdf_tolerances_px {
+            for &relaxation in &opts.sdf_relaxations {
+                runs.push(Run {
+                    repr: RunRepr::Sdf,
+                    method: "sphere-trace",
+                    resolution: None,
+                    build: Build::Scene(Representation::Sdf {
+                        march: MarchParams { tolerance_px, relaxation, ..march },
+                    }),
+                });
+            }
+        }
         for &r in &opts.resolutions {
             let res = Some(r);
             let mesh = |method| {
@@ -479,8 +648,12 @@ pub(crate) fn time_frames(scene: &Scene, geometry: &dyn Geometry, frames: u32) -
 struct Reference {
     name: String,
     image: RgbImage,
+    /// Every primary ray's hit.
     probe: Probe,
+    /// A subsample of the hit points for the Chamfer and Hausdorff distances.
     points: Vec<DVec3>,
+    /// The bounding-box diagonal of the visible bounded objects ([`metrics::bounded_diagonal`]).
+    diagonal: Option<f64>,
     geometry: SceneGeometry,
 }
 
@@ -650,30 +823,63 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
     if opts.band_cells == 0 {
         return Err(Error::Usage("--band must be at least 1 cell".into()));
     }
+    if opts.sdf_tolerances_px.is_empty() || opts.sdf_relaxations.is_empty() {
+        return Err(Error::Usage("--sdf-tolerance-px and --sdf-relax need at least one value each".into()));
+    }
+    for &tolerance_px in &opts.sdf_tolerances_px {
+        for &relaxation in &opts.sdf_relaxations {
+            check_repr(&Representation::Sdf {
+                march: MarchParams { tolerance_px, relaxation, ..opts.march },
+            })
+            .map_err(|e| Error::Usage(format!("--sdf-tolerance-px/--sdf-relax: {e}")))?;
+        }
+    }
     let mut opts = opts.clone();
     opts.resolutions.sort_unstable();
     opts.resolutions.dedup();
     let opts = &opts;
     // Load every input first: a bad file fails before any run.
-    let mut inputs = Vec::new();
-    for path in &opts.inputs {
+    let mut inputs: Vec<(String, String, Scene)> = Vec::new();
+    for (i, path) in opts.inputs.iter().enumerate() {
+        let name = stem(path);
+        if let Some(other) = opts.inputs[..i].iter().find(|p| stem(p) == name) {
+            return Err(Error::Usage(format!(
+                "{} and {} share the name `{name}` (the input column); rename one",
+                other.display(),
+                path.display()
+            )));
+        }
         let mut scene = load_scene_or_mesh(path, Shading::Smooth)?;
         opts.overrides.apply(&mut scene)?;
-        inputs.push((stem(path), scene));
+        inputs.push((name, input_class(path), scene));
     }
     if let Some(dir) = &opts.artifacts {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     }
     let (mut file, mut rows) = open_csv(opts)?;
     let done: HashSet<RowKey> = rows.iter().map(Row::key).collect();
-    let plans: Vec<Vec<Run>> = inputs.iter().map(|(_, s)| plan(s, opts)).collect();
+    let plans: Vec<Vec<Run>> = inputs
+        .iter()
+        .map(|(name, _, s)| {
+            let runs = plan(s, opts);
+            run_order(runs.len(), opts.order_seed, name).into_iter().map(|i| runs[i].clone()).collect()
+        })
+        .collect();
     let total: usize = plans.iter().map(Vec::len).sum();
     let bar = progress_bar(total as u64, opts.progress);
     let commit = commit_id();
-    for ((name, scene), runs) in inputs.iter().zip(&plans) {
+    for ((name, class, scene), runs) in inputs.iter().zip(&plans) {
         let mut reference: Option<Reference> = None;
         for run in runs {
-            let key = (name.clone(), run.repr.to_string(), run.method.to_string(), run.resolution);
+            let key = RowKey {
+                input: name.clone(),
+                replicate: opts.replicate,
+                repr: run.repr.to_string(),
+                method: run.method.to_string(),
+                resolution: run.resolution,
+                knob: run.knob().map(|(t, r)| (t.to_bits(), r.to_bits())),
+            };
+            let done_already = key.is_done(&done);
             let is_reference = reference.is_none();
             bar.set_message(format!(
                 "{name} {}/{} {}",
@@ -681,11 +887,11 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
                 run.method,
                 run.resolution.map_or(String::new(), |r| r.to_string())
             ));
-            if done.contains(&key) && !is_reference {
+            if done_already && !is_reference {
                 bar.inc(1);
                 continue;
             }
-            let row = match measure(name, scene, run, opts, &commit, &mut reference) {
+            let row = match measure((name, class), scene, run, opts, &commit, &mut reference) {
                 Ok(row) => row,
                 // Without its reference an input cannot be measured at all.
                 Err(e) if is_reference => return Err(e),
@@ -695,7 +901,7 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
                     continue;
                 }
             };
-            if !done.contains(&key) {
+            if !done_already {
                 write_row(&mut file, &opts.csv, &row)?;
                 rows.push(row);
             }
@@ -725,46 +931,82 @@ fn progress_bar(total: u64, show: bool) -> indicatif::ProgressBar {
     bar
 }
 
+/// Whether any object of a built run is ray marched (sphere traced or a grid).
+fn marches(plans: &[ObjectPlan]) -> bool {
+    plans.iter().any(|p| {
+        matches!(
+            p.build,
+            PlanBuild::Marched { .. } | PlanBuild::Grid { .. } | PlanBuild::GridFileMarched { .. }
+        )
+    })
+}
+
 /// Builds, times and measures one run (and keeps the reference's images and samples when
-/// it is the first run of the input).
+/// it is the first run of the input). `input` is the input's name and class.
 fn measure(
-    name: &str,
+    input: (&str, &str),
     scene: &Scene,
     run: &Run,
     opts: &CompareOptions,
     commit: &str,
     reference: &mut Option<Reference>,
 ) -> Result<Row> {
+    let (name, class) = input;
     reset_peak_rss();
     let built = build(scene, run.build, &opts.budget)?;
     let (timing, frame) = time_frames(scene, &built.geometry, opts.frames);
     let peak = peak_rss_bytes();
     let probe = metrics::probe(&scene.camera, &built.geometry, scene.settings.max_distance);
     let points = metrics::subsample(&probe.points, opts.surface_samples);
+    let origin = scene.camera.position.as_dvec3();
+    let angle = metrics::pixel_angle(&scene.camera);
     let label = format!("{}/{}", run.repr, run.method);
-    let r = reference.get_or_insert_with(|| Reference {
-        name: label.clone(),
-        image: frame.image.clone(),
-        probe: Probe { hits: probe.hits.clone(), points: Vec::new() },
-        points: points.clone(),
-        geometry: SceneGeometry::new(Vec::new()),
-    });
-    let is_reference = r.name == label && run.resolution.is_none();
-    let (chamfer, hausdorff) = if is_reference {
-        (Some(0.0), Some(0.0))
-    } else {
-        match metrics::surface_distance(&built.geometry, &points, &r.geometry, &r.points) {
-            Some(d) => (Some(d.chamfer_rel()), Some(d.hausdorff_rel())),
-            None => (None, None),
-        }
+    let is_reference = reference.is_none();
+    let r = match reference {
+        Some(r) => r,
+        None => reference.insert(Reference {
+            name: label.clone(),
+            image: frame.image.clone(),
+            diagonal: metrics::bounded_diagonal(built.geometry.objects(), &probe.points),
+            probe: Probe { hits: probe.hits.clone(), points: probe.points.clone() },
+            points: points.clone(),
+            geometry: SceneGeometry::new(Vec::new()),
+        }),
     };
+    // The reference is measured against itself (its geometry is kept only after this run).
+    let reference_geometry: &dyn Geometry = if is_reference { &built.geometry } else { &r.geometry };
+    let px = metrics::pixel_error(&built.geometry, &probe, reference_geometry, &r.probe, origin, angle);
+    let (chamfer, hausdorff) = match r.diagonal {
+        None => (None, None),
+        Some(_) if is_reference => (Some(0.0), Some(0.0)),
+        Some(diagonal) => match metrics::surface_distance(&built.geometry, &points, &r.geometry, &r.points) {
+            Some(d) => {
+                let scale = diagonal.max(f64::MIN_POSITIVE);
+                (Some(d.chamfer / scale), Some(d.hausdorff / scale))
+            }
+            None => (None, None),
+        },
+    };
+    let silhouette = metrics::silhouette_mismatch_pct(&probe, &r.probe);
+    let flip = metrics::flip_mean(&frame.image, &r.image);
+    let px_p95 = px.map(|p| p.p95);
+    let quality = if is_reference {
+        Some(metrics::QUALITY_LEVELS[0].px)
+    } else {
+        metrics::quality_px(px_p95, silhouette, flip)
+    };
+    let knob = run.knob().filter(|_| marches(&built.plans));
     let census = built.geometry.census();
     let total = built.geometry.bytes_used() as u64;
     let row = Row {
         input: name.to_string(),
+        class: class.to_string(),
+        replicate: opts.replicate,
         repr: run.repr.to_string(),
         method: run.method.to_string(),
         resolution: run.resolution,
+        tolerance_px: knob.map(|k| k.0),
+        relaxation: knob.map(|k| k.1),
         reference: r.name.clone(),
         triangles: census.triangles,
         grid_cells_stored: census.grid_samples,
@@ -782,7 +1024,12 @@ fn measure(
         image_rmse: metrics::rmse(&frame.image, &r.image),
         image_psnr_db: metrics::psnr_db(&frame.image, &r.image),
         image_ssim: metrics::ssim(&frame.image, &r.image),
-        hit_mismatch_pct: metrics::hit_mismatch_pct(&probe, &r.probe),
+        flip_mean: flip,
+        silhouette_mismatch_pct: silhouette,
+        px_err_mean: px.map(|p| p.mean),
+        px_err_p95: px_p95,
+        px_err_max: px.map(|p| p.max),
+        quality_px: quality,
         chamfer_rel: chamfer,
         hausdorff_rel: hausdorff,
         peak_rss_bytes: peak,
@@ -814,10 +1061,14 @@ fn save_artifacts(
     is_reference: bool,
 ) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    let base = match run.resolution {
+    let mut base = match run.resolution {
         Some(r) => format!("{}-{}-{r}", run.repr, run.method),
         None => format!("{}-{}", run.repr, run.method),
     };
+    // The SDF sweep's runs differ only in their knob.
+    if let (RunRepr::Sdf, Some((t, r))) = (run.repr, run.knob()) {
+        base = format!("{base}-tol{t}-relax{r}");
+    }
     write_png(image, &dir.join(format!("{base}.png")))?;
     if is_reference && let Some(mesh) = mesh_input(scene) {
         save_mesh(mesh, &dir.join("reference.ply"))?;

@@ -1,7 +1,10 @@
-//! The compare summary: per input and geometric-error threshold, the fastest and the
-//! smallest run that meets it, the time and memory ratio of the best ray-marched run (SDF
-//! or grid) to the best mesh run, and the resolutions at which the fastest representation
-//! changes.
+//! The compare summary: per input and quality level ([`crate::metrics::QUALITY_LEVELS`]:
+//! 0.5, 1 and 2 pixels of geometric error with their silhouette and FLIP bounds), the fastest
+//! and the smallest run that meets it (`quality_px <= level`), the time and memory ratio of
+//! the best ray-marched run (SDF or grid) to the best mesh run, and the resolutions at which
+//! the fastest representation changes. Rows of several replicates of a run (same input,
+//! repr, method, resolution, tolerance and relaxation) count as one run: its median frame
+//! time over the replicates and its worst quality.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -9,9 +12,7 @@ use std::fmt::Write as _;
 use serde::Serialize;
 
 use super::{Row, RunRepr};
-
-/// Thresholds on `chamfer_rel` the summary reports.
-pub const THRESHOLDS: [f64; 3] = [1e-2, 3e-3, 1e-3];
+use crate::metrics::{QUALITY_LEVELS, median};
 
 /// A run named in the summary.
 #[derive(Clone, Debug, Serialize, PartialEq)]
@@ -20,30 +21,42 @@ pub struct Pick {
     pub run: String,
     /// Resolution, if the run has one.
     pub resolution: Option<u32>,
-    /// Median frame time, ms.
+    /// Hit tolerance of its sphere tracing, pixels, if it marches.
+    pub tolerance_px: Option<f64>,
+    /// Over-relaxation of its sphere tracing, if it marches.
+    pub relaxation: Option<f64>,
+    /// Median frame time, ms (the median over replicates of each replicate's median).
     pub frame_ms_median: f64,
     /// Total bytes.
     pub total_bytes: u64,
-    /// Relative Chamfer distance.
-    pub chamfer_rel: f64,
+    /// The finest quality level met (the worst over replicates), pixels; `None`: none.
+    pub quality_px: Option<f64>,
+    /// 95th percentile of the geometric error, pixels (the worst over replicates).
+    pub px_err_p95: Option<f64>,
+    /// Mean FLIP (the worst over replicates).
+    pub flip_mean: f64,
 }
 
-/// The answer at one error threshold.
+/// The answer at one quality level.
 #[derive(Clone, Debug, Serialize, PartialEq)]
-pub struct AtThreshold {
-    /// Largest `chamfer_rel` accepted.
-    pub max_chamfer_rel: f64,
-    /// The fastest run within it.
+pub struct AtLevel {
+    /// The level: largest `px_err_p95`, pixels; runs with `quality_px <= quality_px` meet it.
+    pub quality_px: f64,
+    /// The level's largest `silhouette_mismatch_pct`.
+    pub max_silhouette_pct: f64,
+    /// The level's largest `flip_mean`.
+    pub max_flip_mean: f64,
+    /// The fastest run that meets it.
     pub fastest: Option<Pick>,
-    /// The smallest run within it.
+    /// The smallest run that meets it.
     pub smallest: Option<Pick>,
-    /// The fastest ray-marched run (`sdf` or `grid`) within it.
+    /// The fastest ray-marched run (`sdf` or `grid`) that meets it.
     pub best_marched: Option<Pick>,
-    /// The fastest mesh run within it.
+    /// The fastest mesh run that meets it.
     pub best_mesh: Option<Pick>,
     /// `best_marched` frame time over `best_mesh` frame time (< 1: marching is faster).
     pub marched_over_mesh_time: Option<f64>,
-    /// Bytes of the smallest marched run over the smallest mesh run within the threshold.
+    /// Bytes of the smallest marched run over the smallest mesh run that meet it.
     pub marched_over_mesh_bytes: Option<f64>,
 }
 
@@ -63,8 +76,10 @@ pub struct InputSummary {
     pub input: String,
     /// The reference run.
     pub reference: String,
-    /// Per threshold.
-    pub thresholds: Vec<AtThreshold>,
+    /// Distinct replicates among the input's rows.
+    pub replicates: usize,
+    /// Per quality level, finest first.
+    pub levels: Vec<AtLevel>,
     /// Fastest run per resolution of the sweep.
     pub winners: Vec<Winner>,
     /// Resolutions at which the fastest run changes from the one at the previous resolution.
@@ -84,9 +99,13 @@ fn pick(r: &Row) -> Pick {
     Pick {
         run: format!("{}/{}", r.repr, r.method),
         resolution: r.resolution,
+        tolerance_px: r.tolerance_px,
+        relaxation: r.relaxation,
         frame_ms_median: r.frame_ms_median,
         total_bytes: r.total_bytes,
-        chamfer_rel: r.chamfer_rel.unwrap_or(f64::NAN),
+        quality_px: r.quality_px,
+        px_err_p95: r.px_err_p95,
+        flip_mean: r.flip_mean,
     }
 }
 
@@ -98,7 +117,37 @@ fn is_marched(r: &Row) -> bool {
     r.repr == RunRepr::Sdf.as_str() || r.repr == RunRepr::Grid.as_str()
 }
 
-/// Summarises rows (any order; several inputs).
+/// One row per run of an input: replicates merged (median frame time, worst errors and
+/// quality), in first-seen order.
+fn merge_replicates(rows: &[&Row]) -> Vec<Row> {
+    let mut order = Vec::new();
+    let mut groups: BTreeMap<_, Vec<&Row>> = BTreeMap::new();
+    for r in rows {
+        let key = super::RowKey { replicate: 0, ..r.key() };
+        if !groups.contains_key(&key) {
+            order.push(key.clone());
+        }
+        groups.entry(key).or_default().push(r);
+    }
+    order
+        .iter()
+        .map(|k| {
+            let g = &groups[k];
+            let mut m = g[0].clone();
+            let times: Vec<f64> = g.iter().map(|r| r.frame_ms_median).collect();
+            m.frame_ms_median = median(&times);
+            let worst = |f: fn(&Row) -> Option<f64>| -> Option<f64> {
+                g.iter().map(|r| f(r)).try_fold(0.0f64, |acc, v| v.map(|v| acc.max(v)))
+            };
+            m.quality_px = worst(|r| r.quality_px);
+            m.px_err_p95 = worst(|r| r.px_err_p95);
+            m.flip_mean = g.iter().map(|r| r.flip_mean).fold(0.0, f64::max);
+            m
+        })
+        .collect()
+}
+
+/// Summarises rows (any order; several inputs and replicates).
 pub fn summarize(rows: &[Row]) -> Summary {
     let mut order: Vec<String> = Vec::new();
     let mut by_input: BTreeMap<String, Vec<&Row>> = BTreeMap::new();
@@ -111,11 +160,17 @@ pub fn summarize(rows: &[Row]) -> Summary {
     let inputs = order
         .iter()
         .map(|name| {
-            let rows = &by_input[name];
-            let thresholds = THRESHOLDS
+            let mut replicates: Vec<u32> = by_input[name].iter().map(|r| r.replicate).collect();
+            replicates.sort_unstable();
+            replicates.dedup();
+            let merged = merge_replicates(&by_input[name]);
+            let rows: Vec<&Row> = merged.iter().collect();
+            let rows = &rows;
+            let levels = QUALITY_LEVELS
                 .iter()
-                .map(|&t| {
-                    let ok = || rows.iter().copied().filter(move |r| r.chamfer_rel.is_some_and(|c| c <= t));
+                .map(|level| {
+                    let l = level.px;
+                    let ok = || rows.iter().copied().filter(move |r| r.quality_px.is_some_and(|q| q <= l));
                     let time = |r: &Row| r.frame_ms_median;
                     let bytes = |r: &Row| r.total_bytes as f64;
                     let fastest = min_by(ok(), time);
@@ -124,8 +179,10 @@ pub fn summarize(rows: &[Row]) -> Summary {
                     let best_mesh = min_by(ok().filter(|r| r.repr == RunRepr::Mesh.as_str()), time);
                     let small_marched = min_by(ok().filter(|r| is_marched(r)), bytes);
                     let small_mesh = min_by(ok().filter(|r| r.repr == RunRepr::Mesh.as_str()), bytes);
-                    AtThreshold {
-                        max_chamfer_rel: t,
+                    AtLevel {
+                        quality_px: l,
+                        max_silhouette_pct: level.max_silhouette_pct,
+                        max_flip_mean: level.max_flip_mean,
                         fastest: fastest.map(pick),
                         smallest: smallest.map(pick),
                         marched_over_mesh_time: best_marched
@@ -157,7 +214,8 @@ pub fn summarize(rows: &[Row]) -> Summary {
             InputSummary {
                 input: name.clone(),
                 reference: rows.first().map(|r| r.reference.clone()).unwrap_or_default(),
-                thresholds,
+                replicates: replicates.len(),
+                levels,
                 winners,
                 crossovers,
             }
@@ -170,7 +228,11 @@ fn describe(p: &Option<Pick>) -> String {
     match p {
         Some(p) => {
             let res = p.resolution.map_or(String::new(), |r| format!(" @{r}"));
-            format!("{}{res} ({:.1} ms, {} bytes)", p.run, p.frame_ms_median, p.total_bytes)
+            let knob = match (p.tolerance_px, p.relaxation) {
+                (Some(t), Some(r)) if p.resolution.is_none() => format!(" tol {t} px relax {r}"),
+                _ => String::new(),
+            };
+            format!("{}{res}{knob} ({:.1} ms, {} bytes)", p.run, p.frame_ms_median, p.total_bytes)
         }
         None => "none".into(),
     }
@@ -180,12 +242,15 @@ fn describe(p: &Option<Pick>) -> String {
 pub fn to_text(s: &Summary) -> String {
     let mut t = String::new();
     for i in &s.inputs {
-        let _ = writeln!(t, "{} (reference {}):", i.input, i.reference);
-        for th in &i.thresholds {
+        let reps = if i.replicates > 1 { format!(", {} replicates", i.replicates) } else { String::new() };
+        let _ = writeln!(t, "{} (reference {}{reps}):", i.input, i.reference);
+        for th in &i.levels {
             let _ = writeln!(
                 t,
-                "  chamfer_rel <= {:.0e}: fastest {}; smallest {}",
-                th.max_chamfer_rel,
+                "  quality {} px (silhouette <= {}%, FLIP <= {}): fastest {}; smallest {}",
+                th.quality_px,
+                th.max_silhouette_pct,
+                th.max_flip_mean,
                 describe(&th.fastest),
                 describe(&th.smallest)
             );

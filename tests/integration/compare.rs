@@ -1,6 +1,8 @@
-//! `toolkit compare`: the CSV header is the documented schema, reruns give the same
-//! non-timing columns, surface distances are right on concentric spheres, an interrupted
-//! run keeps its rows and `--resume` completes it without duplicates, and the scaling
+//! `toolkit compare`: the CSV header is the documented schema and rows round-trip through
+//! it, reruns give the same non-timing columns, surface distances are right on concentric
+//! spheres, an interrupted run keeps its rows and `--resume` completes it without duplicates
+//! (keyed by replicate and march tolerance too), `--order-seed` shuffles the runs after the
+//! reference deterministically, two inputs of one name are refused, and the scaling
 //! experiment writes its rows.
 
 use std::path::Path;
@@ -95,10 +97,45 @@ fn csv_header_is_the_documented_schema() {
     ] {
         assert!(kinds.iter().any(|x| x == k), "{k} missing from {kinds:?}");
     }
-    assert_eq!(rows.len(), 2 + 4 * 2);
+    // The reference, 3 x 2 SDF sweep runs and 4 runs per resolution.
+    assert_eq!(rows.len(), 1 + 6 + 4 * 2);
     assert!(rows.iter().all(|r| r.reference == "analytic/closed-form"));
+    let class = dir.file_name().unwrap().to_string_lossy().into_owned();
+    assert!(rows.iter().all(|r| r.class == class && r.replicate == 0 && r.schema_version == 2));
     let reference = &rows[0];
     assert_eq!((reference.image_rmse, reference.chamfer_rel), (0.0, Some(0.0)));
+    assert_eq!((reference.flip_mean, reference.silhouette_mismatch_pct), (0.0, 0.0));
+    assert!(reference.px_err_max.unwrap() < 1e-3, "{reference:?}");
+    assert_eq!(reference.quality_px, Some(0.5));
+    // The closed form of a sphere and a box marches nothing.
+    assert_eq!((reference.tolerance_px, reference.relaxation), (None, None));
+    // The sweep: every pair of tolerance and relaxation once; parametric meshes march nothing,
+    // grids march at the default knob.
+    let mut sweep: Vec<(f64, f64)> = rows
+        .iter()
+        .filter(|r| r.repr == "sdf")
+        .map(|r| (r.tolerance_px.unwrap(), r.relaxation.unwrap()))
+        .collect();
+    sweep.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    assert_eq!(sweep, vec![(0.25, 1.0), (0.25, 1.6), (1.0, 1.0), (1.0, 1.6), (2.0, 1.0), (2.0, 1.6)]);
+    for r in &rows {
+        match (r.repr.as_str(), r.method.as_str()) {
+            ("mesh", "parametric") => assert_eq!(r.tolerance_px, None),
+            ("grid", _) => assert_eq!((r.tolerance_px, r.relaxation), (Some(0.25), Some(1.0))),
+            _ => {}
+        }
+        // Sphere tracing within 2 pixels of tolerance stays about that close.
+        if r.repr == "sdf" {
+            assert!(r.px_err_p95.unwrap() <= r.tolerance_px.unwrap() + 0.1, "{r:?}");
+        }
+    }
+    // Rows round-trip: written again they are the file's lines.
+    let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(Vec::new());
+    for r in &rows {
+        w.serialize(r).unwrap();
+    }
+    let again = String::from_utf8(w.into_inner().unwrap()).unwrap();
+    assert_eq!(again, text.lines().skip(1).map(|l| format!("{l}\n")).collect::<String>());
     // The summary names the input and a fastest run.
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
@@ -107,12 +144,13 @@ fn csv_header_is_the_documented_schema() {
     );
     // Errors fall as resolution grows, for meshes and grids alike.
     for kind in ["mesh/extracted", "grid/dense"] {
-        let c: Vec<f64> = rows
-            .iter()
-            .filter(|r| format!("{}/{}", r.repr, r.method) == kind)
-            .map(|r| r.chamfer_rel.unwrap())
-            .collect();
+        let of = |f: fn(&Row) -> f64| -> Vec<f64> {
+            rows.iter().filter(|r| format!("{}/{}", r.repr, r.method) == kind).map(f).collect()
+        };
+        let c = of(|r| r.chamfer_rel.unwrap());
         assert!(c[1] < c[0], "{kind}: {c:?}");
+        let px = of(|r| r.px_err_mean.unwrap());
+        assert!(px[1] < px[0], "{kind}: {px:?}");
     }
 }
 
@@ -196,15 +234,98 @@ fn interrupted_run_keeps_its_rows_and_resume_completes_it() {
         std::fs::read_to_string(&csv).unwrap().lines().count().saturating_sub(2)
     });
     assert!(kept >= 3, "{kept} rows kept");
-    assert!(!finished_early && kept < 2 + 4 * 4, "the run was not interrupted ({kept} rows)");
+    assert!(!finished_early && kept < 7 + 4 * 4, "the run was not interrupted ({kept} rows)");
     let out = run_compare(&scene, &csv, &["--res", "8,12,16,24", "--resume"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let rows = read_rows(&csv).unwrap();
-    assert_eq!(rows.len(), 2 + 4 * 4, "finished early: {finished_early}");
+    assert_eq!(rows.len(), 7 + 4 * 4, "finished early: {finished_early}");
     let mut keys: Vec<_> = rows.iter().map(Row::key).collect();
     keys.sort();
     keys.dedup();
     assert_eq!(keys.len(), rows.len(), "duplicate rows after --resume");
+}
+
+/// `--resume` keys rows by replicate and by the SDF sweep's tolerance and relaxation: a new
+/// tolerance adds only its run, a new replicate the whole set again.
+#[test]
+fn resume_key_includes_replicate_and_march_knob() {
+    let dir = temp_dir("resume_key");
+    let scene = dir.join("two.toml");
+    std::fs::write(&scene, SCENE).unwrap();
+    let csv = dir.join("out.csv");
+    let sweep = |tol: &str| ["--res", "8", "--sdf-tolerance-px", tol, "--sdf-relax", "1"].map(String::from);
+    fn args(extra: &[String]) -> Vec<&str> {
+        extra.iter().map(String::as_str).collect()
+    }
+    let first = sweep("1");
+    let out = run_compare(&scene, &csv, &args(&first));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(read_rows(&csv).unwrap().len(), 1 + 1 + 4);
+    let mut more = sweep("1,2").to_vec();
+    more.push("--resume".into());
+    let out = run_compare(&scene, &csv, &args(&more));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let rows = read_rows(&csv).unwrap();
+    assert_eq!(rows.len(), 1 + 1 + 4 + 1);
+    assert_eq!(rows.last().unwrap().tolerance_px, Some(2.0));
+    more.extend(["--replicate".into(), "1".into()]);
+    let out = run_compare(&scene, &csv, &args(&more));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let rows = read_rows(&csv).unwrap();
+    assert_eq!(rows.len(), 2 * 7);
+    assert_eq!(rows.iter().filter(|r| r.replicate == 1).count(), 7);
+    let mut keys: Vec<_> = rows.iter().map(Row::key).collect();
+    keys.sort();
+    keys.dedup();
+    assert_eq!(keys.len(), rows.len(), "duplicate rows after --resume");
+    // The summary counts the two replicates as one run each.
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("2 replicates") && stdout.contains("quality 0.5 px"), "{stdout}");
+}
+
+/// `--order-seed` runs the reference first and the rest in an order fixed by the seed.
+#[test]
+fn order_seed_shuffles_the_runs_after_the_reference() {
+    let dir = temp_dir("order_seed");
+    let scene = dir.join("two.toml");
+    std::fs::write(&scene, SCENE).unwrap();
+    let order = |seed: &str, name: &str| -> Vec<String> {
+        let csv = dir.join(name);
+        let out = run_compare(&scene, &csv, &["--res", "8", "--order-seed", seed]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        read_rows(&csv).unwrap().iter().map(|r| format!("{:?}", r.key())).collect()
+    };
+    let (a, b, c) = (order("3", "a.csv"), order("3", "b.csv"), order("4", "c.csv"));
+    assert_eq!(a, b);
+    assert!(a[0].contains("closed-form") && c[0].contains("closed-form"), "{a:?}");
+    assert_ne!(a, c);
+    let (mut sa, mut sc) = (a.clone(), c.clone());
+    sa.sort();
+    sc.sort();
+    assert_eq!(sa, sc);
+}
+
+/// Two inputs with one stem would share the `input` column: refused before any run.
+#[test]
+fn inputs_sharing_a_name_are_refused() {
+    let dir = temp_dir("same_stem");
+    let (a, b) = (dir.join("a"), dir.join("b"));
+    std::fs::create_dir_all(&a).unwrap();
+    std::fs::create_dir_all(&b).unwrap();
+    std::fs::write(a.join("two.toml"), SCENE).unwrap();
+    std::fs::write(b.join("two.toml"), SCENE).unwrap();
+    let csv = dir.join("out.csv");
+    let out = toolkit(&[
+        "compare",
+        a.join("two.toml").to_str().unwrap(),
+        b.join("two.toml").to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("a/two.toml") && err.contains("b/two.toml") && err.contains("`two`"), "{err}");
+    assert!(!csv.exists());
 }
 
 /// Chamfer and Hausdorff distances between concentric spheres of radius 1 and 1.25 both
@@ -269,4 +390,35 @@ fn scaling_experiment_writes_a_row_per_primitive_count_and_representation() {
     for prim in ["sphere", "cube", "cylinder", "cone"] {
         assert_eq!(tris("5", prim), 5 * tris("2", prim) / 2, "{prim}");
     }
+}
+
+/// Without inputs, compare runs every scene under `data/scenes` (relative to the working
+/// folder), class folders included, each row naming its class; two scenes of one stem in
+/// different folders are refused.
+#[test]
+fn default_inputs_are_searched_recursively_with_their_class() {
+    let dir = temp_dir("default_inputs");
+    let scenes = dir.join("data/scenes");
+    std::fs::create_dir_all(scenes.join("blend")).unwrap();
+    std::fs::write(scenes.join("top.toml"), SCENE).unwrap();
+    std::fs::write(scenes.join("blend/inner.toml"), SCENE).unwrap();
+    let run = |csv: &str| {
+        Command::new(env!("CARGO_BIN_EXE_toolkit"))
+            .current_dir(&dir)
+            .args(["compare", "--csv", csv, "--res", "8", "--frames", "1", "--quiet"])
+            .args(["--sdf-tolerance-px", "1", "--sdf-relax", "1"])
+            .output()
+            .unwrap()
+    };
+    let out = run("a.csv");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let rows = read_rows(&dir.join("a.csv")).unwrap();
+    let mut classes: Vec<(String, String)> =
+        rows.iter().map(|r| (r.input.clone(), r.class.clone())).collect();
+    classes.dedup();
+    assert_eq!(classes, vec![("inner".into(), "blend".into()), ("top".into(), "scenes".into())]);
+    std::fs::write(scenes.join("blend/top.toml"), SCENE).unwrap();
+    let out = run("b.csv");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("`top`"));
 }

@@ -10,6 +10,7 @@ mod util;
 mod bad_requests;
 mod cli;
 mod compare;
+mod compare_metrics;
 mod contract;
 mod extract;
 mod extract_dc;
