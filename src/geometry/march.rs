@@ -102,6 +102,23 @@ pub fn sphere_trace(
 /// needed next, [`MarchLane::feed`] takes it and says whether the march is over. Scalar
 /// marching ([`sphere_trace`]) feeds one lane; packets feed eight lanes from one 8-wide
 /// evaluation. Every lane takes exactly the steps [`sphere_trace`] would.
+///
+/// # The surface is where the field changes sign
+///
+/// A signed field's surface is where it changes sign, not every place it comes within the
+/// tolerance of zero: a subtraction whose cutter ends exactly on a face of the solid
+/// (`max(box, -cross)` with the cross's end caps on the box's faces, the usual way a Menger
+/// sponge is written) is zero on the cutter's end cap and positive on both sides of it, a
+/// skin of zero thickness that is not the boundary of any solid. Marching cubes and grids
+/// see no sign change there and leave a hole; so does this marcher (regularised CSG, the
+/// same rule in every representation). A march that converges (`|d| < tolerance`) already
+/// past the surface (`d < 0` in the march's sign) has crossed it; otherwise it probes the
+/// field at `t + d + tolerance / 2` along the ray: a value of the other sign confirms the
+/// crossing, and the hit is refined between the two points (secant) and kept where the
+/// field is smaller there. Without a sign change the point only touches zero (a skin, or a
+/// ray grazing a surface it does not enter), and the march goes on from the probe with
+/// plain steps. Unsigned fields (a triangle) have no inside: their hits are accepted on
+/// convergence, unrefined.
 #[derive(Clone, Copy, Debug)]
 pub struct MarchLane {
     /// Ray parameter to evaluate next.
@@ -114,9 +131,20 @@ pub struct MarchLane {
     omega: f64,
     /// March evaluations so far (the step budget, [`MarchParams::max_steps`]).
     iterations: u32,
-    /// While refining: the converged point `(t, residual, tolerance)` the refinement
-    /// step started from.
-    refining: Option<(f64, f64, f64)>,
+    phase: Phase,
+}
+
+/// What the value fed to a [`MarchLane`] is for.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Phase {
+    /// A sphere-tracing step.
+    March,
+    /// The probe past a converged point `t` (signed distance `d >= 0` in the march's sign,
+    /// tolerance `eps`): does the field change sign?
+    Probe { t: f64, d: f64, eps: f64 },
+    /// The refinement between a converged point `t` (residual `r`) and the probe that
+    /// confirmed the crossing.
+    Refine { t: f64, r: f64, eps: f64 },
 }
 
 impl MarchLane {
@@ -131,7 +159,7 @@ impl MarchLane {
             r: f64::INFINITY,
             omega: 0.0,
             iterations: 0,
-            refining: None,
+            phase: Phase::March,
         }
     }
 
@@ -144,9 +172,9 @@ impl MarchLane {
     /// The hit tolerance at [`Self::t`] (what the field's evaluation must resolve).
     #[inline]
     pub fn tolerance(&self, params: &MarchParams, size: f64) -> f64 {
-        match self.refining {
-            Some((_, _, eps)) => eps,
-            None => params.tolerance(self.t, size),
+        match self.phase {
+            Phase::Probe { eps, .. } | Phase::Refine { eps, .. } => eps,
+            Phase::March => params.tolerance(self.t, size),
         }
     }
 
@@ -162,16 +190,53 @@ impl MarchLane {
         refine: bool,
         stats: &mut RayStats,
     ) -> Option<Option<MarchHit>> {
-        if let Some((t, r, eps)) = self.refining {
-            // The refinement step along the ray (steps back if the point was past the
-            // surface): kept if it is closer to the surface and not before the segment.
-            let r2 = raw.abs();
-            return Some(Some(if r2 <= r && self.t >= seg.t0 - eps {
-                MarchHit { t: self.t, residual: r2 }
-            } else {
-                MarchHit { t, residual: r }
-            }));
+        match self.phase {
+            Phase::March => {}
+            Phase::Refine { t, r, eps } => {
+                // Kept where the field is smaller than at the converged point and not
+                // before the segment.
+                let r2 = raw.abs();
+                return Some(Some(if r2 <= r && self.t >= seg.t0 - eps {
+                    MarchHit { t: self.t, residual: r2 }
+                } else {
+                    MarchHit { t, residual: r }
+                }));
+            }
+            Phase::Probe { t, d, eps } => {
+                let dp = self.sign * raw;
+                if dp < 0.0 {
+                    // The field changes sign between t and the probe: a surface. Refine at
+                    // the secant's zero (two evaluations: the probe and the refinement).
+                    stats.march_steps += 2;
+                    self.phase = Phase::Refine { t, r: d, eps };
+                    self.t = t + (self.t - t) * d / (d - dp);
+                    return None;
+                }
+                // Only touching zero: march on from the probe, with plain steps.
+                self.phase = Phase::March;
+                self.omega = 1.0;
+                self.prev_t = t;
+                self.prev_r = d;
+                if self.t > seg.t1 {
+                    return Some(None);
+                }
+                return self.step(raw, seg, size, params, refine, stats);
+            }
         }
+        self.step(raw, seg, size, params, refine, stats)
+    }
+
+    /// One sphere-tracing step with the field's value `raw` at [`Self::t`].
+    #[inline]
+    fn step(
+        &mut self,
+        raw: f64,
+        seg: &Segment,
+        size: f64,
+        params: &MarchParams,
+        refine: bool,
+        stats: &mut RayStats,
+    ) -> Option<Option<MarchHit>> {
         if self.iterations == 0 {
             self.omega = params.relaxation;
         }
@@ -196,9 +261,20 @@ impl MarchLane {
             if !refine {
                 return Some(Some(MarchHit { t, residual: self.r }));
             }
-            stats.march_steps += 1;
-            self.refining = Some((t, self.r, eps));
-            self.t = t + d;
+            if d < 0.0 {
+                // Already past the surface: crossed. One refinement step back onto it.
+                stats.march_steps += 1;
+                self.phase = Phase::Refine { t, r: self.r, eps };
+                self.t = t + d;
+                return None;
+            }
+            if self.iterations >= params.max_steps {
+                return self.budget(params, stats);
+            }
+            // The probe is counted as a step when it is marched on from (`step`), or with
+            // the refinement when it confirms the crossing.
+            self.phase = Phase::Probe { t, d, eps };
+            self.t = t + d + 0.5 * eps;
             return None;
         }
         self.prev_t = t;
