@@ -150,7 +150,11 @@ impl Geometry for SceneGeometry {
     fn describe(&self) -> String {
         let instances: usize = self.objects.iter().map(|o| o.instances().len()).sum();
         if instances == 0 {
-            return format!("{} objects, top-level BVH of {} nodes", self.objects.len(), self.bvh.nodes.len());
+            return format!(
+                "{} objects, top-level BVH of {} nodes",
+                self.objects.len(),
+                self.bvh.nodes.len()
+            );
         }
         format!(
             "{} objects ({instances} instances), top-level BVH of {} nodes",

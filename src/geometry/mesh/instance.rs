@@ -231,7 +231,8 @@ impl View {
             let u = r.cross(f);
             let half_h = (0.5 * cam.fov_y_deg.to_radians()).tan();
             let half_w = half_h * cam.width as f32 / cam.height.max(1) as f32;
-            for (edge, along) in [(f + r * half_w, u), (f - r * half_w, u), (f + u * half_h, r), (f - u * half_h, r)]
+            for (edge, along) in
+                [(f + r * half_w, u), (f - r * half_w, u), (f + u * half_h, r), (f - u * half_h, r)]
             {
                 let n = edge.cross(along).normalize();
                 planes.push(if n.dot(f) > 0.0 { -n } else { n });
@@ -273,8 +274,7 @@ impl View {
                 for x in range[0].0..=range[0].1 {
                     let offset = Vec3::new(x as f32, y as f32, z as f32) * self.period;
                     let c = self.transform.to_world.transform_point3(self.centre + offset) - self.eye;
-                    if c.length() > reach + self.radius
-                        || self.planes.iter().any(|n| n.dot(c) > self.margin)
+                    if c.length() > reach + self.radius || self.planes.iter().any(|n| n.dot(c) > self.margin)
                     {
                         continue;
                     }
