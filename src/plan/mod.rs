@@ -519,6 +519,7 @@ mod tests {
     use std::path::Path;
 
     use super::*;
+    use crate::plan::budget::BYTES_PER_TRACED_TRIANGLE;
     use crate::scene::load_scene;
 
     fn scene(name: &str) -> Scene {
@@ -549,6 +550,7 @@ mod tests {
             ObjectKind::Primitive(Primitive::Plane { .. }) => "plane",
             ObjectKind::Primitive(Primitive::Triangle { .. }) => "triangle",
             ObjectKind::Primitive(_) => "primitive",
+            ObjectKind::Repeat { .. } => "repeat",
             _ => "other",
         }
     }
@@ -573,9 +575,12 @@ mod tests {
             assert_eq!(p, ObjectPlan::as_asked(Build::Marched { march }));
         }
         let mc = ExtractMethod::MarchingCubes;
+        // The 4 x 1 x 2 sphere grid.
+        let copies = |mesh| Build::Instanced { mesh, copies: 8, reach: None };
         for (o, p) in s.objects.iter().zip(plan_scene(&s, mesh(MeshMethod::Parametric))) {
             let build = match kind(o) {
                 "plane" => Build::PlaneDisc { resolution: 16 },
+                "repeat" => copies(InstanceMesh::Tessellated { resolution: 16, shading: Shading::Smooth }),
                 "other" => Build::Extracted { method: mc, resolution: 16 },
                 _ => Build::Tessellated { resolution: 16, shading: Shading::Smooth },
             };
@@ -585,6 +590,9 @@ mod tests {
             let expect = match kind(o) {
                 "plane" => ObjectPlan::as_asked(Build::PlaneDisc { resolution: 16 }),
                 "triangle" => ObjectPlan::fallback(Build::Marched { march }, Fallback::Unsigned),
+                "repeat" => {
+                    ObjectPlan::as_asked(copies(InstanceMesh::Extracted { method: mc, resolution: 16 }))
+                }
                 _ => ObjectPlan::as_asked(Build::Extracted { method: mc, resolution: 16 }),
             };
             assert_eq!(p, expect, "{}", o.label);
@@ -642,6 +650,13 @@ mod tests {
                 {
                     *shading = got;
                 }
+                if let (
+                    Build::Instanced { mesh: InstanceMesh::Tessellated { shading, .. }, .. },
+                    Build::Instanced { mesh: InstanceMesh::Tessellated { shading: got, .. }, .. },
+                ) = (&mut p.build, r.build)
+                {
+                    *shading = got;
+                }
             }
             assert_eq!(planned, realised, "{}", repr.name());
         }
@@ -660,5 +675,102 @@ mod tests {
         assert_eq!(budget::scene_bytes(&s, grid(GridFill::Sample)), gridded * samples.pow(3) * 4);
         assert_eq!(grid_samples_per_axis(8), 13);
         assert_eq!(grid_samples_per_axis(u32::MAX), u32::MAX);
+    }
+
+    /// A scene of `objects` (TOML tables) before a camera at the origin looking down +z.
+    fn scene_of(objects: &str, max_distance: f32) -> Scene {
+        let text = format!(
+            "[camera]\nposition = [0, 1, -5]\nlook_at = [0, 0, 5]\nwidth = 64\nheight = 48\n\n\
+             [settings]\nmax_distance = {max_distance}\n\n{objects}"
+        );
+        crate::scene::parse_scene(&text, Path::new("instancing.toml")).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    #[test]
+    fn identical_objects_share_the_first_ones_mesh() {
+        let sphere = |x: f32, r: f32| {
+            format!("[[objects]]\ntype = \"sphere\"\nradius = {r}\ntranslate = [{x}, 0, 3]\n\n")
+        };
+        let s =
+            scene_of(&(sphere(-2.0, 0.5) + &sphere(0.0, 0.5) + &sphere(2.0, 0.7) + &sphere(4.0, 0.5)), 100.0);
+        let tess = Build::Tessellated { resolution: 16, shading: Shading::Smooth };
+        let builds: Vec<Build> =
+            plan_scene(&s, mesh(MeshMethod::Parametric)).iter().map(|p| p.build).collect();
+        assert_eq!(builds, [tess, Build::SharedMesh { of: 0 }, tess, Build::SharedMesh { of: 0 }]);
+        // Extraction works in world space: nothing is shared.
+        let mc = ExtractMethod::MarchingCubes;
+        for p in plan_scene(&s, mesh(MeshMethod::Extracted(mc))) {
+            assert_eq!(p.build, Build::Extracted { method: mc, resolution: 16 });
+        }
+        // A shared mesh is estimated as one placement.
+        let one = budget::object_bytes(
+            &s.objects[0],
+            &plan_object(&s, &s.objects[0], mesh(MeshMethod::Parametric)),
+        );
+        let all = budget::scene_bytes(&s, mesh(MeshMethod::Parametric));
+        assert_eq!(all, 2 * one + 2 * budget::BYTES_PER_INSTANCE);
+    }
+
+    #[test]
+    fn repetition_is_instanced_unless_inside_csg_or_over_the_cap() {
+        let repeat = |count: &str, child: &str| {
+            format!(
+                "[[objects]]\ntype = \"repeat\"\nperiod = [1, 0, 1]\n{count}translate = [0, -1, 0]\n[objects.child]\n{child}\n\n"
+            )
+        };
+        let sphere = "type = \"sphere\"\nradius = 0.2";
+        let s = scene_of(&repeat("count = [10, 1, 7]\n", sphere), 100.0);
+        let p = plan_object(&s, &s.objects[0], mesh(MeshMethod::Parametric));
+        let tess = InstanceMesh::Tessellated { resolution: 16, shading: Shading::Smooth };
+        assert_eq!(p, ObjectPlan::as_asked(Build::Instanced { mesh: tess, copies: 70, reach: None }));
+        let bytes = budget::object_bytes(&s.objects[0], &p);
+        assert_eq!(bytes, 2 * 16 * 16 * BYTES_PER_TRACED_TRIANGLE + 70 * budget::BYTES_PER_INSTANCE);
+        // Over the cap: extracted whole.
+        let s = scene_of(&repeat("count = [300, 1, 300]\n", sphere), 100.0);
+        let p = plan_object(&s, &s.objects[0], mesh(MeshMethod::Parametric));
+        assert_eq!(p.build, Build::Extracted { method: ExtractMethod::MarchingCubes, resolution: 16 });
+        // A CSG child is extracted once, in the repetition's frame.
+        let csg = "type = \"subtraction\"\nchildren = [{ type = \"box\", half_size = [0.3, 0.3, 0.3] }, { type = \"sphere\", radius = 0.4 }]";
+        let s = scene_of(&repeat("count = [3, 1, 3]\n", csg), 100.0);
+        let p = plan_object(&s, &s.objects[0], mesh(MeshMethod::Parametric));
+        let mc = InstanceMesh::Extracted { method: ExtractMethod::MarchingCubes, resolution: 16 };
+        assert_eq!(p.build, Build::Instanced { mesh: mc, copies: 9, reach: None });
+        // Infinite: the copies in view out to max_distance, fewer for a shorter one, and a
+        // shorter reach where max_distance would place too many.
+        let s = scene_of(&repeat("", sphere), 40.0);
+        let Build::Instanced { copies: far, reach: Some(r), .. } =
+            plan_object(&s, &s.objects[0], mesh(MeshMethod::Parametric)).build
+        else {
+            panic!("not instanced")
+        };
+        assert_eq!(r, 40.0);
+        let s = scene_of(&repeat("", sphere), 20.0);
+        let Build::Instanced { copies: near, .. } =
+            plan_object(&s, &s.objects[0], mesh(MeshMethod::Parametric)).build
+        else {
+            panic!("not instanced")
+        };
+        assert!(near > 100 && 3 * near < far && far as u64 <= MAX_INSTANCES, "{near} {far}");
+        let s = scene_of(&repeat("", sphere), 1e5);
+        let Build::Instanced { copies, reach: Some(r), .. } =
+            plan_object(&s, &s.objects[0], mesh(MeshMethod::Parametric)).build
+        else {
+            panic!("not instanced")
+        };
+        assert!(
+            r < 1e5 && copies as u64 <= MAX_INSTANCES && copies as u64 > MAX_INSTANCES / 4,
+            "{r} {copies}"
+        );
+        // Repetition inside CSG cannot be instanced: the CSG is extracted whole.
+        let text = format!(
+            "[[objects]]\ntype = \"subtraction\"\nchildren = [{{ type = \"box\", half_size = [3, 0.3, 3] }}, \
+             {{ type = \"repeat\", period = [1, 0, 1], count = [5, 1, 5], child = {{ {} }} }}]\n",
+            "type = \"sphere\", radius = 0.3"
+        );
+        let s = scene_of(&text, 100.0);
+        let p = plan_object(&s, &s.objects[0], mesh(MeshMethod::Parametric));
+        assert_eq!(p.build, Build::Extracted { method: ExtractMethod::MarchingCubes, resolution: 16 });
+        let (g, _) = build_scene_with_plans(&s, mesh(MeshMethod::Parametric));
+        assert!(g.objects()[0].describe().contains("inside CSG"), "{}", g.objects()[0].describe());
     }
 }
