@@ -563,7 +563,7 @@ mod tests {
         assert!(march.pixel_footprint > 0.0);
         for (o, p) in s.objects.iter().zip(plan_scene(&s, repr)) {
             let expect = match kind(o) {
-                "other" => ObjectPlan::fallback(
+                "other" | "repeat" => ObjectPlan::fallback(
                     Build::Marched { march },
                     Fallback::NoClosedForm { kind: o.kind_name() },
                 ),
