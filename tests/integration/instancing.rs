@@ -56,15 +56,11 @@ fn agreement(scene: &Scene, a: &SceneGeometry, b: &SceneGeometry, tol: f32, with
             let ha = a.closest_hit(&ray, 0.0, within, &mut stats).map(|h| h.t);
             total += 1;
             hits += hb.is_some() as usize;
-            let ok = match (ha, hb) {
+            agree += match (ha, hb) {
                 (Some(s), Some(t)) => ((s - t).abs() <= tol) as usize,
                 (None, None) => 1,
                 _ => 0,
             };
-            if ok == 0 && std::env::var("INST_DEBUG").is_ok() {
-                eprintln!("{x} {y}: {ha:?} {hb:?}");
-            }
-            agree += ok;
         }
     }
     (agree as f64 / total as f64, hits)
