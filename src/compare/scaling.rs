@@ -1,6 +1,10 @@
 //! The coursework's scaling experiment: frame time against the number of primitives
 //! (spheres, cubes, cylinders or cones of unit size on a square grid with spacing 2 along x
-//! and z, seen from above at a fixed camera) for each representation.
+//! and z, seen from above at a fixed camera) for each representation, with the primitives
+//! as separate objects ([`Layout::Objects`]: under the top-level BVH; in the mesh
+//! representation they share one mesh) and as the children of one SDF union object
+//! ([`Layout::Union`]: the coursework's own case, where every distance evaluation visits
+//! every primitive).
 
 use std::path::Path;
 use std::time::Instant;
@@ -13,14 +17,36 @@ use crate::error::{Error, Result};
 use crate::geometry::Geometry;
 use crate::geometry::march::MarchParams;
 use crate::plan::{GridFill, GridStorage, MeshMethod, Representation, build_scene};
-use crate::scene::shape::{Object, ObjectKind, Primitive, Shading};
+use crate::scene::shape::{CsgOp, Object, ObjectKind, Primitive, Shading};
 use crate::scene::transform::TransformDesc;
 use crate::scene::{Camera, Light, Material, Scene, Settings};
 
-use super::{SCHEMA_VERSION, commit_id};
+use super::commit_id;
+
+/// Schema version of the scaling CSV: 2 added `layout` (version 1 was the compare CSV's).
+pub const SCALING_SCHEMA_VERSION: u32 = 2;
+
+/// How the experiment's primitives make up the scene.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layout {
+    /// One top-level object per primitive.
+    Objects,
+    /// One object: the union (CSG) of the primitives.
+    Union,
+}
+
+impl Layout {
+    /// The CSV's `layout` value.
+    pub fn name(self) -> &'static str {
+        match self {
+            Layout::Objects => "objects",
+            Layout::Union => "union",
+        }
+    }
+}
 
 /// Columns of the scaling CSV, in order.
-pub const SCALING_COLUMNS: [&str; 23] = [
+pub const SCALING_COLUMNS: [&str; 24] = [
     "primitive",
     "repr",
     "method",
@@ -43,6 +69,7 @@ pub const SCALING_COLUMNS: [&str; 23] = [
     "commit",
     "timestamp",
     "frame_ms_samples",
+    "layout",
     "schema_version",
 ];
 
@@ -53,7 +80,9 @@ pub struct ScalingRow {
     pub primitive: &'static str,
     /// Representation name ([`Representation::name`]).
     pub repr: &'static str,
-    /// Method within the representation (with its resolution, e.g. `parametric-32`).
+    /// Method within the representation (with its resolution, e.g. `parametric-32`),
+    /// prefixed `union-` in the union layout (so that tools grouping rows by
+    /// representation and method keep the layouts apart).
     pub method: String,
     /// Number of primitives.
     pub count: u32,
@@ -93,7 +122,9 @@ pub struct ScalingRow {
     pub timestamp: String,
     /// Every timed frame, ms, space-separated.
     pub frame_ms_samples: String,
-    /// Schema version of the compare CSVs.
+    /// `objects` (one object per primitive) or `union` (one union object of them all).
+    pub layout: &'static str,
+    /// [`SCALING_SCHEMA_VERSION`].
     pub schema_version: u32,
 }
 
@@ -107,6 +138,22 @@ fn primitive(name: &str) -> Primitive {
         "cylinder" => Primitive::Cylinder { radius: 0.5, half_height: 0.5 },
         _ => Primitive::Cone { radius_bottom: 0.5, radius_top: 0.0, half_height: 0.5 },
     }
+}
+
+/// [`scaling_scene`] with its primitives laid out as `layout` says: as they are, or as the
+/// children (same transforms and materials) of one union object.
+pub fn scaling_scene_as(kind: &str, count: u32, width: u32, height: u32, layout: Layout) -> Scene {
+    let mut scene = scaling_scene(kind, count, width, height);
+    if layout == Layout::Union {
+        let children = std::mem::take(&mut scene.objects);
+        scene.objects = vec![Object {
+            kind: ObjectKind::Csg { op: CsgOp::Union, children },
+            transform: TransformDesc::default(),
+            material: 0,
+            label: format!("union of {count} {kind}"),
+        }];
+    }
+    scene
 }
 
 /// `count` primitives of one kind on a square grid with spacing 2 along x and z (row-major,
@@ -217,46 +264,53 @@ pub fn scaling_command(opts: &ScalingOptions, csv_path: &Path) -> Result<String>
     let mut text = String::new();
     for kind in PRIMITIVES {
         for &count in &opts.counts {
-            let mut scene = scaling_scene(kind, count, 320, 240);
-            opts.overrides.apply(&mut scene)?;
-            for (method, r) in &reprs {
-                let repr = r.name();
-                let start = Instant::now();
-                let geometry = build_scene(&scene, *r);
-                let build_ms = start.elapsed().as_secs_f64() * 1e3;
-                let (timing, _) = super::time_frames(&scene, &geometry, opts.frames);
-                let row = ScalingRow {
-                    primitive: kind,
-                    repr,
-                    method: method.clone(),
-                    count,
-                    triangles: geometry.census().triangles,
-                    total_bytes: geometry.bytes_used() as u64,
-                    build_ms,
-                    frame_ms_median: timing.median,
-                    frame_ms_min: timing.min,
-                    frame_ms_max: timing.max,
-                    frames: opts.frames,
-                    fps_median: 1e3 / timing.median,
-                    mrays_per_s: timing.mrays_per_s,
-                    steps_per_ray: timing.steps_per_ray,
-                    nodes_per_ray: timing.nodes_per_ray,
-                    threads: rayon::current_num_threads(),
-                    width: scene.camera.width,
-                    height: scene.camera.height,
-                    depth: scene.settings.max_depth,
-                    commit: commit.clone(),
-                    timestamp: timing.timestamp,
-                    frame_ms_samples: timing.samples,
-                    schema_version: SCHEMA_VERSION,
-                };
-                use std::fmt::Write as _;
-                let _ = writeln!(
-                    text,
-                    "{kind:>8} x{count:<4} {repr:>8}/{method:<14} {:8.1} ms  {:6.1} fps",
-                    row.frame_ms_median, row.fps_median
-                );
-                w.serialize(&row).map_err(|e| Error::io(csv_path, e))?;
+            for layout in [Layout::Objects, Layout::Union] {
+                let mut scene = scaling_scene_as(kind, count, 320, 240, layout);
+                opts.overrides.apply(&mut scene)?;
+                for (method, r) in &reprs {
+                    let repr = r.name();
+                    let method = match layout {
+                        Layout::Objects => method.clone(),
+                        Layout::Union => format!("union-{method}"),
+                    };
+                    let start = Instant::now();
+                    let geometry = build_scene(&scene, *r);
+                    let build_ms = start.elapsed().as_secs_f64() * 1e3;
+                    let (timing, _) = super::time_frames(&scene, &geometry, opts.frames);
+                    let row = ScalingRow {
+                        primitive: kind,
+                        repr,
+                        method: method.clone(),
+                        count,
+                        triangles: geometry.census().triangles,
+                        total_bytes: geometry.bytes_used() as u64,
+                        build_ms,
+                        frame_ms_median: timing.median,
+                        frame_ms_min: timing.min,
+                        frame_ms_max: timing.max,
+                        frames: opts.frames,
+                        fps_median: 1e3 / timing.median,
+                        mrays_per_s: timing.mrays_per_s,
+                        steps_per_ray: timing.steps_per_ray,
+                        nodes_per_ray: timing.nodes_per_ray,
+                        threads: rayon::current_num_threads(),
+                        width: scene.camera.width,
+                        height: scene.camera.height,
+                        depth: scene.settings.max_depth,
+                        commit: commit.clone(),
+                        timestamp: timing.timestamp,
+                        frame_ms_samples: timing.samples,
+                        layout: layout.name(),
+                        schema_version: SCALING_SCHEMA_VERSION,
+                    };
+                    use std::fmt::Write as _;
+                    let _ = writeln!(
+                        text,
+                        "{kind:>8} x{count:<4} {repr:>8}/{method:<20} {:8.1} ms  {:6.1} fps",
+                        row.frame_ms_median, row.fps_median
+                    );
+                    w.serialize(&row).map_err(|e| Error::io(csv_path, e))?;
+                }
             }
         }
     }

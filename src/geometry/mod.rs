@@ -193,6 +193,31 @@ pub trait Geometry: Send + Sync {
     /// upper bound (the distance to a point on the surface). For measuring geometric error,
     /// not for tracing: it may be slow and is not counted in any work counter.
     fn surface_distance(&self, p: DVec3) -> f64;
+
+    /// Data this geometry may share with other geometries (a mesh and its BVH placed
+    /// several times), counted in its own `bytes_used` and `census`; a scene counts each
+    /// `id` once. `None`: nothing shared.
+    fn shared(&self) -> Option<Shared> {
+        None
+    }
+
+    /// The separately placed instances this geometry consists of (the copies of a
+    /// repetition), which a scene puts one by one under its top-level BVH; empty when the
+    /// geometry is one piece.
+    fn instances(&self) -> &[mesh::MeshGeometry] {
+        &[]
+    }
+}
+
+/// Data shared between geometries (see [`Geometry::shared`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shared {
+    /// Identifies the shared data (its address while it lives).
+    pub id: usize,
+    /// Its bytes, part of each sharer's `bytes_used`.
+    pub bytes: usize,
+    /// What it stores, part of each sharer's `census`.
+    pub census: Census,
 }
 
 /// What a geometry stores. `bytes_used() - accel_bytes` is the geometry itself.
@@ -204,6 +229,18 @@ pub struct Census {
     pub grid_samples: u64,
     /// Bytes of acceleration structures (BVH nodes and index arrays), part of `bytes_used`.
     pub accel_bytes: u64,
+}
+
+impl std::ops::Sub for Census {
+    type Output = Census;
+
+    fn sub(self, o: Census) -> Census {
+        Census {
+            triangles: self.triangles - o.triangles,
+            grid_samples: self.grid_samples - o.grid_samples,
+            accel_bytes: self.accel_bytes - o.accel_bytes,
+        }
+    }
 }
 
 impl std::ops::Add for Census {

@@ -1,13 +1,19 @@
 //! The whole scene as one [`Geometry`]: a top-level BVH over the bounded objects and a list
 //! of unbounded ones (infinite planes, unbounded repetition), so the tracer sees one
-//! geometry whatever the representation of each object.
+//! geometry whatever the representation of each object. An object made of instances (the
+//! copies of a repetition, [`Geometry::instances`]) puts each copy under the top-level
+//! BVH; data several objects share ([`Geometry::shared`]: one mesh and BVH placed many
+//! times) is counted once in [`SceneGeometry`]'s bytes and census.
 
 use glam::DVec3;
 use obvhs::BvhBuildParams;
 use obvhs::bvh2::Bvh2;
 
 use crate::geometry::bvh2;
-use crate::geometry::{Aabb, Census, Geometry, Hit, PACKET, Ray, RayStats};
+use crate::geometry::{Aabb, Census, Geometry, Hit, PACKET, Ray, RayStats, Shared};
+
+/// [`SceneGeometry`]'s `part` of a BVH leaf that is a whole object, not one of its instances.
+const WHOLE: u32 = u32::MAX;
 
 /// The whole scene as one geometry: a top-level BVH over the bounded objects plus a list of
 /// unbounded ones (infinite planes, unbounded repetition) that every ray tests.
@@ -18,6 +24,9 @@ pub struct SceneGeometry {
     unbounded: Vec<u32>,
     /// For each BVH primitive, the index into `objects`.
     bounded: Vec<u32>,
+    /// For each BVH primitive, the index into its object's [`Geometry::instances`], or
+    /// [`WHOLE`]; empty when no object has instances (then every leaf is a whole object).
+    part: Vec<u32>,
 }
 
 impl SceneGeometry {
@@ -26,17 +35,61 @@ impl SceneGeometry {
         let mut boxes = Vec::new();
         let mut bounded = Vec::new();
         let mut unbounded = Vec::new();
+        let mut part = Vec::new();
         for (i, o) in objects.iter().enumerate() {
+            if !o.instances().is_empty() {
+                for (k, instance) in o.instances().iter().enumerate() {
+                    if let Some(b) = instance.bounds() {
+                        boxes.push(b);
+                        bounded.push(i as u32);
+                        part.push(k as u32);
+                    }
+                }
+                continue;
+            }
             match o.bounds() {
                 Some(b) => {
                     boxes.push(b);
                     bounded.push(i as u32);
+                    part.push(WHOLE);
                 }
                 None => unbounded.push(i as u32),
             }
         }
+        if part.iter().all(|&k| k == WHOLE) {
+            part = Vec::new();
+        }
         let bvh = bvh2::build(&boxes, BvhBuildParams::medium_build());
-        SceneGeometry { objects, bvh, unbounded, bounded }
+        SceneGeometry { objects, bvh, unbounded, bounded, part }
+    }
+
+    /// The geometry of top-level BVH primitive `prim`: an object or one of its instances.
+    #[inline]
+    fn leaf(&self, prim: u32) -> &dyn Geometry {
+        let object = &*self.objects[self.bounded[prim as usize] as usize];
+        match self.part.get(prim as usize) {
+            Some(&k) if k != WHOLE => &object.instances()[k as usize],
+            _ => object,
+        }
+    }
+
+    /// The shared data counted more than once in the objects' bytes and census: every
+    /// [`Geometry::shared`] after the first with the same id.
+    fn repeated_shares(&self) -> Vec<Shared> {
+        let mut all: Vec<Shared> = self.objects.iter().filter_map(|o| o.shared()).collect();
+        all.sort_by_key(|s| s.id);
+        let mut repeated = Vec::new();
+        for w in all.windows(2) {
+            if w[0].id == w[1].id {
+                repeated.push(w[1]);
+            }
+        }
+        repeated
+    }
+
+    /// Bytes of the top-level structure: the BVH and the leaf and unbounded lists.
+    fn own_accel_bytes(&self) -> usize {
+        bvh2::bytes_used(&self.bvh) + 4 * (self.unbounded.len() + self.bounded.len() + self.part.capacity())
     }
 
     /// The objects, in scene order.
@@ -67,7 +120,7 @@ impl Geometry for SceneGeometry {
             }
         }
         bvh2::traverse(&self.bvh, ray, t_min, t_best, stats, |prim, t_max, stats| {
-            let obj = &self.objects[self.bounded[prim as usize] as usize];
+            let obj = self.leaf(prim);
             Ok(obj.closest_hit(ray, t_min, t_max, stats).map(|h| {
                 let t = h.t;
                 best = Some(h);
@@ -82,8 +135,8 @@ impl Geometry for SceneGeometry {
     }
 
     /// Packets go ray by ray (front to back through the top-level BVH, as
-    /// [`Geometry::closest_hit`]) unless an object prefers packets. Then the bounded objects
-    /// that any ray of the packet reaches (up to [`PACKET_CANDIDATES`]) and the unbounded
+    /// [`Geometry::closest_hit`]) unless an object prefers packets. Then the BVH leaves
+    /// (objects or instances) that any ray of the packet reaches (up to [`PACKET_CANDIDATES`]) and the unbounded
     /// ones each take the whole packet, nearest hits composing through `t_max`.
     fn closest_hits(
         &self,
@@ -109,13 +162,12 @@ impl Geometry for SceneGeometry {
         let mut overflow = false;
         for (ray, &reach) in rays.iter().zip(t_max.iter()) {
             bvh2::traverse(&self.bvh, ray, t_min, reach, stats, |prim, _, _| {
-                let object = self.bounded[prim as usize];
-                if !candidates[..count].contains(&object) {
+                if !candidates[..count].contains(&prim) {
                     if count == PACKET_CANDIDATES {
                         overflow = true;
                         return Err(());
                     }
-                    candidates[count] = object;
+                    candidates[count] = prim;
                     count += 1;
                 }
                 Ok(None)
@@ -124,8 +176,11 @@ impl Geometry for SceneGeometry {
                 return one_by_one(t_max, hits, stats);
             }
         }
-        for &i in self.unbounded.iter().chain(&candidates[..count]) {
+        for &i in &self.unbounded {
             self.objects[i as usize].closest_hits(rays, t_min, t_max, hits, stats);
+        }
+        for &prim in &candidates[..count] {
+            self.leaf(prim).closest_hits(rays, t_min, t_max, hits, stats);
         }
     }
 
@@ -134,10 +189,11 @@ impl Geometry for SceneGeometry {
             return true;
         }
         bvh2::traverse_any(&self.bvh, ray, t_min, t_max, stats, |prim, t_max, stats| {
-            self.objects[self.bounded[prim as usize] as usize].any_hit(ray, t_min, t_max, stats)
+            self.leaf(prim).any_hit(ray, t_min, t_max, stats)
         })
     }
 
+    /// Every object's bytes (shared data once) and the top-level structure's.
     fn bytes_used(&self) -> usize {
         std::mem::size_of::<Self>()
             + self
@@ -145,21 +201,31 @@ impl Geometry for SceneGeometry {
                 .iter()
                 .map(|o| o.bytes_used() + std::mem::size_of::<Box<dyn Geometry>>())
                 .sum::<usize>()
-            + bvh2::bytes_used(&self.bvh)
-            + 4 * (self.unbounded.len() + self.bounded.len())
+            - self.repeated_shares().iter().map(|s| s.bytes).sum::<usize>()
+            + self.own_accel_bytes()
     }
 
     fn describe(&self) -> String {
-        format!("{} objects, top-level BVH of {} nodes", self.objects.len(), self.bvh.nodes.len())
+        let instances: usize = self.objects.iter().map(|o| o.instances().len()).sum();
+        if instances == 0 {
+            return format!(
+                "{} objects, top-level BVH of {} nodes",
+                self.objects.len(),
+                self.bvh.nodes.len()
+            );
+        }
+        format!(
+            "{} objects ({instances} instances), top-level BVH of {} nodes",
+            self.objects.len(),
+            self.bvh.nodes.len()
+        )
     }
 
+    /// Every object's census (shared data once) and the top-level structure's bytes.
     fn census(&self) -> Census {
-        let own = Census {
-            accel_bytes: (bvh2::bytes_used(&self.bvh) + 4 * (self.unbounded.len() + self.bounded.len()))
-                as u64,
-            ..Census::default()
-        };
-        self.objects.iter().fold(own, |c, o| c + o.census())
+        let own = Census { accel_bytes: self.own_accel_bytes() as u64, ..Census::default() };
+        let all = self.objects.iter().fold(own, |c, o| c + o.census());
+        self.repeated_shares().iter().fold(all, |c, s| c - s.census)
     }
 
     fn surface_distance(&self, p: DVec3) -> f64 {
@@ -169,9 +235,7 @@ impl Geometry for SceneGeometry {
         }
         // Bounded objects nearest first through the top-level BVH, which skips every
         // subtree whose box is farther than the best so far.
-        let bounded = bvh2::nearest(&self.bvh, p, |prim| {
-            self.objects[self.bounded[prim as usize] as usize].surface_distance(p)
-        });
+        let bounded = bvh2::nearest(&self.bvh, p, |prim| self.leaf(prim).surface_distance(p));
         best.min(bounded)
     }
 }

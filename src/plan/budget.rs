@@ -15,7 +15,9 @@ use glam::UVec3;
 
 use crate::convert::extract::ExtractMethod;
 use crate::error::{Error, Result};
-use crate::plan::{Build, GridFill, ObjectPlan, Representation, grid_samples_per_axis, plan_object};
+use crate::plan::{
+    Build, GridFill, InstanceMesh, ObjectPlan, Representation, grid_samples_per_axis, plan_object,
+};
 use crate::scene::Scene;
 use crate::scene::shape::{Object, ObjectKind};
 
@@ -29,6 +31,10 @@ pub const DEFAULT_FRACTION: f64 = 0.5;
 /// armadillo with the 8-wide BVH grouped by the surface area heuristic: 7.74 MB for 86k
 /// triangles is 90 bytes, rounded up with room to spare).
 pub const BYTES_PER_TRACED_TRIANGLE: u64 = 100;
+
+/// Bytes per placed instance of a shared mesh (its record with transform and bounds,
+/// about 300 bytes, and its share of the scene's top-level BVH and leaf lists), rounded up.
+pub const BYTES_PER_INSTANCE: u64 = 512;
 
 /// Bytes per grid sample while extracting a surface (f32 sample plus working memory, see
 /// [`crate::convert::extract::extract`]): marching cubes.
@@ -144,7 +150,9 @@ pub fn scene_bytes(scene: &Scene, repr: Representation) -> u64 {
 /// narrow band never holds more than the dense grid) with what sampling or voxelizing a
 /// mesh needs ([`mesh_to_grid_bytes`]); triangles (parametric primitives have at most
 /// `2 res^2`, extracted objects as [`extraction_bytes`]); loaded meshes and grid files
-/// count as what they hold. Sphere tracing and closed forms count nothing.
+/// count as what they hold; a shared mesh counts once, where it is built, and every
+/// placement of it [`BYTES_PER_INSTANCE`] (an instanced repetition: its one mesh and
+/// `copies` placements). Sphere tracing and closed forms count nothing.
 pub fn object_bytes(o: &Object, plan: &ObjectPlan) -> u64 {
     let triangles = match &o.kind {
         ObjectKind::Mesh { mesh, .. } => mesh.triangles.len(),
@@ -157,9 +165,14 @@ pub fn object_bytes(o: &Object, plan: &ObjectPlan) -> u64 {
     match plan.build {
         Build::ClosedForm | Build::Marched { .. } | Build::PlaneDisc { .. } => 0,
         Build::MeshTriangles => (triangles as u64).saturating_mul(BYTES_PER_TRACED_TRIANGLE),
-        Build::Tessellated { resolution, .. } => {
-            let r = resolution as u64;
-            (2 * r * r).saturating_mul(BYTES_PER_TRACED_TRIANGLE)
+        Build::Tessellated { resolution, .. } => tessellation_bytes(resolution),
+        Build::SharedMesh { .. } => BYTES_PER_INSTANCE,
+        Build::Instanced { mesh, copies, .. } => {
+            let mesh = match mesh {
+                InstanceMesh::Tessellated { resolution, .. } => tessellation_bytes(resolution),
+                InstanceMesh::Extracted { method, resolution } => extraction_bytes(resolution, method),
+            };
+            mesh.saturating_add((copies as u64).saturating_mul(BYTES_PER_INSTANCE))
         }
         Build::Extracted { method, resolution } => extraction_bytes(resolution, method),
         // Analytic objects are sampled (`fill` is `Sample`) and hold no triangles.
@@ -171,6 +184,13 @@ pub fn object_bytes(o: &Object, plan: &ObjectPlan) -> u64 {
             extraction_bytes(resolution, method).saturating_add(grid_file)
         }
     }
+}
+
+/// An upper estimate of the bytes of a primitive tessellated at `resolution` (at most
+/// `2 resolution^2` triangles).
+fn tessellation_bytes(resolution: u32) -> u64 {
+    let r = resolution as u64;
+    (2 * r * r).saturating_mul(BYTES_PER_TRACED_TRIANGLE)
 }
 
 /// An upper estimate of the bytes [`crate::plan::reextract_mesh`] needs for a mesh of

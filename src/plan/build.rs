@@ -1,12 +1,15 @@
 //! Builds the geometry an [`ObjectPlan`] names, and returns the realised plan: the one
 //! that was built, with the fallbacks found while building (voxelizing finds a mesh open,
-//! an extraction yields no triangles, a grid cannot be built).
+//! an extraction yields no triangles, a grid cannot be built). Meshes that objects share
+//! ([`Build::SharedMesh`]) are built once, at the first object, and placed at the others;
+//! an instanced repetition ([`Build::Instanced`]) builds its child's mesh once and places
+//! it per copy.
 
 use glam::{DVec3, Vec3};
 
 use super::{
-    Build, Fallback, GRID_MARGIN_CELLS, GridFill, GridStorage, MeshMethod, ObjectPlan, Representation,
-    plan_object,
+    Build, Fallback, GRID_MARGIN_CELLS, GridFill, GridStorage, InstanceMesh, MAX_INSTANCES, MeshMethod,
+    ObjectPlan, Representation, plan_object,
 };
 use crate::convert::extract::{ExtractMethod, Field, extract, extract_object};
 use crate::convert::mesh_to_grid::band::{band_from_function, band_from_mesh};
@@ -20,6 +23,7 @@ use crate::geometry::grid::band::BandGrid;
 use crate::geometry::grid::object::{ClippedGrid, GridObject, GridStore};
 use crate::geometry::march::MarchParams;
 use crate::geometry::mesh::MeshGeometry;
+use crate::geometry::mesh::instance::{InstancedMesh, compose, repeat_offsets};
 use crate::geometry::scene::SceneGeometry;
 use crate::geometry::sdf::{SdfObject, SdfTree, sdf_geometry};
 use crate::geometry::{Geometry, aabb};
@@ -49,7 +53,62 @@ pub fn build_scene_with_plans(scene: &Scene, repr: Representation) -> (SceneGeom
 
 fn build_with_plans(scene: &Scene, repr: Representation) -> (Vec<Box<dyn Geometry>>, Vec<ObjectPlan>) {
     let repr = repr.with_pixel_footprint(scene);
-    scene.objects.iter().map(|o| build_object(scene, o, repr, plan_object(scene, o, repr))).unzip()
+    // The mesh of each object built as a single mesh, which later objects of the same
+    // geometry place (an `Arc` each, dropped at the end).
+    let mut meshes: Vec<Option<MeshGeometry>> = Vec::with_capacity(scene.objects.len());
+    let mut objects = Vec::with_capacity(scene.objects.len());
+    let mut plans = Vec::with_capacity(scene.objects.len());
+    for o in &scene.objects {
+        let plan = plan_object(scene, o, repr);
+        let (g, realised, mesh): (Box<dyn Geometry>, _, _) = match plan.build {
+            Build::SharedMesh { of } => {
+                let source = meshes.get(of as usize).and_then(Option::as_ref);
+                let of_label = scene.objects.get(of as usize).map_or("", |x| x.label.as_str());
+                let label = format!("{} '{}' sharing the mesh of '{of_label}'", o.kind_name(), o.label);
+                match source {
+                    Some(m) => (Box::new(m.placed(o.compiled_transform(), o.material, label)), plan, None),
+                    // Not reached: the first object of a geometry is built as one mesh.
+                    None => {
+                        let (m, realised) = own_mesh(scene, o, repr);
+                        (Box::new(m), realised, None)
+                    }
+                }
+            }
+            Build::MeshTriangles => {
+                let m = mesh_triangles(o);
+                let keep = m.placed(*m.transform(), o.material, String::new());
+                (Box::new(m), plan, Some(keep))
+            }
+            Build::Tessellated { .. } => match mesh_geometry(scene, o, plan.build) {
+                Some((m, build)) => {
+                    let keep = m.placed(*m.transform(), o.material, String::new());
+                    (Box::new(m), ObjectPlan { build, ..plan }, Some(keep))
+                }
+                None => unreachable!("a tessellation always has triangles"),
+            },
+            _ => {
+                let (g, realised) = build_object(scene, o, repr, plan);
+                (g, realised, None)
+            }
+        };
+        objects.push(g);
+        plans.push(realised);
+        meshes.push(mesh);
+    }
+    (objects, plans)
+}
+
+/// A [`Build::SharedMesh`] object built as its own mesh (as the first object of its
+/// geometry is), with that plan.
+fn own_mesh(scene: &Scene, o: &Object, repr: Representation) -> (MeshGeometry, ObjectPlan) {
+    match (&o.kind, repr) {
+        (ObjectKind::Primitive(_), Representation::Mesh { resolution, shading, .. }) => {
+            let (m, build) = mesh_geometry(scene, o, Build::Tessellated { resolution, shading })
+                .expect("a tessellation always has triangles");
+            (m, ObjectPlan::as_asked(build))
+        }
+        _ => (mesh_triangles(o), ObjectPlan::as_asked(Build::MeshTriangles)),
+    }
 }
 
 /// Builds `plan` for `o`, asked in `repr` (which names the sphere tracing used when a
@@ -79,6 +138,14 @@ fn build_object(
                 None => marched(Fallback::EmptyExtraction),
             }
         }
+        Build::SharedMesh { .. } => {
+            let (m, realised) = own_mesh(scene, o, repr);
+            (Box::new(m), realised)
+        }
+        Build::Instanced { .. } => match instanced(scene, o, plan.build) {
+            Some((g, build)) => (Box::new(g), ObjectPlan { build, ..plan }),
+            None => marched(Fallback::EmptyExtraction),
+        },
         Build::GridFileExtracted { method, resolution } => match grid_file_surface(o, resolution, method) {
             Some(mesh) => {
                 let label =
@@ -169,8 +236,13 @@ fn mesh_geometry(scene: &Scene, o: &Object, build: Build) -> Option<(MeshGeometr
             if mesh.triangles.is_empty() {
                 return None;
             }
-            let label =
+            let mut label =
                 format!("{} '{}' extracted from its SDF at {resolution} cells", o.kind_name(), o.label);
+            if let ObjectKind::Repeat { .. } = o.kind {
+                label += &format!(" (more than {MAX_INSTANCES} copies: not instanced)");
+            } else if holds_repeat(o) {
+                label += " (its repetition is inside CSG: extracted whole, not instanced)";
+            }
             Some((MeshGeometry::new(mesh, Shading::Flat, Transform::IDENTITY, o.material, label), build))
         }
         Build::PlaneDisc { resolution } => {
@@ -195,6 +267,74 @@ fn mesh_geometry(scene: &Scene, o: &Object, build: Build) -> Option<(MeshGeometr
         }
         _ => unreachable!("not a triangle plan"),
     }
+}
+
+/// Whether `o` holds a repetition below itself.
+fn holds_repeat(o: &Object) -> bool {
+    match &o.kind {
+        ObjectKind::Csg { children, .. } => {
+            children.iter().any(|c| matches!(c.kind, ObjectKind::Repeat { .. }) || holds_repeat(c))
+        }
+        ObjectKind::Repeat { child, .. } => {
+            matches!(child.kind, ObjectKind::Repeat { .. }) || holds_repeat(child)
+        }
+        _ => false,
+    }
+}
+
+/// A [`Build::Instanced`] plan built: the repetition `o`'s child made into one mesh and
+/// placed at every copy ([`repeat_offsets`]), with the realised build (the shading a
+/// tessellation got, the copies placed); `None` when the child's extraction gives no
+/// triangles or the copies cannot be placed.
+fn instanced(scene: &Scene, o: &Object, build: Build) -> Option<(InstancedMesh, Build)> {
+    let Build::Instanced { mesh: how, .. } = build else { unreachable!("an instanced plan") };
+    let ObjectKind::Repeat { child, count, .. } = &o.kind else { unreachable!("repetitions only") };
+    let copies = repeat_offsets(scene, o, MAX_INSTANCES)?;
+    let (mesh, shading, inner, realised, what) = match how {
+        InstanceMesh::Tessellated { resolution, shading } => {
+            let ObjectKind::Primitive(p) = &child.kind else {
+                unreachable!("tessellation of primitives only")
+            };
+            let mesh = tessellate(p, resolution, None);
+            // Sharp-edged shapes stay flat, as in `mesh_geometry`.
+            let shading = if mesh.normals.is_some() { shading } else { Shading::Flat };
+            let what = format!("{} tessellated at {resolution}", p.kind_name());
+            (
+                mesh,
+                shading,
+                child.compiled_transform(),
+                InstanceMesh::Tessellated { resolution, shading },
+                what,
+            )
+        }
+        InstanceMesh::Extracted { method, resolution } => {
+            // In the repetition's frame: the child's own transform is in its SDF.
+            let mesh = extract_object(child, resolution, method).filter(|m| !m.triangles.is_empty())?;
+            let what = format!("{} extracted from its SDF at {resolution} cells", child.kind_name());
+            (mesh, Shading::Flat, Transform::IDENTITY, how, what)
+        }
+    };
+    let one = MeshGeometry::new(mesh, shading, Transform::IDENTITY, child.material, String::new());
+    let outer = o.compiled_transform();
+    let instances: Vec<MeshGeometry> = copies
+        .offsets
+        .iter()
+        .map(|&offset| one.placed(compose(&outer, offset, &inner), child.material, String::new()))
+        .collect();
+    drop(one);
+    let n = instances.len();
+    let which = match (count, copies.reach) {
+        (Some(c), _) => format!("{}x{}x{} copies", c.x, c.y, c.z),
+        (None, Some(reach)) => format!(
+            "infinite, the {n} copies in view out to {reach} (max_distance {})",
+            scene.settings.max_distance
+        ),
+        (None, None) => unreachable!("an infinite repetition has a reach"),
+    };
+    let label =
+        format!("repeat '{}' instanced ({which}): {n} placements of one mesh, the child {what}", o.label);
+    let build = Build::Instanced { mesh: realised, copies: n as u32, reach: copies.reach };
+    Some((InstancedMesh::new(instances, label), build))
 }
 
 /// A grid file's name for descriptions.
@@ -274,6 +414,11 @@ pub fn scene_mesh(scene: &Scene, repr: Representation) -> Option<TriangleMesh> {
                     None => continue,
                 }
             }
+            Build::SharedMesh { .. } => own_mesh(scene, o, repr).0.world_mesh(),
+            build @ Build::Instanced { .. } => match instanced(scene, o, build) {
+                Some((g, _)) => g.world_mesh(),
+                None => continue,
+            },
             _ => continue,
         };
         let base = all.positions.len() as u32;

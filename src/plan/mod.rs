@@ -13,6 +13,14 @@
 //! - [`Build::Tessellated`]: a primitive tessellated parametrically.
 //! - [`Build::PlaneDisc`]: an infinite plane as a disc around the camera.
 //! - [`Build::Extracted`]: a bounded object's surface extracted from its SDF.
+//! - [`Build::Instanced`]: a repetition's child made into one mesh (tessellated or
+//!   extracted) with one BVH, placed once per copy under the scene's top-level BVH, as a
+//!   polygon renderer instances repeated geometry: every copy of a finite repetition (up
+//!   to [`MAX_INSTANCES`]), the copies in view out to `max_distance` of an infinite one.
+//!   Repetition inside CSG (a box minus repeated crosses) cannot be instanced: that
+//!   object is extracted whole.
+//! - [`Build::SharedMesh`]: a top-level object with the same geometry (kind and
+//!   parameters) as an earlier one placed from that one's mesh and BVH (not a copy).
 //! - [`Build::Grid`]: an object sampled (or a mesh voxelized) into an SDF grid, dense or
 //!   narrow band, possibly clipped to the view region.
 //! - [`Build::GridFileMarched`], [`Build::GridFileExtracted`]: a grid file ray marched,
@@ -31,6 +39,7 @@ use std::fmt;
 
 use glam::Vec3;
 
+pub use crate::geometry::mesh::instance::MAX_INSTANCES;
 pub use build::{
     build_objects, build_scene, build_scene_with_plans, grid_file_mesh, reextract_mesh, scene_mesh,
 };
@@ -39,6 +48,7 @@ use crate::convert::extract::ExtractMethod;
 use crate::geometry::Aabb;
 use crate::geometry::grid::object::{VIEW_CLIP_FRACTION, view_region};
 use crate::geometry::march::MarchParams;
+use crate::geometry::mesh::instance::repeat_offsets;
 use crate::geometry::sdf::SdfTree;
 use crate::scene::Scene;
 use crate::scene::shape::{Object, ObjectKind, Primitive, Shading};
@@ -53,10 +63,11 @@ pub enum Representation {
     Sdf { march: MarchParams },
     /// Primitives tessellated parametrically at `resolution` (segments around the largest
     /// circle) and ray traced as triangle meshes through a BVH; infinite planes become a
-    /// disc around the camera out to the scene's `max_distance`; bounded CSG and repetition
-    /// are extracted from their SDF (marching cubes, `resolution` cells along the
-    /// longest axis, at most 512); unbounded ones are sphere traced with `march` (the
-    /// render says so).
+    /// disc around the camera out to the scene's `max_distance`; repetition is instanced
+    /// (its child made into one mesh, placed per copy: [`Build::Instanced`]); bounded CSG
+    /// is extracted from its SDF (marching cubes, `resolution` cells along the
+    /// longest axis, at most 512); unbounded CSG is sphere traced with `march` (the
+    /// render says so). Objects of the same geometry share one mesh ([`Build::SharedMesh`]).
     Mesh { resolution: u32, shading: Shading, method: MeshMethod, march: MarchParams },
     /// Every bounded object (primitive, CSG, repetition, mesh) sampled into a signed
     /// distance grid of `resolution` cells along its longest axis (exact distances at cell
@@ -221,6 +232,26 @@ pub enum Build {
         /// region (the rest is sphere traced); `None`: the whole box.
         clip: Option<Aabb>,
     },
+    /// A repetition's child made into one mesh with one BVH, placed once per copy (the
+    /// copies are the leaves of the scene's top-level BVH).
+    Instanced {
+        /// How the one mesh is made.
+        mesh: InstanceMesh,
+        /// Copies placed, at most [`MAX_INSTANCES`] (0 when none of an infinite
+        /// repetition's copies is in view).
+        copies: u32,
+        /// An infinite repetition's copies are those in view within this distance of the
+        /// camera (scene units: `max_distance`, or less where that would place more than
+        /// [`MAX_INSTANCES`] copies); `None` for a finite repetition (every copy).
+        reach: Option<f32>,
+    },
+    /// The mesh and BVH of top-level object `of` (an earlier object of the same kind and
+    /// parameters, built [`Build::Tessellated`] or [`Build::MeshTriangles`]) placed under
+    /// this object's transform and material, not built again.
+    SharedMesh {
+        /// Index of that object in the scene's objects.
+        of: u32,
+    },
     /// A grid file ray marched.
     GridFileMarched {
         /// How its samples are stored.
@@ -233,6 +264,27 @@ pub enum Build {
         /// The extraction method.
         method: ExtractMethod,
         /// Cells along the longest axis of the grid's box, at most
+        /// [`MAX_EXTRACT_RESOLUTION`].
+        resolution: u32,
+    },
+}
+
+/// How the one mesh of a [`Build::Instanced`] repetition is made.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum InstanceMesh {
+    /// The child primitive (not a plane) tessellated parametrically in its own frame.
+    Tessellated {
+        /// Segments around the largest circle, `>= 3`.
+        resolution: u32,
+        /// As [`Build::Tessellated`]'s.
+        shading: Shading,
+    },
+    /// The child (CSG or a finite repetition; any child when extraction is asked for)
+    /// extracted from its SDF in the repetition's frame, traced flat.
+    Extracted {
+        /// The extraction method.
+        method: ExtractMethod,
+        /// Cells along the longest axis of the child's box, at most
         /// [`MAX_EXTRACT_RESOLUTION`].
         resolution: u32,
     },
@@ -334,9 +386,10 @@ pub fn plan_object(scene: &Scene, o: &Object, repr: Representation) -> ObjectPla
     }
     let is_mesh = matches!(o.kind, ObjectKind::Mesh { .. });
     match repr {
-        _ if is_mesh && !matches!(repr, Representation::Grid { .. }) => {
-            ObjectPlan::as_asked(Build::MeshTriangles)
-        }
+        _ if is_mesh && !matches!(repr, Representation::Grid { .. }) => match first_alike(scene, o) {
+            Some(of) => ObjectPlan::as_asked(Build::SharedMesh { of }),
+            None => ObjectPlan::as_asked(Build::MeshTriangles),
+        },
         Representation::Analytic { .. } => match o.kind {
             ObjectKind::Primitive(_) => ObjectPlan::as_asked(Build::ClosedForm),
             _ => marched(Some(Fallback::NoClosedForm { kind: o.kind_name() })),
@@ -351,11 +404,31 @@ pub fn plan_object(scene: &Scene, o: &Object, repr: Representation) -> ObjectPla
             (ObjectKind::Primitive(Primitive::Plane { .. }), _) => {
                 ObjectPlan::as_asked(Build::PlaneDisc { resolution })
             }
-            (ObjectKind::Primitive(_), MeshMethod::Parametric) => {
-                ObjectPlan::as_asked(Build::Tessellated { resolution, shading })
+            (ObjectKind::Primitive(_), MeshMethod::Parametric) => match first_alike(scene, o) {
+                Some(of) => ObjectPlan::as_asked(Build::SharedMesh { of }),
+                None => ObjectPlan::as_asked(Build::Tessellated { resolution, shading }),
+            },
+            (ObjectKind::Repeat { child, .. }, _)
+                if let Some(mesh) = instance_mesh(child, resolution, shading, method) =>
+            {
+                match repeat_offsets(scene, o, MAX_INSTANCES) {
+                    Some(c) => ObjectPlan::as_asked(Build::Instanced {
+                        mesh,
+                        copies: c.offsets.len() as u32,
+                        reach: c.reach,
+                    }),
+                    // More copies than may be instanced: extracted whole (finite) or
+                    // sphere traced (infinite).
+                    None if !signed(o) => marched(Some(Fallback::Unsigned)),
+                    None if o.bounds().is_none() => marched(Some(Fallback::Unbounded)),
+                    None => ObjectPlan::as_asked(Build::Extracted {
+                        method: method.extract_method(),
+                        resolution: resolution.min(MAX_EXTRACT_RESOLUTION),
+                    }),
+                }
             }
-            // CSG and bounded repetition (and every bounded object when extraction is
-            // asked for): extracted from the SDF.
+            // CSG, repetition that cannot be instanced (and every bounded object when
+            // extraction is asked for): extracted from the SDF.
             _ if !signed(o) => marched(Some(Fallback::Unsigned)),
             _ if o.bounds().is_none() => marched(Some(Fallback::Unbounded)),
             _ => ObjectPlan::as_asked(Build::Extracted {
@@ -403,6 +476,47 @@ pub fn plan_scene(scene: &Scene, repr: Representation) -> Vec<ObjectPlan> {
     scene.objects.iter().map(|o| plan_object(scene, o, repr)).collect()
 }
 
+/// How the one mesh of a repetition of `child` is made in the mesh representation, or
+/// `None` when it cannot be (an unbounded child; an unsigned one that would need
+/// extraction).
+fn instance_mesh(
+    child: &Object,
+    resolution: u32,
+    shading: Shading,
+    method: MeshMethod,
+) -> Option<InstanceMesh> {
+    match (&child.kind, method) {
+        (ObjectKind::Primitive(Primitive::Plane { .. }), _) => None,
+        (ObjectKind::Primitive(_), MeshMethod::Parametric) => {
+            Some(InstanceMesh::Tessellated { resolution, shading })
+        }
+        _ if child.bounds().is_none() || !signed(child) => None,
+        _ => Some(InstanceMesh::Extracted {
+            method: method.extract_method(),
+            resolution: resolution.min(MAX_EXTRACT_RESOLUTION),
+        }),
+    }
+}
+
+/// The index of the first top-level object of `scene` before `o` with the same geometry
+/// (a primitive, not a plane, of the same kind and parameters; a mesh of the same file
+/// and data with the same shading), whose mesh `o` then shares; `None` when there is none
+/// or `o` is not one of `scene`'s objects.
+fn first_alike(scene: &Scene, o: &Object) -> Option<u32> {
+    let me = scene.objects.iter().position(|x| std::ptr::eq(x, o))?;
+    let alike = |x: &Object| match (&x.kind, &o.kind) {
+        (ObjectKind::Primitive(p), ObjectKind::Primitive(q)) => {
+            p == q && !matches!(p, Primitive::Plane { .. })
+        }
+        (
+            ObjectKind::Mesh { mesh: m, source: a, shading: s },
+            ObjectKind::Mesh { mesh: n, source: b, shading: t },
+        ) => s == t && (std::sync::Arc::ptr_eq(m, n) || (a == b && m == n)),
+        _ => false,
+    };
+    scene.objects[..me].iter().position(alike).map(|i| i as u32)
+}
+
 /// Whether `o` has a signed analytic distance (false when it holds a triangle, a mesh or a
 /// grid file).
 fn signed(o: &Object) -> bool {
@@ -414,6 +528,7 @@ mod tests {
     use std::path::Path;
 
     use super::*;
+    use crate::plan::budget::BYTES_PER_TRACED_TRIANGLE;
     use crate::scene::load_scene;
 
     fn scene(name: &str) -> Scene {
@@ -444,6 +559,7 @@ mod tests {
             ObjectKind::Primitive(Primitive::Plane { .. }) => "plane",
             ObjectKind::Primitive(Primitive::Triangle { .. }) => "triangle",
             ObjectKind::Primitive(_) => "primitive",
+            ObjectKind::Repeat { .. } => "repeat",
             _ => "other",
         }
     }
@@ -456,7 +572,7 @@ mod tests {
         assert!(march.pixel_footprint > 0.0);
         for (o, p) in s.objects.iter().zip(plan_scene(&s, repr)) {
             let expect = match kind(o) {
-                "other" => ObjectPlan::fallback(
+                "other" | "repeat" => ObjectPlan::fallback(
                     Build::Marched { march },
                     Fallback::NoClosedForm { kind: o.kind_name() },
                 ),
@@ -471,9 +587,12 @@ mod tests {
             assert_eq!(p, ObjectPlan::as_asked(build), "{}", o.label);
         }
         let mc = ExtractMethod::MarchingCubes;
+        // The 4 x 1 x 2 sphere grid.
+        let copies = |mesh| Build::Instanced { mesh, copies: 8, reach: None };
         for (o, p) in s.objects.iter().zip(plan_scene(&s, mesh(MeshMethod::Parametric))) {
             let build = match kind(o) {
                 "plane" => Build::PlaneDisc { resolution: 16 },
+                "repeat" => copies(InstanceMesh::Tessellated { resolution: 16, shading: Shading::Smooth }),
                 "other" => Build::Extracted { method: mc, resolution: 16 },
                 _ => Build::Tessellated { resolution: 16, shading: Shading::Smooth },
             };
@@ -483,6 +602,9 @@ mod tests {
             let expect = match kind(o) {
                 "plane" => ObjectPlan::as_asked(Build::PlaneDisc { resolution: 16 }),
                 "triangle" => ObjectPlan::fallback(Build::Marched { march }, Fallback::Unsigned),
+                "repeat" => {
+                    ObjectPlan::as_asked(copies(InstanceMesh::Extracted { method: mc, resolution: 16 }))
+                }
                 _ => ObjectPlan::as_asked(Build::Extracted { method: mc, resolution: 16 }),
             };
             assert_eq!(p, expect, "{}", o.label);
@@ -540,6 +662,13 @@ mod tests {
                 {
                     *shading = got;
                 }
+                if let (
+                    Build::Instanced { mesh: InstanceMesh::Tessellated { shading, .. }, .. },
+                    Build::Instanced { mesh: InstanceMesh::Tessellated { shading: got, .. }, .. },
+                ) = (&mut p.build, r.build)
+                {
+                    *shading = got;
+                }
             }
             assert_eq!(planned, realised, "{}", repr.name());
         }
@@ -558,5 +687,102 @@ mod tests {
         assert_eq!(budget::scene_bytes(&s, grid(GridFill::Sample)), gridded * samples.pow(3) * 4);
         assert_eq!(grid_samples_per_axis(8), 13);
         assert_eq!(grid_samples_per_axis(u32::MAX), u32::MAX);
+    }
+
+    /// A scene of `objects` (TOML tables) before a camera at the origin looking down +z.
+    fn scene_of(objects: &str, max_distance: f32) -> Scene {
+        let text = format!(
+            "[camera]\nposition = [0, 1, -5]\nlook_at = [0, 0, 5]\nwidth = 64\nheight = 48\n\n\
+             [settings]\nmax_distance = {max_distance}\n\n{objects}"
+        );
+        crate::scene::parse_scene(&text, Path::new("instancing.toml")).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    #[test]
+    fn identical_objects_share_the_first_ones_mesh() {
+        let sphere = |x: f32, r: f32| {
+            format!("[[objects]]\ntype = \"sphere\"\nradius = {r}\ntranslate = [{x}, 0, 3]\n\n")
+        };
+        let s =
+            scene_of(&(sphere(-2.0, 0.5) + &sphere(0.0, 0.5) + &sphere(2.0, 0.7) + &sphere(4.0, 0.5)), 100.0);
+        let tess = Build::Tessellated { resolution: 16, shading: Shading::Smooth };
+        let builds: Vec<Build> =
+            plan_scene(&s, mesh(MeshMethod::Parametric)).iter().map(|p| p.build).collect();
+        assert_eq!(builds, [tess, Build::SharedMesh { of: 0 }, tess, Build::SharedMesh { of: 0 }]);
+        // Extraction works in world space: nothing is shared.
+        let mc = ExtractMethod::MarchingCubes;
+        for p in plan_scene(&s, mesh(MeshMethod::Extracted(mc))) {
+            assert_eq!(p.build, Build::Extracted { method: mc, resolution: 16 });
+        }
+        // A shared mesh is estimated as one placement.
+        let one = budget::object_bytes(
+            &s.objects[0],
+            &plan_object(&s, &s.objects[0], mesh(MeshMethod::Parametric)),
+        );
+        let all = budget::scene_bytes(&s, mesh(MeshMethod::Parametric));
+        assert_eq!(all, 2 * one + 2 * budget::BYTES_PER_INSTANCE);
+    }
+
+    #[test]
+    fn repetition_is_instanced_unless_inside_csg_or_over_the_cap() {
+        let repeat = |count: &str, child: &str| {
+            format!(
+                "[[objects]]\ntype = \"repeat\"\nperiod = [1, 0, 1]\n{count}translate = [0, -1, 0]\n[objects.child]\n{child}\n\n"
+            )
+        };
+        let sphere = "type = \"sphere\"\nradius = 0.2";
+        let s = scene_of(&repeat("count = [10, 1, 7]\n", sphere), 100.0);
+        let p = plan_object(&s, &s.objects[0], mesh(MeshMethod::Parametric));
+        let tess = InstanceMesh::Tessellated { resolution: 16, shading: Shading::Smooth };
+        assert_eq!(p, ObjectPlan::as_asked(Build::Instanced { mesh: tess, copies: 70, reach: None }));
+        let bytes = budget::object_bytes(&s.objects[0], &p);
+        assert_eq!(bytes, 2 * 16 * 16 * BYTES_PER_TRACED_TRIANGLE + 70 * budget::BYTES_PER_INSTANCE);
+        // Over the cap: extracted whole.
+        let s = scene_of(&repeat("count = [300, 1, 300]\n", sphere), 100.0);
+        let p = plan_object(&s, &s.objects[0], mesh(MeshMethod::Parametric));
+        assert_eq!(p.build, Build::Extracted { method: ExtractMethod::MarchingCubes, resolution: 16 });
+        // A CSG child is extracted once, in the repetition's frame.
+        let csg = "type = \"subtraction\"\nchildren = [{ type = \"box\", half_size = [0.3, 0.3, 0.3] }, { type = \"sphere\", radius = 0.4 }]";
+        let s = scene_of(&repeat("count = [3, 1, 3]\n", csg), 100.0);
+        let p = plan_object(&s, &s.objects[0], mesh(MeshMethod::Parametric));
+        let mc = InstanceMesh::Extracted { method: ExtractMethod::MarchingCubes, resolution: 16 };
+        assert_eq!(p.build, Build::Instanced { mesh: mc, copies: 9, reach: None });
+        // Infinite: the copies in view out to max_distance, fewer for a shorter one, and a
+        // shorter reach where max_distance would place too many.
+        let s = scene_of(&repeat("", sphere), 40.0);
+        let Build::Instanced { copies: far, reach: Some(r), .. } =
+            plan_object(&s, &s.objects[0], mesh(MeshMethod::Parametric)).build
+        else {
+            panic!("not instanced")
+        };
+        assert_eq!(r, 40.0);
+        let s = scene_of(&repeat("", sphere), 20.0);
+        let Build::Instanced { copies: near, .. } =
+            plan_object(&s, &s.objects[0], mesh(MeshMethod::Parametric)).build
+        else {
+            panic!("not instanced")
+        };
+        assert!(near > 100 && 3 * near < far && far as u64 <= MAX_INSTANCES, "{near} {far}");
+        let s = scene_of(&repeat("", sphere), 1e5);
+        let Build::Instanced { copies, reach: Some(r), .. } =
+            plan_object(&s, &s.objects[0], mesh(MeshMethod::Parametric)).build
+        else {
+            panic!("not instanced")
+        };
+        assert!(
+            r < 1e5 && copies as u64 <= MAX_INSTANCES && copies as u64 > MAX_INSTANCES / 4,
+            "{r} {copies}"
+        );
+        // Repetition inside CSG cannot be instanced: the CSG is extracted whole.
+        let text = format!(
+            "[[objects]]\ntype = \"subtraction\"\nchildren = [{{ type = \"box\", half_size = [3, 0.3, 3] }}, \
+             {{ type = \"repeat\", period = [1, 0, 1], count = [5, 1, 5], child = {{ {} }} }}]\n",
+            "type = \"sphere\", radius = 0.3"
+        );
+        let s = scene_of(&text, 100.0);
+        let p = plan_object(&s, &s.objects[0], mesh(MeshMethod::Parametric));
+        assert_eq!(p.build, Build::Extracted { method: ExtractMethod::MarchingCubes, resolution: 16 });
+        let (g, _) = build_scene_with_plans(&s, mesh(MeshMethod::Parametric));
+        assert!(g.objects()[0].describe().contains("inside CSG"), "{}", g.objects()[0].describe());
     }
 }

@@ -382,14 +382,26 @@ fn scaling_experiment_writes_a_row_per_primitive_count_and_representation() {
     let header: Vec<String> = reader.headers().unwrap().iter().map(String::from).collect();
     assert_eq!(header, sdfmesh::compare::scaling::SCALING_COLUMNS.to_vec());
     let rows: Vec<csv::StringRecord> = reader.records().map(Result::unwrap).collect();
-    assert_eq!(rows.len(), 4 * 2 * 4);
-    // More primitives, more triangles in the mesh representation.
-    let tris = |count: &str, prim: &str| -> u64 {
-        rows.iter().find(|r| &r[0] == prim && &r[1] == "mesh" && &r[3] == count).unwrap()[4].parse().unwrap()
+    // Primitives x counts x layouts x representations.
+    assert_eq!(rows.len(), 4 * 2 * 2 * 4);
+    let col = |name: &str| header.iter().position(|c| c == name).unwrap();
+    let (layout, method, bytes) = (col("layout"), col("method"), col("total_bytes"));
+    let mesh = |count: &str, prim: &str, l: &str| {
+        rows.iter().find(|r| &r[0] == prim && &r[1] == "mesh" && &r[3] == count && &r[layout] == l).unwrap()
     };
+    let num = |r: &csv::StringRecord, i: usize| -> u64 { r[i].parse().unwrap() };
     for prim in ["sphere", "cube", "cylinder", "cone"] {
-        assert_eq!(tris("5", prim), 5 * tris("2", prim) / 2, "{prim}");
+        // Separate objects share one mesh: more primitives, more placements, not more
+        // triangles.
+        let (two, five) = (mesh("2", prim, "objects"), mesh("5", prim, "objects"));
+        assert_eq!(num(two, 4), num(five, 4), "{prim}");
+        assert!(num(five, bytes) > num(two, bytes), "{prim}");
+        assert!(!two[method].starts_with("union"), "{prim}");
+        // One union object: extracted whole.
+        let union = mesh("5", prim, "union");
+        assert!(union[method].starts_with("union-") && num(union, 4) > 0, "{prim}");
     }
+    assert!(rows.iter().all(|r| r[col("schema_version")] == *"2"));
 }
 
 /// Without inputs, compare runs every scene under `data/scenes` (relative to the working

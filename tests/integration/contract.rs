@@ -1,7 +1,8 @@
 //! The `Geometry` contract (`src/geometry/mod.rs`), checked once for every representation
 //! (closed form, analytic SDF, relaxed SDF, dense grid, narrow-band grid, tessellated mesh)
-//! on every test scene (single primitives, CSG, a union of 9 primitives, a mesh read from a file, and a scene of
-//! several objects with an infinite plane): each object's geometry and the scene aggregate
+//! on every test scene (single primitives, CSG, a union of 9 primitives, a mesh read from a
+//! file, a scene of several objects with an infinite plane, and repetition and repeated
+//! objects, instanced and shared in the mesh representation): each object's geometry and the scene aggregate
 //! (`SceneGeometry`). `contract_tests!` writes one `#[test]` per scene x representation.
 //!
 //! For deterministic pseudo-random rays aimed at the objects, grazing rays, rays starting
@@ -214,6 +215,49 @@ children = [
 "#
     );
     parse_scene(&text, Path::new("several.toml")).unwrap()
+}
+
+/// Repetition and repeated geometry: a finite repetition of spheres and one of a CSG
+/// child (instanced in the mesh representation: one mesh placed per copy), and two boxes
+/// of the same size (sharing one mesh there).
+fn repeated() -> Scene {
+    let text = format!(
+        r#"
+[camera]
+position = [0, 1.5, -6]
+look_at = [0, 0, 0]
+width = {PIXELS}
+height = {PIXELS}
+
+[[objects]]
+type = "repeat"
+period = [0.8, 0, 0.7]
+count = [3, 1, 2]
+rotate = [0, 25, 0]
+translate = [-0.6, -0.6, 0.2]
+child = {{ type = "sphere", radius = 0.3 }}
+
+[[objects]]
+type = "repeat"
+period = [0.9, 0.9, 0]
+count = [2, 2, 1]
+translate = [0.9, 0.5, 0.3]
+child = {{ type = "subtraction", children = [{{ type = "box", half_size = [0.3, 0.3, 0.3] }}, {{ type = "sphere", radius = 0.25, translate = [0, 0, -0.3] }}] }}
+
+[[objects]]
+type = "box"
+half_size = [0.25, 0.4, 0.25]
+rotate = [0, 35, 0]
+translate = [-1.3, 0.6, -0.5]
+
+[[objects]]
+type = "box"
+half_size = [0.25, 0.4, 0.25]
+rotate = [20, 0, 10]
+translate = [0.2, 0.9, -0.8]
+"#
+    );
+    parse_scene(&text, Path::new("repeated.toml")).unwrap()
 }
 
 // ---------------------------------------------------------------- the contract
@@ -507,4 +551,14 @@ macro_rules! contract_tests {
     )*};
 }
 
-contract_tests!(sphere, rotated_box, torus, cylinder_and_cone, csg, big_union, mesh_file, several_with_plane);
+contract_tests!(
+    sphere,
+    rotated_box,
+    torus,
+    cylinder_and_cone,
+    csg,
+    big_union,
+    mesh_file,
+    several_with_plane,
+    repeated
+);

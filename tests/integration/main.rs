@@ -25,6 +25,7 @@ mod grid_speed_nearest;
 mod grid_voxelize;
 mod hard_cases;
 mod hard_suite;
+mod instancing;
 mod mesh_io;
 mod mesh_tracing;
 mod representations;

@@ -4,10 +4,17 @@
 //! (vertex-normal) shading, instancing under a transform, and exact byte counts. Where the
 //! CPU has AVX2 a closest hit runs whole (ray setup, walk, hit record) in one function
 //! compiled for it, with no call in between.
+//!
+//! The triangles, normals and BVH of a mesh ([`MeshShape`]) are shared (an `Arc`) by every
+//! [`MeshGeometry`] placed from it ([`MeshGeometry::placed`]): one mesh and one BVH,
+//! one transform per instance, as a polygon renderer instances repeated geometry
+//! ([`instance`]: the copies of a repetition).
 
+pub mod instance;
 pub mod triangle;
 pub mod wide_bvh;
 
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use glam::{DVec3, Vec3};
@@ -18,23 +25,64 @@ use crate::geometry::mesh::triangle::{ShearedRay, closest_point_on_triangle};
 #[cfg(target_arch = "x86_64")]
 use crate::geometry::mesh::wide_bvh::WideBoxRayAvx2;
 use crate::geometry::mesh::wide_bvh::{BoxTest, LeafHit, WideBoxRay, WideBvh, closest_walk};
-use crate::geometry::{Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, aabb, f32_error, max_abs};
+use crate::geometry::{
+    Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, Shared, aabb, f32_error, max_abs,
+};
 use crate::mesh::TriangleMesh;
 pub use crate::scene::shape::Shading;
 use crate::scene::transform::Transform;
 
-/// A triangle mesh ready for tracing.
-pub struct MeshGeometry {
+/// The part of a traced mesh that instances share: positions, triangles, normals and the
+/// BVH, in the mesh's own frame.
+pub struct MeshShape {
     positions: Vec<Vec3>,
     /// Triangles in BVH leaf order: leaf primitive `i` is `triangles[i]`.
     triangles: Vec<[u32; 3]>,
     normals: Option<Vec<Vec3>>,
     bvh: WideBvh,
+    /// The box of the triangles (padded as the BVH's leaves), `None` without triangles.
+    local_bounds: Option<Aabb>,
+}
+
+impl MeshShape {
+    /// Bytes of the shape: its struct and everything it owns (the BVH's struct counted once).
+    pub fn bytes_used(&self) -> usize {
+        std::mem::size_of::<Self>()
+            + self.positions.capacity() * std::mem::size_of::<Vec3>()
+            + self.triangles.capacity() * std::mem::size_of::<[u32; 3]>()
+            + self.normals.as_ref().map_or(0, |n| n.capacity() * std::mem::size_of::<Vec3>())
+            + self.bvh.bytes_used()
+            - std::mem::size_of::<WideBvh>()
+    }
+
+    /// What the shape stores: its triangles and the BVH's nodes and packets.
+    pub fn census(&self) -> Census {
+        Census {
+            triangles: self.triangles.len() as u64,
+            grid_samples: 0,
+            accel_bytes: (self.bvh.bytes_used() - std::mem::size_of::<WideBvh>()) as u64,
+        }
+    }
+
+    /// Number of triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// The box of the triangles in the mesh's frame, `None` without triangles.
+    pub fn local_bounds(&self) -> Option<Aabb> {
+        self.local_bounds
+    }
+}
+
+/// A triangle mesh ready for tracing: a shared [`MeshShape`] placed under a transform.
+pub struct MeshGeometry {
+    shape: Arc<MeshShape>,
     transform: Transform,
     material: MaterialId,
     world_bounds: Option<Aabb>,
     label: String,
-    /// Wall-clock time of the BVH build.
+    /// Wall-clock time of the BVH build (of the shared shape, for a placed instance).
     pub build_time: Duration,
 }
 
@@ -122,49 +170,77 @@ impl MeshGeometry {
             }
             Shading::Smooth => {}
         }
-        let local = boxes.iter().copied().reduce(|a, b| a.union(&b));
-        let world_bounds = local.map(|b| transform.box_to_world(&b));
+        let local_bounds = boxes.iter().copied().reduce(|a, b| a.union(&b));
+        let world_bounds = local_bounds.map(|b| transform.box_to_world(&b));
+        let shape = Arc::new(MeshShape { positions, triangles, normals, bvh, local_bounds });
+        MeshGeometry { shape, transform, material, world_bounds, label, build_time: start.elapsed() }
+    }
+
+    /// Another instance of this geometry's mesh and BVH (shared, not copied) under
+    /// `transform` (mesh frame to world) with `material`.
+    pub fn placed(&self, transform: Transform, material: MaterialId, label: String) -> MeshGeometry {
+        let world_bounds = self.shape.local_bounds.map(|b| transform.box_to_world(&b));
         MeshGeometry {
-            positions,
-            triangles,
-            normals,
-            bvh,
+            shape: Arc::clone(&self.shape),
             transform,
             material,
             world_bounds,
             label,
-            build_time: start.elapsed(),
+            build_time: self.build_time,
         }
+    }
+
+    /// The shared mesh and BVH.
+    pub fn shape(&self) -> &Arc<MeshShape> {
+        &self.shape
+    }
+
+    /// The transform from the mesh's frame to the world.
+    pub fn transform(&self) -> &Transform {
+        &self.transform
     }
 
     /// The triangles in world space (positions transformed; no normals).
     pub fn world_mesh(&self) -> TriangleMesh {
         TriangleMesh {
-            positions: self.positions.iter().map(|&p| self.transform.to_world.transform_point3(p)).collect(),
-            triangles: self.triangles.clone(),
+            positions: self
+                .shape
+                .positions
+                .iter()
+                .map(|&p| self.transform.to_world.transform_point3(p))
+                .collect(),
+            triangles: self.shape.triangles.clone(),
             normals: None,
         }
     }
 
     /// Number of triangles.
     pub fn triangle_count(&self) -> usize {
-        self.triangles.len()
+        self.shape.triangles.len()
+    }
+
+    /// Bytes of this instance alone: its struct and label, without the shared shape.
+    pub fn instance_bytes(&self) -> usize {
+        std::mem::size_of::<Self>() + self.label.capacity()
     }
 
     /// Makes the BVH walks use the portable box test even where the CPU has AVX2 (for
     /// measuring what AVX2 brings; hits are bit-identical).
+    ///
+    /// # Panics
+    /// When the shape is shared with other instances.
     pub fn use_portable_box_test(&mut self) {
-        self.bvh.use_portable_box_test();
+        Arc::get_mut(&mut self.shape).expect("an unshared mesh").bvh.use_portable_box_test();
     }
 
     /// Whether the BVH walks use the AVX2 box test.
     pub fn uses_avx2(&self) -> bool {
-        self.bvh.uses_avx2()
+        self.shape.bvh.uses_avx2()
     }
 
     /// Bytes of the BVH alone (its struct, nodes and leaf packets).
     pub fn accel_bytes(&self) -> usize {
-        self.bvh.bytes_used()
+        self.shape.bvh.bytes_used()
     }
 
     /// [`Geometry::closest_hit`] with the AVX2 box test: the whole of it (ray setup, walk and
@@ -199,16 +275,16 @@ impl MeshGeometry {
     ) -> Option<Hit> {
         let local = if self.transform.identity { *ray } else { self.transform.ray_to_local(ray) };
         let LeafHit { triangle: i, t, corners: [a, b, c] } =
-            closest_walk::<B>(&self.bvh, local.origin, local.dir, t_min, t_max, stats)?;
+            closest_walk::<B>(&self.shape.bvh, local.origin, local.dir, t_min, t_max, stats)?;
         let geometric = (b - a).cross(c - a);
         let normal = self.transform.normal_to_world(geometric);
         let mut shading_normal = normal;
-        if let Some(normals) = &self.normals {
+        if let Some(normals) = &self.shape.normals {
             // The same test on the winner alone, for its barycentrics (bit-identical `t`).
             let bary = ShearedRay::new(local.origin, local.dir)
                 .intersect(a, b, c, t, t)
                 .map_or([1.0 / 3.0; 3], |h| h.bary);
-            let t = self.triangles[i as usize];
+            let t = self.shape.triangles[i as usize];
             let s = normals[t[0] as usize] * bary[0]
                 + normals[t[1] as usize] * bary[1]
                 + normals[t[2] as usize] * bary[2];
@@ -225,8 +301,8 @@ impl MeshGeometry {
 
     #[inline]
     fn corners(&self, i: u32) -> [Vec3; 3] {
-        let t = self.triangles[i as usize];
-        [self.positions[t[0] as usize], self.positions[t[1] as usize], self.positions[t[2] as usize]]
+        let (t, p) = (self.shape.triangles[i as usize], &self.shape.positions);
+        [p[t[0] as usize], p[t[1] as usize], p[t[2] as usize]]
     }
 }
 
@@ -237,7 +313,7 @@ impl Geometry for MeshGeometry {
 
     fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
         #[cfg(target_arch = "x86_64")]
-        if self.bvh.uses_avx2() {
+        if self.shape.bvh.uses_avx2() {
             // SAFETY: `uses_avx2` is only true where the CPU has AVX2, FMA, POPCNT and BMI1.
             // The ray goes by value: a caller that has just written it would otherwise
             // have its stores read back by wider loads, which cannot be forwarded.
@@ -248,25 +324,23 @@ impl Geometry for MeshGeometry {
 
     fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
         let local = self.transform.ray_to_local(ray);
-        self.bvh.any_hit(local.origin, local.dir, t_min, t_max, stats)
+        self.shape.bvh.any_hit(local.origin, local.dir, t_min, t_max, stats)
     }
 
     fn bytes_used(&self) -> usize {
-        std::mem::size_of::<Self>()
-            + self.positions.capacity() * std::mem::size_of::<Vec3>()
-            + self.triangles.capacity() * std::mem::size_of::<[u32; 3]>()
-            + self.normals.as_ref().map_or(0, |n| n.capacity() * std::mem::size_of::<Vec3>())
-            + self.bvh.bytes_used()
-            - std::mem::size_of::<WideBvh>()
-            + self.label.capacity()
+        self.instance_bytes() + self.shape.bytes_used()
     }
 
     fn census(&self) -> Census {
-        Census {
-            triangles: self.triangles.len() as u64,
-            grid_samples: 0,
-            accel_bytes: (self.bvh.bytes_used() - std::mem::size_of::<WideBvh>()) as u64,
-        }
+        self.shape.census()
+    }
+
+    fn shared(&self) -> Option<Shared> {
+        Some(Shared {
+            id: Arc::as_ptr(&self.shape) as usize,
+            bytes: self.shape.bytes_used(),
+            census: self.shape.census(),
+        })
     }
 
     fn surface_distance(&self, p: DVec3) -> f64 {
@@ -275,7 +349,7 @@ impl Geometry for MeshGeometry {
         let local = self.transform.point_to_local_f64(p);
         let to_world = |x: DVec3| self.transform.to_world.transform_point3(x.as_vec3()).as_dvec3();
         let mut best = f64::INFINITY;
-        self.bvh.nearest(local, |i| {
+        self.shape.bvh.nearest(local, |i| {
             let [a, b, c] = self.corners(i);
             let x = closest_point_on_triangle(local.as_vec3().into(), a.into(), b.into(), c.into());
             let d = (to_world(Vec3::from(x).as_dvec3()) - p).length();
@@ -290,12 +364,12 @@ impl Geometry for MeshGeometry {
         format!(
             "{}: {} triangles, 8-wide BVH of {} nodes and {} leaf packets (depth {}) built in {:.1} ms, {}",
             self.label,
-            self.triangles.len(),
-            self.bvh.nodes.len(),
-            self.bvh.packets.len(),
-            self.bvh.depth,
+            self.shape.triangles.len(),
+            self.shape.bvh.nodes.len(),
+            self.shape.bvh.packets.len(),
+            self.shape.bvh.depth,
             self.build_time.as_secs_f64() * 1e3,
-            if self.normals.is_some() { "smooth shading" } else { "flat shading" }
+            if self.shape.normals.is_some() { "smooth shading" } else { "flat shading" }
         )
     }
 }
