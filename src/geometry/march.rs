@@ -113,11 +113,12 @@ pub fn sphere_trace(
 /// see no sign change there and leave a hole; so does this marcher (regularised CSG, the
 /// same rule in every representation). A march that converges (`|d| < tolerance`) already
 /// past the surface (`d < 0` in the march's sign) has crossed it; otherwise it probes the
-/// field at `t + d + tolerance / 2` along the ray: a value of the other sign confirms the
+/// field at `t + d + tolerance / 2` along the ray (twice as far after each touch, see
+/// [`MAX_TOUCHES`]): a value of the other sign confirms the
 /// crossing, and the hit is refined between the two points (secant) and kept where the
 /// field is smaller there. Without a sign change the point only touches zero (a skin, or a
 /// ray grazing a surface it does not enter), and the march goes on from the probe with
-/// plain steps. Unsigned fields (a triangle) have no inside: their hits are accepted on
+/// plain steps, up to [`MAX_TOUCHES`] times in a row. Unsigned fields (a triangle) have no inside: their hits are accepted on
 /// convergence, unrefined.
 #[derive(Clone, Copy, Debug)]
 pub struct MarchLane {
@@ -127,12 +128,27 @@ pub struct MarchLane {
     sign: f64,
     prev_t: f64,
     prev_r: f64,
+    /// |distance| at the last point marched, `r_t`.
     r: f64,
+    r_t: f64,
     omega: f64,
     /// March evaluations so far (the step budget, [`MarchParams::max_steps`]).
     iterations: u32,
+    /// Probes in a row that found no sign change (see [`MAX_TOUCHES`]).
+    touches: u32,
+    /// The converged point where the current run of touches began.
+    first_touch: MarchHit,
     phase: Phase,
 }
+
+/// Converged points in a row without a sign change after which a march accepts the first
+/// of them as a hit: a ray that runs along a surface within the tolerance for that long (a
+/// ray in the plane of a face) is seen as that surface. The probes after a touch reach
+/// twice as far each time (half a tolerance, one, two, ...), so a skin is left after one or
+/// two and a ray tangent to a curved surface leaves its zone of near-zero distance (of
+/// length `2 sqrt(2 R tolerance)` for radius `R`) after a few; 16 probes cover `2^15`
+/// tolerances.
+pub const MAX_TOUCHES: u32 = 16;
 
 /// What the value fed to a [`MarchLane`] is for.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -157,8 +173,11 @@ impl MarchLane {
             prev_t: seg.t0,
             prev_r: 0.0,
             r: f64::INFINITY,
+            r_t: seg.t0,
             omega: 0.0,
             iterations: 0,
+            touches: 0,
+            first_touch: MarchHit { t: seg.t0, residual: 0.0 },
             phase: Phase::March,
         }
     }
@@ -214,6 +233,10 @@ impl MarchLane {
                 }
                 // Only touching zero: march on from the probe, with plain steps.
                 self.phase = Phase::March;
+                if self.touches == 0 {
+                    self.first_touch = MarchHit { t, residual: d };
+                }
+                self.touches += 1;
                 self.omega = 1.0;
                 self.prev_t = t;
                 self.prev_r = d;
@@ -249,6 +272,7 @@ impl MarchLane {
         }
         let d = self.sign * raw;
         self.r = d.abs();
+        self.r_t = t;
         // With over-relaxation the step may jump over a surface; detect it by the two
         // unbounding spheres (radii prev_r and r) failing to cover the step, and go back
         // to the plain step from the previous point.
@@ -257,9 +281,15 @@ impl MarchLane {
             self.t = self.prev_t + self.prev_r;
             return self.budget(params, stats);
         }
+        if self.r >= eps {
+            self.touches = 0;
+        }
         if self.r < eps {
             if !refine {
                 return Some(Some(MarchHit { t, residual: self.r }));
+            }
+            if self.touches >= MAX_TOUCHES {
+                return Some(Some(self.first_touch));
             }
             if d < 0.0 {
                 // Already past the surface: crossed. One refinement step back onto it.
@@ -274,7 +304,7 @@ impl MarchLane {
             // The probe is counted as a step when it is marched on from (`step`), or with
             // the refinement when it confirms the crossing.
             self.phase = Phase::Probe { t, d, eps };
-            self.t = t + d + 0.5 * eps;
+            self.t = t + d + 0.5 * eps * f64::from(1u32 << self.touches.min(15));
             return None;
         }
         self.prev_t = t;
@@ -294,14 +324,14 @@ impl MarchLane {
     }
 
     /// The end of a march that goes on: over when the step budget is spent (reported as a
-    /// hit only within the pixel footprint of the surface).
+    /// hit at the last point marched, only within the pixel footprint of the surface).
     #[inline]
     fn budget(&self, params: &MarchParams, stats: &mut RayStats) -> Option<Option<MarchHit>> {
         if self.iterations < params.max_steps {
             return None;
         }
         stats.step_limit_hits += 1;
-        let (t, r) = (self.t, self.r);
+        let (t, r) = (self.r_t, self.r);
         Some((t > 0.0 && r < params.pixel_footprint * t).then_some(MarchHit { t, residual: r }))
     }
 }
