@@ -334,8 +334,9 @@ fn eval_repeat(period: Vec3, count: Option<UVec3>, child: &SdfNode, q: DVec3) ->
 /// copies per level) is not built and the tree is evaluated instead.
 pub const MAX_TAPE_OPS: usize = 1 << 16;
 
-/// The analytic field the marcher traces: the f64 [`SdfTree`] and, where it is not too
-/// long ([`MAX_TAPE_OPS`]), its compiled f32 [`Tape`](tape::Tape). Each distance asked for
+/// The analytic field the marcher traces: the f64 [`SdfTree`] and, for a compound object
+/// (CSG, repetition) whose tape is not too long ([`MAX_TAPE_OPS`]), its compiled f32
+/// [`Tape`](tape::Tape). Each distance asked for
 /// with a tolerance ([`DistanceField::distance_within`]) comes from the tape when the
 /// tape's error bound at that point ([`tape::Tape::error_bound`] of `|p - origin|`) is at
 /// most a quarter of the tolerance, from the tree otherwise.
@@ -343,7 +344,8 @@ pub const MAX_TAPE_OPS: usize = 1 << 16;
 pub struct SdfField {
     /// The f64 tree: the precise distance, materials, error measurements.
     pub tree: SdfTree,
-    /// The compiled tape, `None` when longer than [`MAX_TAPE_OPS`].
+    /// The compiled tape, `None` for a single primitive or when longer than
+    /// [`MAX_TAPE_OPS`].
     pub tape: Option<tape::Tape>,
     /// The material of every primitive when they all have the same one (no lookup per
     /// hit), else `None` (the tree finds the nearest primitive's).
@@ -373,7 +375,9 @@ impl SdfField {
     pub fn new(object: &Object, bounds: Option<crate::geometry::Aabb>) -> Option<Self> {
         let tree = SdfTree::new(object)?;
         let tape = tape::Tape::compile(&tree, bounds);
-        let tape = (tape.ops().len() <= MAX_TAPE_OPS).then_some(tape);
+        // A single primitive is cheaper in the f64 tree (a few operations) than through the
+        // tape's interpreter: the tape pays off for compound objects.
+        let tape = (tree.node_count > 1 && tape.ops().len() <= MAX_TAPE_OPS).then_some(tape);
         let uniform_material = uniform_material(&tree.root);
         Some(SdfField { tree, tape, uniform_material })
     }
@@ -397,6 +401,22 @@ impl SdfField {
         } else {
             self.tree.distance(p)
         }
+    }
+
+    /// The tape at up to 8 world points in one 8-wide evaluation (lanes past `points` are
+    /// evaluated at the tape's origin and ignored).
+    #[inline]
+    fn eval_tape8(tape: &tape::Tape, points: &[DVec3]) -> [f32; 8] {
+        let (mut xs, mut ys, mut zs) = ([0.0f32; 8], [0.0f32; 8], [0.0f32; 8]);
+        for (i, p) in points.iter().take(8).enumerate() {
+            let r = tape.relative(*p);
+            (xs[i], ys[i], zs[i]) = (r.x, r.y, r.z);
+        }
+        SCRATCH.with(|s| {
+            let mut s = s.borrow_mut();
+            s.fit(tape);
+            tape.eval8(&xs, &ys, &zs, &mut s)
+        })
     }
 
     /// The tape's distance at world point `p` (f32, widened). With AVX2 this is one lane
@@ -553,22 +573,17 @@ impl DistanceField for SdfField {
         self.choose(p, tolerance, |tape| Self::eval_tape(tape, p))
     }
 
+    fn prefers_packets(&self) -> bool {
+        self.tape.is_some()
+    }
+
     fn distance8_within(&self, points: &[DVec3; 8], tolerances: &[f64; 8]) -> [f64; 8] {
         let Some(tape) = self.tape.as_ref() else {
             return points.map(|p| self.tree.distance(p));
         };
         // Each lane decides as `distance_within` at its point alone; the tape's lanes equal
         // its scalar values bit for bit.
-        let (mut xs, mut ys, mut zs) = ([0.0f32; 8], [0.0f32; 8], [0.0f32; 8]);
-        for (i, p) in points.iter().enumerate() {
-            let r = tape.relative(*p);
-            (xs[i], ys[i], zs[i]) = (r.x, r.y, r.z);
-        }
-        let d = SCRATCH.with(|s| {
-            let mut s = s.borrow_mut();
-            s.fit(tape);
-            tape.eval8(&xs, &ys, &zs, &mut s)
-        });
+        let d = Self::eval_tape8(tape, points);
         std::array::from_fn(|i| self.choose(points[i], tolerances[i], |_| d[i] as f64))
     }
 
@@ -580,16 +595,7 @@ impl DistanceField for SdfField {
         if tape.error_bound(far) > 0.25 * tolerance {
             return points.map(|p| self.tree.distance(p));
         }
-        let (mut xs, mut ys, mut zs) = ([0.0f32; 8], [0.0f32; 8], [0.0f32; 8]);
-        for (i, p) in points.iter().enumerate() {
-            let r = tape.relative(*p);
-            (xs[i], ys[i], zs[i]) = (r.x, r.y, r.z);
-        }
-        let d = SCRATCH.with(|s| {
-            let mut s = s.borrow_mut();
-            s.fit(tape);
-            tape.eval8(&xs, &ys, &zs, &mut s)
-        });
+        let d = Self::eval_tape8(tape, points);
         [d[0] as f64, d[1] as f64, d[2] as f64, d[3] as f64]
     }
 
