@@ -9,7 +9,10 @@
 //! [`SdfTree`](crate::geometry::sdf::SdfTree)) and SDF grids
 //! ([`crate::geometry::grid::object::GridObject`], a [`Marched`] over a
 //! [`GridField`](crate::geometry::grid::object::GridField)) are the two fields plugged in
-//! today; a new marched representation is a new field, not a new marcher.
+//! today; a new marched representation is a new field, not a new marcher. A field that
+//! evaluates eight points at once ([`DistanceField::distance8_within`]) gets packets of
+//! primary rays marched side by side ([`Geometry::closest_hits`]), each lane taking exactly
+//! the steps of its own scalar march ([`MarchLane`]).
 
 use glam::{DVec3, Vec3};
 

@@ -27,6 +27,8 @@ pub struct SceneGeometry {
     /// For each BVH primitive, the index into its object's [`Geometry::instances`], or
     /// [`WHOLE`]; empty when no object has instances (then every leaf is a whole object).
     part: Vec<u32>,
+    /// Whether any object prefers packets ([`Geometry::prefers_packets`]), decided once.
+    packets: bool,
 }
 
 impl SceneGeometry {
@@ -60,7 +62,8 @@ impl SceneGeometry {
             part = Vec::new();
         }
         let bvh = bvh2::build(&boxes, BvhBuildParams::medium_build());
-        SceneGeometry { objects, bvh, unbounded, bounded, part }
+        let packets = objects.iter().any(|o| o.prefers_packets());
+        SceneGeometry { objects, bvh, unbounded, bounded, part, packets }
     }
 
     /// The geometry of top-level BVH primitive `prim`: an object or one of its instances.
@@ -131,7 +134,7 @@ impl Geometry for SceneGeometry {
     }
 
     fn prefers_packets(&self) -> bool {
-        self.objects.iter().any(|o| o.prefers_packets())
+        self.packets
     }
 
     /// Packets go ray by ray (front to back through the top-level BVH, as
