@@ -81,6 +81,24 @@ impl Ray {
 /// Rays per packet of [`Geometry::closest_hits`]: the width of an 8-wide f32 evaluation.
 pub const PACKET: usize = 8;
 
+/// [`Geometry::closest_hits`] as a loop of [`Geometry::closest_hit`] over the packet's rays:
+/// the trait's default, and what an aggregate falls back to.
+pub fn closest_hits_one_by_one<G: Geometry + ?Sized>(
+    g: &G,
+    rays: &[Ray],
+    t_min: f32,
+    t_max: &mut [f32],
+    hits: &mut [Option<Hit>],
+    stats: &mut RayStats,
+) {
+    for ((ray, t_max), hit) in rays.iter().zip(t_max.iter_mut()).zip(hits.iter_mut()) {
+        if let Some(h) = g.closest_hit(ray, t_min, *t_max, stats) {
+            *t_max = h.t;
+            *hit = Some(h);
+        }
+    }
+}
+
 /// A ray/surface intersection in world space.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {
@@ -159,22 +177,17 @@ pub trait Geometry: Send + Sync {
         hits: &mut [Option<Hit>],
         stats: &mut RayStats,
     ) {
-        for ((ray, t_max), hit) in rays.iter().zip(t_max.iter_mut()).zip(hits.iter_mut()) {
-            if let Some(h) = self.closest_hit(ray, t_min, *t_max, stats) {
-                *t_max = h.t;
-                *hit = Some(h);
-            }
-        }
+        closest_hits_one_by_one(self, rays, t_min, t_max, hits, stats);
     }
 
-    /// Whether any surface is hit with `t` in `[t_min, t_max]` (shadow rays). May stop at
-    /// the first hit found.
     /// Whether [`Self::closest_hits`] is faster than its rays one by one (true for marched
     /// fields); an aggregate marches packets only through geometries that say so.
     fn prefers_packets(&self) -> bool {
         false
     }
 
+    /// Whether any surface is hit with `t` in `[t_min, t_max]` (shadow rays). May stop at
+    /// the first hit found.
     fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
         self.closest_hit(ray, t_min, t_max, stats).is_some()
     }

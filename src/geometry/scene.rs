@@ -10,7 +10,7 @@ use obvhs::BvhBuildParams;
 use obvhs::bvh2::Bvh2;
 
 use crate::geometry::bvh2;
-use crate::geometry::{Aabb, Census, Geometry, Hit, PACKET, Ray, RayStats, Shared};
+use crate::geometry::{Aabb, Census, Geometry, Hit, PACKET, Ray, RayStats, Shared, closest_hits_one_by_one};
 
 /// [`SceneGeometry`]'s `part` of a BVH leaf that is a whole object, not one of its instances.
 const WHOLE: u32 = u32::MAX;
@@ -139,8 +139,9 @@ impl Geometry for SceneGeometry {
 
     /// Packets go ray by ray (front to back through the top-level BVH, as
     /// [`Geometry::closest_hit`]) unless an object prefers packets. Then the BVH leaves
-    /// (objects or instances) that any ray of the packet reaches (up to [`PACKET_CANDIDATES`]) and the unbounded
-    /// ones each take the whole packet, nearest hits composing through `t_max`.
+    /// (objects or instances) that any ray of the packet reaches (up to
+    /// [`PACKET_CANDIDATES`]) and the unbounded objects each take the whole packet, nearest
+    /// hits composing through `t_max`.
     fn closest_hits(
         &self,
         rays: &[Ray],
@@ -149,16 +150,8 @@ impl Geometry for SceneGeometry {
         hits: &mut [Option<Hit>],
         stats: &mut RayStats,
     ) {
-        let one_by_one = |t_max: &mut [f32], hits: &mut [Option<Hit>], stats: &mut RayStats| {
-            for ((ray, t_max), hit) in rays.iter().zip(t_max.iter_mut()).zip(hits.iter_mut()) {
-                if let Some(h) = self.closest_hit(ray, t_min, *t_max, stats) {
-                    *t_max = h.t;
-                    *hit = Some(h);
-                }
-            }
-        };
         if rays.len() > PACKET || !self.prefers_packets() {
-            return one_by_one(t_max, hits, stats);
+            return closest_hits_one_by_one(self, rays, t_min, t_max, hits, stats);
         }
         let mut candidates = [0u32; PACKET_CANDIDATES];
         let mut count = 0usize;
@@ -176,7 +169,7 @@ impl Geometry for SceneGeometry {
                 Ok(None)
             });
             if overflow {
-                return one_by_one(t_max, hits, stats);
+                return closest_hits_one_by_one(self, rays, t_min, t_max, hits, stats);
             }
         }
         for &i in &self.unbounded {

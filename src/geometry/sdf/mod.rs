@@ -388,7 +388,9 @@ impl SdfField {
     /// `tolerance`; else, when the tape's value is farther than `4 err` from the surface,
     /// that value moved `err` towards zero (a lower bound of the true distance with the
     /// true sign, and no march converges there since the tolerance is below `4 err`);
-    /// else the tree. `tape8` is the tape's value at `p` when already computed.
+    /// else the tree. `tape_value` gives the tape's value at `p` (evaluated, or taken from an
+    /// 8-wide evaluation already made); it is computed first, and wasted only where the
+    /// tree answers.
     #[inline]
     fn choose(&self, p: DVec3, tolerance: f64, tape_value: impl FnOnce(&tape::Tape) -> f64) -> f64 {
         let Some(tape) = self.tape.as_ref() else { return self.tree.distance(p) };
