@@ -49,12 +49,12 @@ fn fmt_input(path: &Path, location: &Option<Location>, message: &str) -> String 
 impl Error {
     /// An input error at an optional location.
     pub fn input(path: impl Into<PathBuf>, location: Option<Location>, message: impl fmt::Display) -> Self {
-        Error::Input { path: path.into(), location, message: message.to_string() }
+        Error::Input { path: path.into(), location, message: single_line(message.to_string()) }
     }
 
     /// An I/O error on `path`.
     pub fn io(path: impl Into<PathBuf>, err: impl fmt::Display) -> Self {
-        Error::Io { path: path.into(), message: err.to_string() }
+        Error::Io { path: path.into(), message: single_line(err.to_string()) }
     }
 
     /// The process exit code for this error: 2 for everything a user can cause (bad input,
@@ -65,6 +65,24 @@ impl Error {
             Error::Io { .. } => 2,
         }
     }
+}
+
+/// `message` with every control character (a newline above all) escaped as Rust writes it
+/// in a string literal: text quoted from an input file (a JSON key, a version string, a
+/// parser's message) must not break the one-line contract.
+fn single_line(message: String) -> String {
+    if !message.chars().any(char::is_control) {
+        return message;
+    }
+    let mut out = String::with_capacity(message.len() + 8);
+    for c in message.chars() {
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    out
 }
 
 /// The library's result type.

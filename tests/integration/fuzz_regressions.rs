@@ -155,3 +155,32 @@ fn obj_vertical_tab_separated_keywords_are_seen_as_tobj_sees_them() {
     let mesh = valid_mesh(load_mesh(&p));
     assert_eq!(mesh.triangles.len(), 1);
 }
+
+/// Text quoted from a glTF file may hold a newline (JSON writes it `\n` inside a string):
+/// a required extension's name, a version string, an unknown enum value or attribute name.
+/// The gltf fuzz target found one such input (CI, stop 23); every error message now
+/// escapes control characters, whichever loader quotes them.
+#[test]
+fn gltf_text_with_newlines_stays_on_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let docs = [
+        ("ext.gltf", "\\n", r#"{"asset":{"version":"2.0"},"extensionsRequired":["KHR_x\nline two"]}"#),
+        ("version.gltf", "\\n", r#"{"asset":{"version":"1\nline two"}}"#),
+        (
+            "variant.gltf",
+            "accessors[0].type",
+            r#"{"asset":{"version":"2.0"},"accessors":[{"componentType":5126,"count":3,"type":"VEC\n3"}]}"#,
+        ),
+        (
+            "attribute.gltf",
+            "attributes[",
+            r#"{"asset":{"version":"2.0"},"meshes":[{"primitives":[{"attributes":{"POSITION":0,"TEX\nCOORD":0}}]}],
+            "accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3"}],
+            "bufferViews":[{"buffer":0,"byteLength":36}],"buffers":[{"byteLength":36}]}"#,
+        ),
+    ];
+    for (name, needle, text) in docs {
+        let p = put(dir.path(), name, text);
+        fails(&p, load_mesh(&p), &[needle]);
+    }
+}
