@@ -155,6 +155,33 @@ fn big_union() -> Scene {
     lit_scene(vec![with(kind, Vec3::new(0.1, 0.0, 0.0), Vec3::new(15.0, 20.0, 0.0))], PIXELS)
 }
 
+/// A smooth union of 40 small spheres spread through a box, minus a box: sphere traced
+/// with its tape shortened per region (`prune::TapeRegions`), which single rays and packet
+/// lanes must look up alike, and which must keep the closed form's surface.
+pub(crate) fn blobs() -> Scene {
+    let mut seed = 11u32;
+    let mut next = || {
+        seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        (seed >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0
+    };
+    let spheres: Vec<Object> = (0..40)
+        .map(|_| {
+            let c = Vec3::new(next(), next() * 0.8, next());
+            object(Primitive::Sphere { radius: 0.18 + 0.06 * next() }, c, Vec3::ZERO, Vec3::ONE)
+        })
+        .collect();
+    let blend = Object {
+        kind: ObjectKind::Csg { op: CsgOp::SmoothUnion { k: 0.12 }, children: spheres },
+        transform: TransformDesc::default(),
+        material: 1,
+        label: "blend".into(),
+    };
+    let cut =
+        object(Primitive::Box { half: Vec3::splat(0.45) }, Vec3::new(0.6, 0.5, -0.6), Vec3::ZERO, Vec3::ONE);
+    let kind = ObjectKind::Csg { op: CsgOp::Subtraction, children: vec![blend, cut] };
+    lit_scene(vec![with(kind, Vec3::ZERO, Vec3::new(0.0, 20.0, 0.0))], PIXELS)
+}
+
 /// A triangle mesh read from an OBJ file through the scene parser (a mesh object: traced
 /// as triangles in every representation but the grid, which samples it).
 fn mesh_file() -> Scene {
@@ -558,6 +585,7 @@ contract_tests!(
     cylinder_and_cone,
     csg,
     big_union,
+    blobs,
     mesh_file,
     several_with_plane,
     repeated

@@ -31,6 +31,7 @@ mod mesh_tracing;
 mod representations;
 mod round_trip;
 mod scene_errors;
+mod sdf_prune;
 mod sdf_tape;
 mod tessellate;
 mod winding_sign;

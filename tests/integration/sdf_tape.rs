@@ -185,7 +185,7 @@ fn check(o: &Object, points: &[Vec3]) -> Result<Seen, TestCaseError> {
 
 /// Points around the tape's origin: within 1.5 times the bounds (or a radius of 8 for an
 /// unbounded object), plus a few far away.
-fn sample(o: &Object, unit: &[Vec3]) -> Vec<Vec3> {
+pub(crate) fn sample(o: &Object, unit: &[Vec3]) -> Vec<Vec3> {
     let tape = Tape::from_object(o).unwrap();
     let r = if tape.reach > 0.0 { 1.5 * tape.reach as f32 } else { 8.0 };
     let mut pts: Vec<Vec3> = unit.iter().map(|&u| u * r).collect();
@@ -195,7 +195,7 @@ fn sample(o: &Object, unit: &[Vec3]) -> Vec<Vec3> {
 
 /// A random tree, near the world origin or up to 1000 units away from it (the tape is
 /// relative to the object's centre), and 56 points in the unit cube.
-fn case() -> impl Strategy<Value = (Object, Vec<Vec3>)> {
+pub(crate) fn case() -> impl Strategy<Value = (Object, Vec<Vec3>)> {
     (tree(), prop::collection::vec(vec3(-1.0, 1.0), 56), prop_oneof![Just(Vec3::ZERO), vec3(-1000.0, 1000.0)])
         .prop_map(|(mut o, unit, offset)| {
             o.transform.translate += offset;

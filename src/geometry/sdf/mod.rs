@@ -8,6 +8,7 @@
 //! tree elsewhere (the radius-5000 ground sphere seen from nearby, a surface a secondary
 //! ray starts on); materials and the error measurements always use the tree.
 
+pub mod prune;
 pub mod tape;
 
 use crate::geometry::march::MarchParams;
@@ -350,6 +351,9 @@ pub struct SdfField {
     /// The material of every primitive when they all have the same one (no lookup per
     /// hit), else `None` (the tree finds the nearest primitive's).
     pub uniform_material: Option<MaterialId>,
+    /// The tape shortened per region of the object's bounds ([`prune::TapeRegions`]),
+    /// where that pays; points outside the regions run the whole tape.
+    pub regions: Option<prune::TapeRegions>,
 }
 
 /// The material every primitive under `node` has, if they all have the same one.
@@ -379,7 +383,21 @@ impl SdfField {
         // tape's interpreter: the tape pays off for compound objects.
         let tape = (tree.node_count > 1 && tape.ops().len() <= MAX_TAPE_OPS).then_some(tape);
         let uniform_material = uniform_material(&tree.root);
-        Some(SdfField { tree, tape, uniform_material })
+        let regions = match (&tape, bounds) {
+            (Some(t), Some(b)) => prune::TapeRegions::build(t, b),
+            _ => None,
+        };
+        Some(SdfField { tree, tape, uniform_material, regions })
+    }
+
+    /// The operations to run at relative point `rel`: its region's shortened tape, or the
+    /// whole tape.
+    #[inline]
+    fn ops_at<'a>(&'a self, tape: &'a tape::Tape, rel: Vec3) -> tape::Ops<'a> {
+        match self.regions.as_ref().and_then(|r| Some((r, r.cell(rel)?))) {
+            Some((r, cell)) => r.ops(cell),
+            None => tape::Ops::All(tape.ops()),
+        }
     }
 
     /// The distance at world point `p` with an error of at most a quarter of `tolerance`,
@@ -405,36 +423,63 @@ impl SdfField {
         }
     }
 
-    /// The tape at up to 8 world points in one 8-wide evaluation (lanes past `points` are
-    /// evaluated at the tape's origin and ignored).
+    /// The tape at 1 to 8 world points in 8-wide evaluations (lanes past `points` repeat
+    /// the first point and are ignored): one evaluation per distinct region among the
+    /// points, each running that region's shortened tape, so that every lane gets what
+    /// [`SdfField::eval_tape`] gives at its point alone.
     #[inline]
-    fn eval_tape8(tape: &tape::Tape, points: &[DVec3]) -> [f32; 8] {
+    fn eval_tape8(&self, tape: &tape::Tape, points: &[DVec3]) -> [f32; 8] {
+        let n = points.len().min(8);
         let (mut xs, mut ys, mut zs) = ([0.0f32; 8], [0.0f32; 8], [0.0f32; 8]);
-        for (i, p) in points.iter().take(8).enumerate() {
-            let r = tape.relative(*p);
+        let mut cell = [u32::MAX; 8];
+        for i in 0..8 {
+            let r = tape.relative(points[if i < n { i } else { 0 }]);
             (xs[i], ys[i], zs[i]) = (r.x, r.y, r.z);
+            if let Some(regions) = &self.regions {
+                cell[i] = regions.cell(r).unwrap_or(u32::MAX);
+            }
         }
+        let ops_of = |c: u32| match &self.regions {
+            Some(r) if c != u32::MAX => r.ops(c),
+            _ => tape::Ops::All(tape.ops()),
+        };
         SCRATCH.with(|s| {
             let mut s = s.borrow_mut();
             s.fit(tape);
-            tape.eval8(&xs, &ys, &zs, &mut s)
+            let first = tape.eval8_ops(ops_of(cell[0]), &xs, &ys, &zs, &mut s);
+            if cell.iter().all(|&c| c == cell[0]) {
+                return first;
+            }
+            let mut out = first;
+            let mut done = cell.map(|c| c == cell[0]);
+            while let Some(i) = done.iter().position(|d| !d) {
+                let d = tape.eval8_ops(ops_of(cell[i]), &xs, &ys, &zs, &mut s);
+                for j in i..8 {
+                    if cell[j] == cell[i] {
+                        out[j] = d[j];
+                        done[j] = true;
+                    }
+                }
+            }
+            out
         })
     }
 
-    /// The tape's distance at world point `p` (f32, widened). With AVX2 this is one lane
-    /// of an 8-wide evaluation: the same value bit for bit (see [`tape`]), and faster than
-    /// the scalar interpreter, whose chains of dependent operations (a smooth union's
-    /// blends) wait on each other's latency.
+    /// The tape's distance at world point `p` (f32, widened), running the shortened tape
+    /// of its region. With AVX2 this is one lane of an 8-wide evaluation: the same value
+    /// bit for bit (see [`tape`]), and faster than the scalar interpreter, whose chains of
+    /// dependent operations (a smooth union's blends) wait on each other's latency.
     #[inline]
-    fn eval_tape(tape: &tape::Tape, p: DVec3) -> f64 {
+    fn eval_tape(&self, tape: &tape::Tape, p: DVec3) -> f64 {
         let rel = tape.relative(p);
+        let ops = self.ops_at(tape, rel);
         SCRATCH.with(|s| {
             let mut s = s.borrow_mut();
             s.fit(tape);
             if crate::simd::avx2() {
-                tape.eval8(&[rel.x; 8], &[rel.y; 8], &[rel.z; 8], &mut s)[0] as f64
+                tape.eval8_ops(ops, &[rel.x; 8], &[rel.y; 8], &[rel.z; 8], &mut s)[0] as f64
             } else {
-                tape.eval(rel, &mut s) as f64
+                tape.eval_ops(ops, rel, &mut s) as f64
             }
         })
     }
@@ -572,7 +617,7 @@ impl DistanceField for SdfField {
 
     #[inline]
     fn distance_within(&self, p: DVec3, tolerance: f64) -> f64 {
-        self.choose(p, tolerance, |tape| Self::eval_tape(tape, p))
+        self.choose(p, tolerance, |tape| self.eval_tape(tape, p))
     }
 
     fn prefers_packets(&self) -> bool {
@@ -585,7 +630,7 @@ impl DistanceField for SdfField {
         };
         // Each lane decides as `distance_within` at its point alone; the tape's lanes equal
         // its scalar values bit for bit.
-        let d = Self::eval_tape8(tape, points);
+        let d = self.eval_tape8(tape, points);
         std::array::from_fn(|i| self.choose(points[i], tolerances[i], |_| d[i] as f64))
     }
 
@@ -597,7 +642,7 @@ impl DistanceField for SdfField {
         if tape.error_bound(far) > 0.25 * tolerance {
             return points.map(|p| self.tree.distance(p));
         }
-        let d = Self::eval_tape8(tape, points);
+        let d = self.eval_tape8(tape, points);
         [d[0] as f64, d[1] as f64, d[2] as f64, d[3] as f64]
     }
 
@@ -624,6 +669,7 @@ impl DistanceField for SdfField {
     fn heap_bytes(&self) -> usize {
         self.tree.bytes_used() - std::mem::size_of::<SdfTree>()
             + self.tape.as_ref().map_or(0, |t| t.bytes_used())
+            + self.regions.as_ref().map_or(0, |r| r.bytes_used())
     }
 
     fn census(&self) -> Census {
@@ -638,7 +684,21 @@ impl DistanceField for SdfField {
     fn describe(&self, why: &str) -> String {
         let bound = if self.tree.exact { "exact distance" } else { "Lipschitz bound" };
         match &self.tape {
-            Some(t) => format!("{why} ({bound}, f32 tape of {} ops)", t.ops().len()),
+            Some(t) => match &self.regions {
+                Some(r) => {
+                    let n = r.cells();
+                    format!(
+                        "{why} ({bound}, f32 tape of {} ops, pruned over {}x{}x{} regions to {:.0}% on average, {} distinct)",
+                        t.ops().len(),
+                        n.x,
+                        n.y,
+                        n.z,
+                        100.0 * r.mean_ratio(),
+                        r.distinct()
+                    )
+                }
+                None => format!("{why} ({bound}, f32 tape of {} ops)", t.ops().len()),
+            },
             None => format!("{why} ({bound}, f64 tree: tape over {MAX_TAPE_OPS} ops)"),
         }
     }

@@ -330,6 +330,83 @@ pub enum Op {
         /// Value register of each axis's offset, or [`NO_REG`].
         offs: [u32; 3],
     },
+    /// `vals[out] = vals[a]`: a choice that a region's interval decided
+    /// ([`super::prune`]); the compiler never emits it.
+    Copy {
+        /// Value register written.
+        out: u32,
+        /// Register copied.
+        a: u32,
+    },
+    /// `vals[out] = -vals[a]`: a subtraction that a region's interval decided for its
+    /// second operand ([`super::prune`]); the compiler never emits it.
+    Neg {
+        /// Value register written.
+        out: u32,
+        /// Register negated.
+        a: u32,
+    },
+}
+
+impl Op {
+    /// `(point register, value register)` of a primitive operation; `None` for the rest.
+    pub fn primitive_registers(&self) -> Option<(u32, u32)> {
+        match *self {
+            Op::Sphere { p, out, .. }
+            | Op::Plane { p, out, .. }
+            | Op::Box { p, out, .. }
+            | Op::Ellipsoid { p, out, .. }
+            | Op::Cylinder { p, out, .. }
+            | Op::Cone { p, out, .. }
+            | Op::Torus { p, out, .. }
+            | Op::Triangle { p, out, .. }
+            | Op::Capsule { p, out, .. } => Some((p, out)),
+            _ => None,
+        }
+    }
+
+    /// The factor a primitive's local distance is multiplied by ([`Op::Sphere`]'s `scale`
+    /// and the like); `None` for the rest.
+    pub fn primitive_scale(&self) -> Option<f32> {
+        match *self {
+            Op::Sphere { scale, .. }
+            | Op::Plane { scale, .. }
+            | Op::Box { scale, .. }
+            | Op::Ellipsoid { scale, .. }
+            | Op::Cylinder { scale, .. }
+            | Op::Cone { scale, .. }
+            | Op::Torus { scale, .. }
+            | Op::Triangle { scale, .. }
+            | Op::Capsule { scale, .. } => Some(scale),
+            _ => None,
+        }
+    }
+}
+
+/// The operations one evaluation runs: a whole tape's, or a shortened tape's picked from a
+/// list ([`super::prune::TapeRegions`]: the tape's operations followed by the copies that
+/// replace decided choices) by index.
+#[derive(Clone, Copy, Debug)]
+pub enum Ops<'a> {
+    /// Every operation, in order.
+    All(&'a [Op]),
+    /// `ops[order[0]], ops[order[1]], ...`.
+    Picked {
+        /// The operations picked from.
+        ops: &'a [Op],
+        /// Indices into `ops`, in evaluation order.
+        order: &'a [u16],
+    },
+}
+
+/// Runs `$ops` ([`Ops`]) through [`run`] with the rest of the arguments.
+macro_rules! run_ops {
+    ($ops:expr, $($rest:expr),*) => {
+        match $ops {
+            Ops::All(ops) => run(ops.iter(), $($rest),*),
+            Ops::Picked { ops, order } => run(order.iter().map(|&i| &ops[i as usize]), $($rest),*),
+        }
+    };
 }
 
 /// The constants of an [`Op::Triangle`] (vertices, edges, normal and their reciprocal
@@ -506,7 +583,25 @@ impl Tape {
     /// `scratch` must fit the tape (panics otherwise).
     #[inline]
     pub fn eval(&self, p_rel: Vec3, scratch: &mut TapeScratch) -> f32 {
-        run::<f32>(&self.ops, &self.triangles, &mut scratch.vals, &mut scratch.pts, p_rel.to_array())
+        self.eval_ops(Ops::All(&self.ops), p_rel, scratch)
+    }
+
+    /// [`Tape::eval`] running `ops` instead of the whole tape: a shortened tape of this
+    /// one ([`super::prune::TapeRegions`]), which uses its registers and triangles.
+    #[inline]
+    pub fn eval_ops(&self, ops: Ops, p_rel: Vec3, scratch: &mut TapeScratch) -> f32 {
+        run_ops!(ops, &self.triangles, &mut scratch.vals, &mut scratch.pts, p_rel.to_array())
+    }
+
+    /// The value of primitive operation `op` (one of this tape's) at point `local` of its
+    /// point register, for interval bounds ([`super::prune`]); `None` when `op` is not a
+    /// primitive. `scratch` must fit the tape.
+    pub(crate) fn primitive_at(&self, op: &Op, local: [f32; 3], scratch: &mut TapeScratch) -> Option<f32> {
+        let (p, out) = op.primitive_registers()?;
+        scratch.pts[p as usize] = local;
+        let input = scratch.pts[0];
+        run::<f32>(std::iter::once(op), &self.triangles, &mut scratch.vals, &mut scratch.pts, input);
+        Some(scratch.vals[out as usize])
     }
 
     /// [`Tape::eval`] at the eight points `(xs[l], ys[l], zs[l])` (relative to
@@ -515,12 +610,25 @@ impl Tape {
     /// [`Tape::eval8_portable`].
     #[inline]
     pub fn eval8(&self, xs: &[f32; 8], ys: &[f32; 8], zs: &[f32; 8], scratch: &mut TapeScratch) -> [f32; 8] {
+        self.eval8_ops(Ops::All(&self.ops), xs, ys, zs, scratch)
+    }
+
+    /// [`Tape::eval8`] running `ops`, a shortened tape of this one (as [`Tape::eval_ops`]).
+    #[inline]
+    pub fn eval8_ops(
+        &self,
+        ops: Ops,
+        xs: &[f32; 8],
+        ys: &[f32; 8],
+        zs: &[f32; 8],
+        scratch: &mut TapeScratch,
+    ) -> [f32; 8] {
         #[cfg(target_arch = "x86_64")]
         if crate::simd::avx2() {
             // SAFETY: the CPU has AVX2 and FMA (checked just above).
-            return unsafe { self.eval8_avx2(xs, ys, zs, scratch) };
+            return unsafe { self.eval8_avx2(ops, xs, ys, zs, scratch) };
         }
-        self.eval8_portable(xs, ys, zs, scratch)
+        self.eval8_portable_ops(ops, xs, ys, zs, scratch)
     }
 
     /// The portable build of [`Tape::eval8`] (eight-lane arrays the compiler vectorises for
@@ -532,27 +640,31 @@ impl Tape {
         zs: &[f32; 8],
         scratch: &mut TapeScratch,
     ) -> [f32; 8] {
-        run::<F8>(
-            &self.ops,
-            &self.triangles,
-            &mut scratch.vals8,
-            &mut scratch.pts8,
-            [F8(*xs), F8(*ys), F8(*zs)],
-        )
-        .0
+        self.eval8_portable_ops(Ops::All(&self.ops), xs, ys, zs, scratch)
+    }
+
+    fn eval8_portable_ops(
+        &self,
+        ops: Ops,
+        xs: &[f32; 8],
+        ys: &[f32; 8],
+        zs: &[f32; 8],
+        scratch: &mut TapeScratch,
+    ) -> [f32; 8] {
+        run_ops!(ops, &self.triangles, &mut scratch.vals8, &mut scratch.pts8, [F8(*xs), F8(*ys), F8(*zs)]).0
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    fn eval8_avx2(&self, xs: &[f32; 8], ys: &[f32; 8], zs: &[f32; 8], scratch: &mut TapeScratch) -> [f32; 8] {
-        run::<F8>(
-            &self.ops,
-            &self.triangles,
-            &mut scratch.vals8,
-            &mut scratch.pts8,
-            [F8(*xs), F8(*ys), F8(*zs)],
-        )
-        .0
+    fn eval8_avx2(
+        &self,
+        ops: Ops,
+        xs: &[f32; 8],
+        ys: &[f32; 8],
+        zs: &[f32; 8],
+        scratch: &mut TapeScratch,
+    ) -> [f32; 8] {
+        run_ops!(ops, &self.triangles, &mut scratch.vals8, &mut scratch.pts8, [F8(*xs), F8(*ys), F8(*zs)]).0
     }
 }
 
@@ -969,7 +1081,13 @@ fn segment2<L: Lane>(v: [f32; 3], w: P<L>, inv_vv: f32) -> L {
 /// Runs the tape over lanes `L`: the input point in point register 0, the result in value
 /// register 0.
 #[inline(always)]
-fn run<L: Lane>(ops: &[Op], tris: &[TriangleConsts], vals: &mut [L], pts: &mut [P<L>], p: P<L>) -> L {
+fn run<'a, L: Lane>(
+    ops: impl Iterator<Item = &'a Op>,
+    tris: &[TriangleConsts],
+    vals: &mut [L],
+    pts: &mut [P<L>],
+    p: P<L>,
+) -> L {
     pts[0] = p;
     for op in ops {
         match *op {
@@ -1113,6 +1231,8 @@ fn run<L: Lane>(ops: &[Op], tris: &[TriangleConsts], vals: &mut [L], pts: &mut [
                 }
                 pts[dst as usize] = r;
             }
+            Op::Copy { out, a } => vals[out as usize] = vals[a as usize],
+            Op::Neg { out, a } => vals[out as usize] = -vals[a as usize],
         }
     }
     vals[0]
