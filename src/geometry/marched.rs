@@ -149,6 +149,64 @@ impl<F: DistanceField> Marched<F> {
         (hit.t >= t_min as f64 && hit.t <= t_max as f64).then_some(hit)
     }
 
+    /// Marches the `live` lanes of a packet of up to [`PACKET`] rays side by side, one
+    /// 8-wide field evaluation per step for every lane still marching
+    /// ([`DistanceField::distance8_within`]); each lane takes the steps of its own scalar
+    /// march ([`MarchLane`]), so it converges where [`Marched::march`] does for that ray
+    /// alone, and `on_hit(lane, hit, stats)` is called for each lane whose march converges
+    /// within `[t_min, t_max[lane]]`.
+    fn march_packet(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: &[f32; PACKET],
+        live: &[bool; PACKET],
+        stats: &mut RayStats,
+        mut on_hit: impl FnMut(usize, MarchHit, &mut RayStats),
+    ) {
+        let refine = self.field.is_signed();
+        let mut lanes: [Option<(MarchLane, Segment)>; PACKET] = [None; PACKET];
+        for (i, ray) in rays.iter().enumerate().take(PACKET) {
+            if !live[i] {
+                continue;
+            }
+            if let Some(seg) = self.segment(ray, t_min, t_max[i]) {
+                lanes[i] = Some((MarchLane::new(&seg, stats), seg));
+            }
+        }
+        let mut points = [DVec3::ZERO; PACKET];
+        let mut tolerances = [f64::INFINITY; PACKET];
+        loop {
+            let mut first = None;
+            for (i, lane) in lanes.iter().enumerate() {
+                if let Some((lane, seg)) = lane {
+                    points[i] = seg.origin + seg.dir * lane.t();
+                    tolerances[i] = lane.tolerance(&self.march, self.size);
+                    first.get_or_insert(i);
+                }
+            }
+            let Some(first) = first else { break };
+            // Idle lanes evaluate a copy of a live lane's point with no tolerance to meet.
+            for (i, lane) in lanes.iter().enumerate() {
+                if lane.is_none() {
+                    points[i] = points[first];
+                    tolerances[i] = f64::INFINITY;
+                }
+            }
+            let d = self.field.distance8_within(&points, &tolerances);
+            for i in 0..PACKET {
+                let Some((lane, seg)) = &mut lanes[i] else { continue };
+                let Some(outcome) = lane.feed(d[i], seg, self.size, &self.march, refine, stats) else {
+                    continue;
+                };
+                lanes[i] = None;
+                if let Some(mh) = outcome.filter(|h| h.t >= t_min as f64 && h.t <= t_max[i] as f64) {
+                    on_hit(i, mh, stats);
+                }
+            }
+        }
+    }
+
     /// The hit record of a converged march of `ray`: point, normal from the gradient,
     /// material and error bound.
     fn hit(&self, ray: &Ray, hit: MarchHit, stats: &mut RayStats) -> Hit {
@@ -189,9 +247,8 @@ impl<F: DistanceField> Geometry for Marched<F> {
         self.field.prefers_packets()
     }
 
-    /// Marches the packet's rays side by side, one 8-wide field evaluation per step for
-    /// every lane still marching ([`DistanceField::distance8_within`]); each lane takes
-    /// the steps of its own scalar march ([`MarchLane`]), so the hits are those of
+    /// Marches the packet's rays side by side ([`Marched::march_packet`]); each lane takes
+    /// the steps of its own scalar march, so the hits are those of
     /// [`Geometry::closest_hit`].
     fn closest_hits(
         &self,
@@ -202,46 +259,23 @@ impl<F: DistanceField> Geometry for Marched<F> {
         stats: &mut RayStats,
     ) {
         debug_assert!(rays.len() <= PACKET && t_max.len() == rays.len() && hits.len() == rays.len());
-        let refine = self.field.is_signed();
-        let mut lanes: [Option<(MarchLane, Segment)>; PACKET] = [None; PACKET];
-        for (i, ray) in rays.iter().enumerate().take(PACKET) {
-            if let Some(seg) = self.segment(ray, t_min, t_max[i]) {
-                lanes[i] = Some((MarchLane::new(&seg, stats), seg));
-            }
-        }
-        let mut points = [DVec3::ZERO; PACKET];
-        let mut tolerances = [f64::INFINITY; PACKET];
-        loop {
-            let mut first = None;
-            for (i, lane) in lanes.iter().enumerate() {
-                if let Some((lane, seg)) = lane {
-                    points[i] = seg.origin + seg.dir * lane.t();
-                    tolerances[i] = lane.tolerance(&self.march, self.size);
-                    first.get_or_insert(i);
-                }
-            }
-            let Some(first) = first else { break };
-            // Idle lanes evaluate a copy of a live lane's point with no tolerance to meet.
-            for (i, lane) in lanes.iter().enumerate() {
-                if lane.is_none() {
-                    points[i] = points[first];
-                    tolerances[i] = f64::INFINITY;
-                }
-            }
-            let d = self.field.distance8_within(&points, &tolerances);
-            for i in 0..PACKET {
-                let Some((lane, seg)) = &mut lanes[i] else { continue };
-                let Some(outcome) = lane.feed(d[i], seg, self.size, &self.march, refine, stats) else {
-                    continue;
-                };
-                lanes[i] = None;
-                if let Some(mh) = outcome.filter(|h| h.t >= t_min as f64 && h.t <= t_max[i] as f64) {
-                    let hit = self.hit(&rays[i], mh, stats);
-                    t_max[i] = hit.t;
-                    hits[i] = Some(hit);
-                }
-            }
-        }
+        let live = [true; PACKET];
+        let reach: [f32; PACKET] = std::array::from_fn(|i| t_max.get(i).copied().unwrap_or(0.0));
+        self.march_packet(rays, t_min, &reach, &live, stats, |i, mh, stats| {
+            let hit = self.hit(&rays[i], mh, stats);
+            t_max[i] = hit.t;
+            hits[i] = Some(hit);
+        });
+    }
+
+    /// The packet march of [`Geometry::closest_hits`] for the lanes not yet occluded; a
+    /// lane is occluded where its march converges within its interval, as
+    /// [`Geometry::any_hit`] says for that ray alone.
+    fn any_hits(&self, rays: &[Ray], t_min: f32, t_max: &[f32], occluded: &mut [bool], stats: &mut RayStats) {
+        debug_assert!(rays.len() <= PACKET && t_max.len() == rays.len() && occluded.len() == rays.len());
+        let live: [bool; PACKET] = std::array::from_fn(|i| occluded.get(i).is_some_and(|o| !o));
+        let reach: [f32; PACKET] = std::array::from_fn(|i| t_max.get(i).copied().unwrap_or(0.0));
+        self.march_packet(rays, t_min, &reach, &live, stats, |i, _, _| occluded[i] = true);
     }
 
     fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {

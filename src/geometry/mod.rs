@@ -99,6 +99,23 @@ pub fn closest_hits_one_by_one<G: Geometry + ?Sized>(
     }
 }
 
+/// [`Geometry::any_hits`] as a loop of [`Geometry::any_hit`] over the packet's rays not
+/// yet occluded: the trait's default, and what an aggregate falls back to.
+pub fn any_hits_one_by_one<G: Geometry + ?Sized>(
+    g: &G,
+    rays: &[Ray],
+    t_min: f32,
+    t_max: &[f32],
+    occluded: &mut [bool],
+    stats: &mut RayStats,
+) {
+    for ((ray, &t_max), occluded) in rays.iter().zip(t_max).zip(occluded.iter_mut()) {
+        if !*occluded {
+            *occluded = g.any_hit(ray, t_min, t_max, stats);
+        }
+    }
+}
+
 /// A ray/surface intersection in world space.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {
@@ -190,6 +207,16 @@ pub trait Geometry: Send + Sync {
     /// the first hit found.
     fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
         self.closest_hit(ray, t_min, t_max, stats).is_some()
+    }
+
+    /// [`Self::any_hit`] for a packet of up to [`PACKET`] rays (the shadow rays of a
+    /// primary packet towards one light): each lane not yet `occluded` becomes occluded
+    /// when [`Self::any_hit`] would say so for that ray alone, so calls over several
+    /// geometries compose. The default is that loop; marched fields override it to
+    /// evaluate their distance for eight points at once. `rays`, `t_max` and `occluded`
+    /// have the same length.
+    fn any_hits(&self, rays: &[Ray], t_min: f32, t_max: &[f32], occluded: &mut [bool], stats: &mut RayStats) {
+        any_hits_one_by_one(self, rays, t_min, t_max, occluded, stats);
     }
 
     /// Bytes of memory this geometry holds (its own struct and everything it owns).

@@ -10,7 +10,9 @@ use obvhs::BvhBuildParams;
 use obvhs::bvh2::Bvh2;
 
 use crate::geometry::bvh2;
-use crate::geometry::{Aabb, Census, Geometry, Hit, PACKET, Ray, RayStats, Shared, closest_hits_one_by_one};
+use crate::geometry::{
+    Aabb, Census, Geometry, Hit, PACKET, Ray, RayStats, Shared, any_hits_one_by_one, closest_hits_one_by_one,
+};
 
 /// [`SceneGeometry`]'s `part` of a BVH leaf that is a whole object, not one of its instances.
 const WHOLE: u32 = u32::MAX;
@@ -177,6 +179,42 @@ impl Geometry for SceneGeometry {
         }
         for &prim in &candidates[..count] {
             self.leaf(prim).closest_hits(rays, t_min, t_max, hits, stats);
+        }
+    }
+
+    /// As [`Self::closest_hits`]: the bounded objects any live ray's box reaches (up to
+    /// [`PACKET_CANDIDATES`], else ray by ray), each asked for the whole packet.
+    fn any_hits(&self, rays: &[Ray], t_min: f32, t_max: &[f32], occluded: &mut [bool], stats: &mut RayStats) {
+        if rays.len() > PACKET || !self.prefers_packets() {
+            return any_hits_one_by_one(self, rays, t_min, t_max, occluded, stats);
+        }
+        for &i in &self.unbounded {
+            self.objects[i as usize].any_hits(rays, t_min, t_max, occluded, stats);
+        }
+        let mut candidates = [0u32; PACKET_CANDIDATES];
+        let mut count = 0usize;
+        let mut overflow = false;
+        for ((ray, &reach), _) in rays.iter().zip(t_max).zip(occluded.iter()).filter(|(_, o)| !**o) {
+            bvh2::traverse(&self.bvh, ray, t_min, reach, stats, |prim, _, _| {
+                if !candidates[..count].contains(&prim) {
+                    if count == PACKET_CANDIDATES {
+                        overflow = true;
+                        return Err(());
+                    }
+                    candidates[count] = prim;
+                    count += 1;
+                }
+                Ok(None)
+            });
+            if overflow {
+                return any_hits_one_by_one(self, rays, t_min, t_max, occluded, stats);
+            }
+        }
+        for &prim in &candidates[..count] {
+            if occluded.iter().all(|&o| o) {
+                break;
+            }
+            self.leaf(prim).any_hits(rays, t_min, t_max, occluded, stats);
         }
     }
 

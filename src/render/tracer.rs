@@ -11,6 +11,10 @@ use crate::scene::{Light, Material, Scene};
 /// Contributions weighing less than this (a fraction of the pixel) are not traced.
 pub const MIN_CONTRIBUTION: f32 = 1.0 / 512.0;
 
+/// Lights whose shadow rays [`Tracer::trace_packet`] traces as packets; the shadow rays of
+/// any further lights are traced one by one.
+pub const PACKET_LIGHTS: usize = 8;
+
 /// Traces rays through one scene and geometry.
 pub struct Tracer<'a> {
     scene: &'a Scene,
@@ -42,8 +46,10 @@ impl<'a> Tracer<'a> {
     }
 
     /// The colours seen along a packet of up to [`PACKET`] primary rays: their closest hits
-    /// found together ([`Geometry::closest_hits`]), then each shaded as [`Self::trace`]
-    /// does (shadow and secondary rays one by one). `out[i]` is exactly `trace(&rays[i])`.
+    /// found together ([`Geometry::closest_hits`]), then the shadow rays of those hits
+    /// towards each of the first [`PACKET_LIGHTS`] lights together
+    /// ([`Geometry::any_hits`]), then each hit shaded as [`Self::trace`] does (further
+    /// shadow rays and secondary rays one by one). `out[i]` is exactly `trace(&rays[i])`.
     pub fn trace_packet(&self, rays: &[Ray], out: &mut [Vec3], stats: &mut RayStats) {
         debug_assert!(rays.len() <= PACKET && out.len() == rays.len());
         let n = rays.len().min(PACKET);
@@ -51,10 +57,36 @@ impl<'a> Tracer<'a> {
         let mut hits: [Option<Hit>; PACKET] = [None; PACKET];
         stats.rays += n as u64;
         self.geometry.closest_hits(&rays[..n], 0.0, &mut t_max[..n], &mut hits[..n], stats);
+        // occluded[i][l]: whether hit i's shadow ray towards light l is blocked (only read
+        // where that ray exists, i.e. where the light is in front of the surface).
+        let mut occluded = [[false; PACKET_LIGHTS]; PACKET];
+        for (l, light) in self.scene.lights.iter().take(PACKET_LIGHTS).enumerate() {
+            let mut shadow = [Ray::new(Vec3::ZERO, Vec3::Z); PACKET];
+            let mut reach = [0.0f32; PACKET];
+            let mut lane_of = [0usize; PACKET];
+            let mut m = 0;
+            for i in 0..n {
+                let Some(hit) = &hits[i] else { continue };
+                let (n_shade, above) = surface_frame(&rays[i], hit);
+                let Some((to_light, dist, ..)) = self.light_towards(light, above) else { continue };
+                if n_shade.dot(to_light) > 0.0 {
+                    (shadow[m], reach[m], lane_of[m]) = (Ray::new(above, to_light), dist, i);
+                    m += 1;
+                }
+            }
+            if m == 0 {
+                continue;
+            }
+            let mut blocked = [false; PACKET];
+            self.geometry.any_hits(&shadow[..m], 0.0, &reach[..m], &mut blocked[..m], stats);
+            for j in 0..m {
+                occluded[lane_of[j]][l] = blocked[j];
+            }
+        }
         let depth = self.scene.settings.max_depth;
         for i in 0..n {
             out[i] = match &hits[i] {
-                Some(hit) => self.shade(&rays[i], hit, depth, 1.0, stats),
+                Some(hit) => self.shade(&rays[i], hit, depth, 1.0, Some(&occluded[i]), stats),
                 None => self.scene.settings.background,
             };
         }
@@ -63,47 +95,61 @@ impl<'a> Tracer<'a> {
     fn trace_rec(&self, ray: &Ray, depth: u32, weight: f32, stats: &mut RayStats) -> Vec3 {
         stats.rays += 1;
         match self.geometry.closest_hit(ray, 0.0, self.scene.settings.max_distance, stats) {
-            Some(hit) => self.shade(ray, &hit, depth, weight, stats),
+            Some(hit) => self.shade(ray, &hit, depth, weight, None, stats),
             None => self.scene.settings.background,
         }
     }
 
-    fn shade(&self, ray: &Ray, hit: &Hit, depth: u32, weight: f32, stats: &mut RayStats) -> Vec3 {
+    /// The direction towards `light` from `from`, the distance a shadow ray goes, and the
+    /// light's intensity and colour; `None` for the ambient light and a point light at
+    /// `from` itself.
+    fn light_towards(&self, light: &Light, from: Vec3) -> Option<(Vec3, f32, f32, Vec3)> {
+        match *light {
+            Light::Ambient { .. } => None,
+            Light::Point { position, intensity, color } => {
+                let v = position - from;
+                let d = v.length();
+                (d > 0.0).then(|| (v / d, d, intensity, color))
+            }
+            Light::Directional { direction, intensity, color } => {
+                Some((-direction, self.scene.settings.max_distance, intensity, color))
+            }
+        }
+    }
+
+    /// The colour of `hit` seen along `ray`. `occluded`, where the shadow rays of the
+    /// first [`PACKET_LIGHTS`] lights were traced already ([`Self::trace_packet`]), says
+    /// which were blocked; other shadow rays are traced here.
+    fn shade(
+        &self,
+        ray: &Ray,
+        hit: &Hit,
+        depth: u32,
+        weight: f32,
+        occluded: Option<&[bool; PACKET_LIGHTS]>,
+        stats: &mut RayStats,
+    ) -> Vec3 {
         let m: &Material = &self.scene.materials[hit.material as usize];
-        // Face the geometric normal towards the viewer; remember whether we are leaving the
-        // solid. Spawned rays start off the surface along it. Shading uses the shading
-        // normal turned to the same side.
         let leaving = hit.normal.dot(ray.dir) > 0.0;
         let face = if leaving { -hit.normal } else { hit.normal };
-        let n = if leaving { -hit.shading_normal } else { hit.shading_normal };
-        let n = if n.dot(face) > 0.0 { n } else { face };
+        let (n, above) = surface_frame(ray, hit);
         let offset = spawn_offset(hit);
-        let above = hit.point + face * offset;
         let view = -ray.dir;
 
         let mut local = m.ka * self.ambient * m.color;
-        for light in &self.scene.lights {
-            let (to_light, dist, intensity, color) = match *light {
-                Light::Ambient { .. } => continue,
-                Light::Point { position, intensity, color } => {
-                    let v = position - above;
-                    let d = v.length();
-                    if d <= 0.0 {
-                        continue;
-                    }
-                    (v / d, d, intensity, color)
-                }
-                Light::Directional { direction, intensity, color } => {
-                    (-direction, self.scene.settings.max_distance, intensity, color)
-                }
-            };
+        for (l, light) in self.scene.lights.iter().enumerate() {
+            let Some((to_light, dist, intensity, color)) = self.light_towards(light, above) else { continue };
             let n_dot_l = n.dot(to_light);
             if n_dot_l <= 0.0 {
                 continue;
             }
             stats.rays += 1;
             stats.shadow_rays += 1;
-            if self.geometry.any_hit(&Ray::new(above, to_light), 0.0, dist, stats) {
+            let blocked = match occluded {
+                Some(o) if l < PACKET_LIGHTS => o[l],
+                _ => self.geometry.any_hit(&Ray::new(above, to_light), 0.0, dist, stats),
+            };
+            if blocked {
                 continue;
             }
             local += m.kd * intensity * n_dot_l * m.color * color;
@@ -154,6 +200,20 @@ impl<'a> Tracer<'a> {
         };
         (1.0 - tr) * opaque + tr * transmitted
     }
+}
+
+/// The shading normal of `hit` turned towards the viewer of `ray` (and to the side of the
+/// geometric normal facing them), and the point shadow and reflection rays start from:
+/// the hit point moved off the surface along that facing geometric normal.
+#[inline]
+fn surface_frame(ray: &Ray, hit: &Hit) -> (Vec3, Vec3) {
+    // Face the geometric normal towards the viewer (`leaving`: the ray leaves the solid);
+    // shading uses the shading normal turned to the same side.
+    let leaving = hit.normal.dot(ray.dir) > 0.0;
+    let face = if leaving { -hit.normal } else { hit.normal };
+    let n = if leaving { -hit.shading_normal } else { hit.shading_normal };
+    let n = if n.dot(face) > 0.0 { n } else { face };
+    (n, hit.point + face * spawn_offset(hit))
 }
 
 /// Refracts unit `d` through a surface with unit normal `n` facing against `d`, with

@@ -458,6 +458,21 @@ fn check_packets(what: &str, g: &dyn Geometry, queue: &[(Ray, f32, f32)]) {
                 assert_eq!(t_max[i], h.t, "{what}: packet lane {i}: t_max not lowered to the hit");
             }
         }
+        // The same packet as shadow rays: any_hits equals any_hit lane by lane, and a lane
+        // already occluded (every fourth) stays so and is not traced.
+        let reach: Vec<f32> = chunk.iter().map(|c| c.2).collect();
+        let want: Vec<bool> = chunk.iter().map(|c| g.any_hit(&c.0, c.1, c.2, &mut stats)).collect();
+        let mut occluded: Vec<bool> = (0..chunk.len()).map(|i| (i + packets) % 4 == 3).collect();
+        let before = occluded.clone();
+        g.any_hits(&rays, t_min, &reach, &mut occluded, &mut stats);
+        for i in 0..chunk.len() {
+            assert_eq!(
+                occluded[i],
+                want[i] || before[i],
+                "{what}: shadow packet lane {i} of ray {:?}",
+                rays[i]
+            );
+        }
         packets += 1;
         start = end;
     }

@@ -589,6 +589,10 @@ impl Geometry for SdfUnion {
         self.parts.any_hit(ray, t_min, t_max, stats)
     }
 
+    fn any_hits(&self, rays: &[Ray], t_min: f32, t_max: &[f32], occluded: &mut [bool], stats: &mut RayStats) {
+        self.parts.any_hits(rays, t_min, t_max, occluded, stats)
+    }
+
     fn bytes_used(&self) -> usize {
         std::mem::size_of::<Self>() + self.parts.bytes_used() + self.label.capacity()
     }
