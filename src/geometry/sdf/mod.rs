@@ -703,6 +703,7 @@ impl DistanceField for SdfField {
                 }
                 None => format!("{why} ({bound}, f32 tape of {} ops)", t.ops().len()),
             },
+            None if self.tree.node_count <= 1 => format!("{why} ({bound}, f64 tree: a single primitive)"),
             None => format!("{why} ({bound}, f64 tree: tape over {MAX_TAPE_OPS} ops)"),
         }
     }

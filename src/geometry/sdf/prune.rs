@@ -248,7 +248,18 @@ impl Bounds {
                     let id = |x: f32| ((x - shift + 0.5).floor() + shift).max(lo).min(hi);
                     let (id0, id1) = (id(x.lo), id(x.hi));
                     self.vals[base as usize] = Interval::new(id0 * period, id1 * period);
-                    let (n0, n1) = ((id0 - 1.0).max(lo).min(hi), (id1 + 1.0).max(lo).min(hi));
+                    // The neighbour is on `x`'s side of the cell index (`id < x`: above): in
+                    // one cell with `x` on one side, a single cell.
+                    let (down, up) = if id0 != id1 {
+                        (id0 - 1.0, id1 + 1.0)
+                    } else if id0 < x.lo {
+                        (id0 + 1.0, id0 + 1.0)
+                    } else if x.hi <= id0 {
+                        (id0 - 1.0, id0 - 1.0)
+                    } else {
+                        (id0 - 1.0, id0 + 1.0)
+                    };
+                    let (n0, n1) = (down.max(lo).min(hi), up.max(lo).min(hi));
                     self.vals[other as usize] = Interval::new(n0 * period, n1 * period);
                 }
                 Op::Offset { src, dst, offs } => {
