@@ -121,8 +121,33 @@ pub enum SdfNode {
     Primitive { prim: Primitive, transform: Transform, material: MaterialId },
     /// A CSG operation under a transform.
     Csg { op: CsgOp, children: Vec<SdfNode>, transform: Transform },
-    /// Domain repetition under a transform (see [`ObjectKind::Repeat`]).
-    Repeat { period: Vec3, count: Option<UVec3>, child: Box<SdfNode>, transform: Transform },
+    /// Domain repetition under a transform (see [`ObjectKind::Repeat`]). `gaps[axis]`:
+    /// where the child's bounds keep at least this distance (> 0, local units) from its
+    /// cell's faces along that axis ([`cell_gaps`]), the neighbouring cells along it are
+    /// bounded by the face instead of evaluated ([`eval_repeat`]).
+    Repeat {
+        period: Vec3,
+        count: Option<UVec3>,
+        child: Box<SdfNode>,
+        transform: Transform,
+        gaps: [Option<f64>; 3],
+    },
+}
+
+/// Per axis of a finite repetition with more than one copy along it, the distance between
+/// `child`'s bounds and the faces of its cell (a box of `period` centred on the origin)
+/// when it is positive (above a millionth of the period): then no copy reaches into the
+/// next cell along that axis, with room to spare. `None` for the other axes, and for every
+/// axis of an infinite repetition (whose rays graze across many cells, where the face
+/// bound would cost more steps than the neighbours' evaluations save).
+pub fn cell_gaps(period: Vec3, count: Option<UVec3>, child: &Object) -> [Option<f64>; 3] {
+    let (Some(count), Some(b)) = (count, child.bounds()) else { return [None; 3] };
+    let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
+    std::array::from_fn(|axis| {
+        let s = period[axis] as f64;
+        let gap = (0.5 * s - hi[axis] as f64).min(lo[axis] as f64 + 0.5 * s);
+        (s > 0.0 && count[axis] > 1 && gap.is_finite() && gap > 1e-6 * s).then_some(gap)
+    })
 }
 
 /// A compiled object tree with its distance bound kind.
@@ -204,8 +229,9 @@ fn compile(object: &Object, exact: &mut bool, count: &mut usize) -> Option<SdfNo
         }
         ObjectKind::Repeat { period, count: reps, child } => {
             *exact = false;
+            let gaps = cell_gaps(*period, *reps, child);
             let child = Box::new(compile(child, exact, count)?);
-            SdfNode::Repeat { period: *period, count: *reps, child, transform }
+            SdfNode::Repeat { period: *period, count: *reps, child, transform, gaps }
         }
     })
 }
@@ -226,7 +252,9 @@ impl SdfNode {
         let (d, m) = match self {
             SdfNode::Primitive { prim, material, .. } => (primitive_distance_f64(prim, q), *material),
             SdfNode::Csg { op, children, .. } => eval_csg(*op, children, q),
-            SdfNode::Repeat { period, count, child, .. } => eval_repeat(*period, *count, child, q),
+            SdfNode::Repeat { period, count, child, gaps, .. } => {
+                eval_repeat(*period, *count, child, gaps, q)
+            }
         };
         // Rotation and translation keep distances; scale multiplies them. The smallest scale
         // factor keeps the result a lower bound under non-uniform scale.
@@ -284,10 +312,26 @@ fn eval_csg(op: CsgOp, children: &[SdfNode], q: DVec3) -> (f64, MaterialId) {
 /// on the nearer side along each repeated axis, so a child that reaches into its neighbours
 /// is still seen. The result is a lower bound when the child stays within one period of its
 /// cell centre.
-fn eval_repeat(period: Vec3, count: Option<UVec3>, child: &SdfNode, q: DVec3) -> (f64, MaterialId) {
+///
+/// Along an axis with a gap ([`cell_gaps`]: every copy stays at least `gap` inside its
+/// cell along it), the neighbouring cell is not evaluated: the result is `min(d, face +
+/// gap)` over those axes, `face` being the distance from `q` to the nearest cell's face on
+/// that axis that has a neighbouring cell. Any copy in another cell along that axis lies
+/// beyond that face by at least `gap`, so this is a Lipschitz-1 lower bound of the
+/// distance to all copies, equal to `d` within `gap` of the surface (the zero set does not
+/// change); a child that fits its cell on all three axes is evaluated once instead of 8
+/// times.
+fn eval_repeat(
+    period: Vec3,
+    count: Option<UVec3>,
+    child: &SdfNode,
+    gaps: &[Option<f64>; 3],
+    q: DVec3,
+) -> (f64, MaterialId) {
     let mut base = [0.0f64; 3];
     let mut other = [0.0f64; 3];
     let mut repeated = [false; 3];
+    let mut face = f64::INFINITY;
     for axis in 0..3 {
         let s = period[axis] as f64;
         if s <= 0.0 {
@@ -307,6 +351,17 @@ fn eval_repeat(period: Vec3, count: Option<UVec3>, child: &SdfNode, q: DVec3) ->
         let next = (id + if x > id { 1.0 } else { -1.0 }).clamp(lo, hi);
         base[axis] = id * s;
         other[axis] = next * s;
+        if let Some(g) = gaps[axis] {
+            // Bounded by the face: the corners below skip this axis (other == base).
+            other[axis] = base[axis];
+            let (local, half) = (q[axis] - base[axis], 0.5 * s + g);
+            if id < hi {
+                face = face.min(half - local);
+            }
+            if id > lo {
+                face = face.min(half + local);
+            }
+        }
     }
     let mut best = (f64::INFINITY, 0);
     for corner in 0..8u32 {
@@ -328,7 +383,7 @@ fn eval_repeat(period: Vec3, count: Option<UVec3>, child: &SdfNode, q: DVec3) ->
             best = r;
         }
     }
-    best
+    if face < best.0 { (face, best.1) } else { best }
 }
 
 /// Longest tape compiled for rendering; a longer one (nested repetition unrolls `2^k`

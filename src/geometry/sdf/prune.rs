@@ -20,8 +20,9 @@
 //!   `h` clamps to 0 or 1 there), and so on. Undecided, the result's interval is the
 //!   operation's range over the two intervals (a smooth minimum lies at most `k / 4` below
 //!   the smaller operand).
-//! * Repetition cells ([`Op::Cells`]) over an interval are a range of cells; a box that
-//!   spans several makes the folded point's box wider, which is still sound.
+//! * Repetition cells ([`Op::Cells`], [`Op::CellFace`]) over an interval are a range of
+//!   cells; a box that spans several makes the folded point's box wider, which is still
+//!   sound.
 //!
 //! # Shortening
 //!
@@ -262,6 +263,24 @@ impl Bounds {
                     let (n0, n1) = (down.max(lo).min(hi), up.max(lo).min(hi));
                     self.vals[other as usize] = Interval::new(n0 * period, n1 * period);
                 }
+                Op::CellFace { p, axis, base, face, period, inv_period, shift, lo, hi, half_gap } => {
+                    let v = self.pts[p as usize][axis as usize];
+                    let x = v.scale(inv_period);
+                    let id = |x: f32| ((x - shift + 0.5).floor() + shift).max(lo).min(hi);
+                    let (id0, id1) = (id(x.lo), id(x.hi));
+                    self.vals[base as usize] = Interval::new(id0 * period, id1 * period);
+                    // In one cell: the faces' distances over the box; across cells, a
+                    // point is within its nearest cell, so the bound is at least the gap.
+                    let none = Interval { lo: f32::INFINITY, hi: f32::INFINITY };
+                    self.vals[face as usize] = if id0 == id1 {
+                        let local = v.add(-(id0 * period));
+                        let up = if id0 < hi { local.neg().add(half_gap) } else { none };
+                        let down = if lo < id0 { local.add(half_gap) } else { none };
+                        up.min(down)
+                    } else {
+                        Interval { lo: 0.0, hi: f32::INFINITY }
+                    };
+                }
                 Op::Offset { src, dst, offs } => {
                     let q = self.pts[src as usize];
                     let mut r = q;
@@ -364,10 +383,10 @@ fn kill_if_live(op: &Op, live_v: &mut [bool], live_p: &mut [bool]) -> bool {
         Op::Translate { dst, .. } | Op::Affine { dst, .. } | Op::Offset { dst, .. } => {
             std::mem::replace(&mut live_p[dst as usize], false)
         }
-        Op::Cells { base, other, .. } => {
-            let l = live_v[base as usize] || live_v[other as usize];
+        Op::Cells { base, other: second, .. } | Op::CellFace { base, face: second, .. } => {
+            let l = live_v[base as usize] || live_v[second as usize];
             live_v[base as usize] = false;
-            live_v[other as usize] = false;
+            live_v[second as usize] = false;
             l
         }
         Op::Scale { a, .. } => live_v[a as usize],
@@ -393,7 +412,7 @@ fn mark_inputs(op: &Op, live_v: &mut [bool], live_p: &mut [bool]) {
                 }
             }
         }
-        Op::Cells { p, .. } => live_p[p as usize] = true,
+        Op::Cells { p, .. } | Op::CellFace { p, .. } => live_p[p as usize] = true,
         Op::Scale { a, .. } | Op::Copy { a, .. } | Op::Neg { a, .. } => live_v[a as usize] = true,
         ref o => match o.primitive_registers() {
             Some((p, _)) => live_p[p as usize] = true,

@@ -21,7 +21,9 @@
 //!   combinations, and the child's code follows once per combination (unrolled, so the tape
 //!   has no jumps and every lane runs the same instructions), combined with [`Op::Min`].
 //!   Nested repetitions multiply: a child under repetition along `k` axes appears `2^k`
-//!   times.
+//!   times. Along an axis where the child stays inside its cell ([`super::cell_gaps`]),
+//!   [`Op::CellFace`] takes the nearest cell only and bounds the others by the cell's face
+//!   plus the gap, as the tree does; a child that fits on every axis appears once.
 //!
 //! # Coordinates and precision
 //!
@@ -319,6 +321,33 @@ pub enum Op {
         lo: f32,
         /// Highest cell index (`inf` for infinite repetition).
         hi: f32,
+    },
+    /// The nearest repetition cell along `axis` as [`Op::Cells`] (`vals[base] = id *
+    /// period`) and, for a child that stays inside its cell ([`super::cell_gap`]), the
+    /// distance bound of every other copy along that axis: with `x = p[axis] - id *
+    /// period`, `vals[face] = min(half_gap - x if id < hi, half_gap + x if id > lo)` (+inf
+    /// where neither side has a neighbour), `half_gap` being half the period plus the gap.
+    CellFace {
+        /// Point register (the repetition's local frame).
+        p: u32,
+        /// Axis 0, 1 or 2.
+        axis: u32,
+        /// Value register for the nearest cell's offset.
+        base: u32,
+        /// Value register for the face distance plus the gap.
+        face: u32,
+        /// Period along the axis (> 0), local units.
+        period: f32,
+        /// `1 / period`.
+        inv_period: f32,
+        /// 0, or 0.5 for an even finite count.
+        shift: f32,
+        /// Lowest cell index (`-inf` for infinite repetition).
+        lo: f32,
+        /// Highest cell index (`inf` for infinite repetition).
+        hi: f32,
+        /// Half the period plus the gap, local units.
+        half_gap: f32,
     },
     /// `pts[dst][i] = pts[src][i] - vals[offs[i]]`, or `pts[src][i]` where `offs[i]` is
     /// [`NO_REG`].
@@ -747,12 +776,16 @@ impl Compiler {
                     });
                 }
             }
-            SdfNode::Repeat { period, count, child, .. } => {
+            SdfNode::Repeat { period, count, child, gaps, .. } => {
                 let q = self.point(pin, &map, next_pt);
                 let mut axes = [(0u32, 0u32); 3];
                 let mut n = 0;
                 let mut reg = out + 1;
                 let mut extent = 0.0f64;
+                // Axes along which the child fits its cell: the nearest cell only, and the
+                // face bound (`eval_repeat`) in `faces`; their offsets in `fixed`.
+                let mut faces = [NO_REG; 3];
+                let mut fixed = [NO_REG; 3];
                 for axis in 0..3 {
                     let s = period[axis];
                     if s <= 0.0 {
@@ -766,6 +799,25 @@ impl Compiler {
                         }
                         None => (f32::NEG_INFINITY, f32::INFINITY, 0.0),
                     };
+                    if let Some(gap) = gaps[axis] {
+                        let half_gap = (0.5 * s as f64 + gap) as f32;
+                        self.ops.push(Op::CellFace {
+                            p: q,
+                            axis: axis as u32,
+                            base: reg,
+                            face: reg + 1,
+                            period: s,
+                            inv_period: 1.0 / s,
+                            shift,
+                            lo,
+                            hi,
+                            half_gap,
+                        });
+                        fixed[axis] = reg;
+                        faces[axis] = reg + 1;
+                        reg += 2;
+                        continue;
+                    }
                     self.ops.push(Op::Cells {
                         p: q,
                         axis: axis as u32,
@@ -789,14 +841,18 @@ impl Compiler {
                 self.points = self.points.max(folded + 1);
                 let inherited = inherited + mult * (map.translation.length() + extent);
                 let corners = 1u32 << n;
+                // With face bounds, the copies' minimum goes to `acc` (the child's registers
+                // lie above it, clear of the face registers), and `out` takes the faces'.
+                let faces: Vec<u32> = faces.into_iter().filter(|&f| f != NO_REG).collect();
+                let result = if faces.is_empty() { out } else { acc };
                 for corner in 0..corners {
-                    let mut offs = [NO_REG; 3];
+                    let mut offs = fixed;
                     for (j, &(axis, r)) in axes[..n].iter().enumerate() {
                         offs[axis as usize] = if corner & (1 << j) != 0 { r + 1 } else { r };
                     }
                     self.ops.push(Op::Offset { src: q, dst: folded, offs });
                     let dst = if corners == 1 {
-                        out
+                        result
                     } else if corner == 0 {
                         acc
                     } else {
@@ -804,9 +860,12 @@ impl Compiler {
                     };
                     self.node(child, folded, DAffine3::IDENTITY, mult, inherited, dst, folded + 1);
                     if corner > 0 {
-                        let dst = if corner + 1 == corners { out } else { acc };
+                        let dst = if corner + 1 == corners { result } else { acc };
                         self.ops.push(Op::Min { out: dst, a: acc, b: acc + 1 });
                     }
+                }
+                for (j, &f) in faces.iter().enumerate() {
+                    self.ops.push(Op::Min { out, a: if j == 0 { result } else { out }, b: f });
                 }
             }
         }
@@ -1220,6 +1279,19 @@ fn run<'a, L: Lane>(
                 let next = (id + step).vmax(lo).vmin(hi);
                 vals[base as usize] = id * L::splat(period);
                 vals[other as usize] = next * L::splat(period);
+            }
+            Op::CellFace { p, axis, base, face, period, inv_period, shift, lo, hi, half_gap } => {
+                let v = pts[p as usize][axis as usize];
+                let x = v * L::splat(inv_period);
+                let (lo, hi, shift) = (L::splat(lo), L::splat(hi), L::splat(shift));
+                let id = ((x - shift + L::splat(0.5)).vfloor() + shift).vmax(lo).vmin(hi);
+                let offset = id * L::splat(period);
+                let local = v - offset;
+                let inf = L::splat(f32::INFINITY);
+                let up = L::select_lt(id, hi, L::splat(half_gap) - local, inf);
+                let down = L::select_lt(lo, id, L::splat(half_gap) + local, inf);
+                vals[base as usize] = offset;
+                vals[face as usize] = down.vmin(up);
             }
             Op::Offset { src, dst, offs } => {
                 let q = pts[src as usize];
