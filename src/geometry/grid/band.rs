@@ -162,13 +162,14 @@ impl BandGrid {
     /// boundary of the surface-free cube of bricks around it (see the module
     /// documentation), sign kept, so a step never crosses the interpolated surface;
     /// continued outside the box as [`BandGrid::trilinear`].
+    #[inline]
     pub fn march_distance(&self, p: Vec3) -> f32 {
         self.eval(p, true)
     }
 
     /// [`BandGrid::trilinear`] (`skip == false`) or [`BandGrid::march_distance`]. The
     /// eight-lane kernel of [`super::packet`] repeats these operations in this order.
-    #[inline]
+    #[inline(always)]
     fn eval(&self, p: Vec3, skip: bool) -> f32 {
         let (lo, hi) = self.bounds();
         let q = p.clamp(lo, hi);

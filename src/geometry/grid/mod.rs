@@ -193,7 +193,15 @@ impl SdfGrid {
     /// (the surface then crosses the box boundary, which
     /// [`crate::convert::mesh_to_grid::sample_mesh`]'s margin
     /// avoids). Both are continuous across the box boundary and 1-Lipschitz in `d`.
+    #[inline]
     pub fn trilinear(&self, p: Vec3) -> f32 {
+        self.trilinear_inline(p)
+    }
+
+    /// [`SdfGrid::trilinear`], always inlined (into the AVX2 build of the marched field,
+    /// [`object::GridStore::march_distance`]).
+    #[inline(always)]
+    pub(crate) fn trilinear_inline(&self, p: Vec3) -> f32 {
         let (lo, hi) = self.bounds();
         let q = p.clamp(lo, hi);
         let d = (p - q).length();

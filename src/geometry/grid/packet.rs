@@ -123,20 +123,49 @@ mod avx2 {
             let max_cell = (dims - UVec3::splat(2)).as_vec3();
             let zero = _mm256_setzero_ps();
             let one = splat(1.0);
-            let q: [__m256; 3] = std::array::from_fn(|a| min(max(p[a], splat(lo[a])), splat(hi[a])));
-            let dv: [__m256; 3] = std::array::from_fn(|a| _mm256_sub_ps(p[a], q[a]));
+            // Plain loops, no closures: everything must inline into the AVX2 caller.
+            let mut dv = [zero; 3];
+            let mut f = [zero; 3];
+            let mut t = [zero; 3];
+            let mut cell = [_mm256_setzero_si256(); 3];
+            for a in 0..3 {
+                let q = min(max(p[a], splat(lo[a])), splat(hi[a]));
+                dv[a] = _mm256_sub_ps(p[a], q);
+                f[a] = _mm256_div_ps(_mm256_sub_ps(q, splat(origin[a])), splat(voxel));
+                let c = min(max(_mm256_floor_ps(f[a]), zero), splat(max_cell[a]));
+                t[a] = min(max(_mm256_sub_ps(f[a], c), zero), one);
+                cell[a] = _mm256_cvttps_epi32(c);
+            }
             let dd = _mm256_add_ps(
                 _mm256_add_ps(_mm256_mul_ps(dv[0], dv[0]), _mm256_mul_ps(dv[1], dv[1])),
                 _mm256_mul_ps(dv[2], dv[2]),
             );
             let d = _mm256_sqrt_ps(dd);
-            let f: [__m256; 3] =
-                std::array::from_fn(|a| _mm256_div_ps(_mm256_sub_ps(q[a], splat(origin[a])), splat(voxel)));
-            let c: [__m256; 3] =
-                std::array::from_fn(|a| min(max(_mm256_floor_ps(f[a]), zero), splat(max_cell[a])));
-            let t: [__m256; 3] = std::array::from_fn(|a| min(max(_mm256_sub_ps(f[a], c[a]), zero), one));
-            let cell: [__m256i; 3] = std::array::from_fn(|a| _mm256_cvttps_epi32(c[a]));
             Common { d, f, t, cell }
+        }
+    }
+
+    /// The samples at `base + o` lane by lane.
+    #[inline(always)]
+    unsafe fn gather(v: *const f32, base: __m256i, o: i32) -> __m256 {
+        unsafe { _mm256_i32gather_ps::<4>(v, _mm256_add_epi32(base, _mm256_set1_epi32(o))) }
+    }
+
+    /// The 16-bit samples at `base + o` and `base + o + 1` (x and x + 1, always in the same
+    /// brick) of the lanes in `mask`, in one 32-bit gather at 2-byte granularity, as `f32`.
+    #[inline(always)]
+    unsafe fn pair(data: *const i32, base: __m256i, o: i32, mask: __m256i) -> (__m256, __m256) {
+        unsafe {
+            let w = _mm256_mask_i32gather_epi32::<2>(
+                _mm256_setzero_si256(),
+                data,
+                _mm256_add_epi32(base, _mm256_set1_epi32(o)),
+                mask,
+            );
+            (
+                _mm256_cvtepi32_ps(_mm256_and_si256(w, _mm256_set1_epi32(0xffff))),
+                _mm256_cvtepi32_ps(_mm256_srli_epi32::<16>(w)),
+            )
         }
     }
 
@@ -178,11 +207,10 @@ mod avx2 {
                 ),
             );
             let v = g.values.as_ptr();
-            let at = |o: i32| _mm256_i32gather_ps::<4>(v, _mm256_add_epi32(base, _mm256_set1_epi32(o)));
-            let x00 = lerp(at(0), at(1), t[0]);
-            let x10 = lerp(at(sy), at(sy + 1), t[0]);
-            let x01 = lerp(at(sz), at(sz + 1), t[0]);
-            let x11 = lerp(at(sz + sy), at(sz + sy + 1), t[0]);
+            let x00 = lerp(gather(v, base, 0), gather(v, base, 1), t[0]);
+            let x10 = lerp(gather(v, base, sy), gather(v, base, sy + 1), t[0]);
+            let x01 = lerp(gather(v, base, sz), gather(v, base, sz + 1), t[0]);
+            let x11 = lerp(gather(v, base, sz + sy), gather(v, base, sz + sy + 1), t[0]);
             let value = lerp(lerp(x00, x10, t[1]), lerp(x01, x11, t[1]), t[2]);
             store(continue_outside(value, d))
         }
@@ -195,7 +223,11 @@ mod avx2 {
         unsafe {
             let Common { d, f, t, cell } = common((g.origin, g.voxel, g.dims), g.bounds(), xs, ys, zs);
             let (slots, bounds, ranges, data) = (&g.slots, &g.bounds, &g.ranges, &g.data);
-            let brick: [__m256i; 3] = std::array::from_fn(|a| _mm256_srli_epi32::<3>(cell[a]));
+            let brick = [
+                _mm256_srli_epi32::<3>(cell[0]),
+                _mm256_srli_epi32::<3>(cell[1]),
+                _mm256_srli_epi32::<3>(cell[2]),
+            ];
             let bi = _mm256_add_epi32(
                 brick[0],
                 _mm256_mullo_epi32(
@@ -216,7 +248,11 @@ mod avx2 {
                 let stored =
                     _mm256_castps_si256(_mm256_xor_ps(empty, _mm256_castsi256_ps(_mm256_set1_epi32(-1))));
                 let seven = _mm256_set1_epi32(7);
-                let l: [__m256i; 3] = std::array::from_fn(|a| _mm256_and_si256(cell[a], seven));
+                let l = [
+                    _mm256_and_si256(cell[0], seven),
+                    _mm256_and_si256(cell[1], seven),
+                    _mm256_and_si256(cell[2], seven),
+                ];
                 let bs = _mm256_set1_epi32(BS as i32);
                 let base = _mm256_add_epi32(
                     _mm256_mullo_epi32(slot, _mm256_set1_epi32(BRICK_SAMPLES as i32)),
@@ -236,26 +272,11 @@ mod avx2 {
                     stored_ps,
                 );
                 let dp = data.as_ptr() as *const i32;
-                let low = _mm256_set1_epi32(0xffff);
-                // Samples `o` and `o + 1` (x and x + 1, always in the same brick) in one
-                // 32-bit gather at 2-byte granularity.
-                let pair = |o: i32| {
-                    let w = _mm256_mask_i32gather_epi32::<2>(
-                        _mm256_setzero_si256(),
-                        dp,
-                        _mm256_add_epi32(base, _mm256_set1_epi32(o)),
-                        stored,
-                    );
-                    (
-                        _mm256_cvtepi32_ps(_mm256_and_si256(w, low)),
-                        _mm256_cvtepi32_ps(_mm256_srli_epi32::<16>(w)),
-                    )
-                };
                 let (sy, sz) = (BS as i32, (BS * BS) as i32);
-                let (a0, a1) = pair(0);
-                let (b0, b1) = pair(sy);
-                let (c0, c1) = pair(sz);
-                let (e0, e1) = pair(sz + sy);
+                let (a0, a1) = pair(dp, base, 0, stored);
+                let (b0, b1) = pair(dp, base, sy, stored);
+                let (c0, c1) = pair(dp, base, sz, stored);
+                let (e0, e1) = pair(dp, base, sz + sy, stored);
                 let x00 = lerp(a0, a1, t[0]);
                 let x10 = lerp(b0, b1, t[0]);
                 let x01 = lerp(c0, c1, t[0]);
