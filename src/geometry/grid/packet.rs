@@ -375,6 +375,19 @@ mod tests {
     }
 
     #[test]
+    fn marched_store_equals_the_baseline_build() {
+        // `GridStore::march_distance` runs an AVX2 build of the scalar source where it can.
+        use super::super::object::GridStore;
+        let g = grid();
+        let b = BandGrid::from_dense(&g, 2).unwrap();
+        let (dense, band) = (GridStore::Dense(g.clone()), GridStore::Band(b.clone()));
+        for p in points(2000) {
+            assert_eq!(dense.march_distance(p).to_bits(), g.trilinear(p).to_bits(), "{p}");
+            assert_eq!(band.march_distance(p).to_bits(), b.march_distance(p).to_bits(), "{p}");
+        }
+    }
+
+    #[test]
     fn band_lanes_equal_scalar() {
         let g = grid();
         for cells in [1, 2] {
