@@ -21,6 +21,7 @@ mod grid_cli;
 mod grid_io;
 mod grid_objects;
 mod grid_sample;
+mod grid_skip;
 mod grid_speed_nearest;
 mod grid_voxelize;
 mod hard_cases;

@@ -7,11 +7,13 @@
 //! grid of cubic cells: sample `(i, j, k)` sits at `origin + voxel * (i, j, k)`, so a grid
 //! of `dims` samples spans `dims - 1` cells per axis and its box is
 //! `[origin, origin + voxel * (dims - 1)]`. Between samples [`SdfGrid::trilinear`]
-//! interpolates.
+//! interpolates; [`SdfGrid::trilinear8`] interpolates at eight points at once (for packets
+//! of marched rays, AVX2 where the CPU has it, bit-identical lane by lane).
 
 pub mod band;
 pub mod io;
 pub mod object;
+mod packet;
 
 use glam::{UVec3, Vec3};
 
@@ -191,7 +193,15 @@ impl SdfGrid {
     /// (the surface then crosses the box boundary, which
     /// [`crate::convert::mesh_to_grid::sample_mesh`]'s margin
     /// avoids). Both are continuous across the box boundary and 1-Lipschitz in `d`.
+    #[inline]
     pub fn trilinear(&self, p: Vec3) -> f32 {
+        self.trilinear_inline(p)
+    }
+
+    /// [`SdfGrid::trilinear`], always inlined (into the AVX2 build of the marched field,
+    /// [`object::GridStore::march_distance`]).
+    #[inline(always)]
+    pub(crate) fn trilinear_inline(&self, p: Vec3) -> f32 {
         let (lo, hi) = self.bounds();
         let q = p.clamp(lo, hi);
         let d = (p - q).length();
