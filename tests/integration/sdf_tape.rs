@@ -131,7 +131,7 @@ struct Seen {
 /// of 14 nudges along the axes and diagonals), within twice the bound, and the point is
 /// counted as a jump.
 fn check(o: &Object, points: &[Vec3]) -> Result<Seen, TestCaseError> {
-    let tree = SdfTree::new(o).unwrap();
+    let tree = SdfTree::for_marching(o).unwrap();
     let tape = Tape::from_object(o).unwrap();
     let mut scratch = TapeScratch::new(&tape);
     let mut seen = Seen::default();
@@ -209,6 +209,40 @@ proptest! {
     fn tape_matches_the_tree((o, unit) in case()) {
         check(&o, &sample(&o, &unit))?;
     }
+
+    /// The marching tree (repetitions whose child fits its cell bounded by the cell's faces)
+    /// against the tree grids and meshes are built from: the same sign everywhere (so the
+    /// same surface), and, where every copy's value is its exact distance (exact primitives under
+    /// rigid transforms, unions and repetitions only), at most the same value outside: a
+    /// bound a march may step by. (Where a copy's value is only a bound, the sampling tree
+    /// can go below the true distance of a neighbour copy, and the face bound above it.)
+    #[test]
+    fn marching_tree_bounds_the_sampling_tree((o, unit) in case()) {
+        let (sampling, marching) = (SdfTree::new(&o).unwrap(), SdfTree::for_marching(&o).unwrap());
+        let tape = Tape::from_object(&o).unwrap();
+        let exact = exact_copies(&o);
+        for p in sample(&o, &unit) {
+            let w = tape.origin + p.as_dvec3();
+            let (a, m) = (sampling.distance(w), marching.distance(w));
+            let slack = 1e-9 * (1.0 + w.abs().max_element());
+            prop_assert!(!exact || m.abs() <= a.abs() + slack, "marching {m} above sampling {a} at {w}");
+            prop_assert!(a * m >= 0.0 || a.abs() <= slack, "marching {m} and sampling {a} differ in sign at {w}");
+        }
+    }
+}
+
+/// Whether every value in `o`'s tree is an exact distance: exact primitives under
+/// translations, rotations and uniform scales, combined by unions and repetitions only.
+fn exact_copies(o: &Object) -> bool {
+    let s = o.transform.scale;
+    let rigid = s.x == s.y && s.y == s.z;
+    rigid
+        && match &o.kind {
+            ObjectKind::Primitive(p) => sdfmesh::geometry::sdf::primitive_is_exact(p),
+            ObjectKind::Csg { op: CsgOp::Union, children } => children.iter().all(exact_copies),
+            ObjectKind::Repeat { child, .. } => exact_copies(child),
+            _ => false,
+        }
 }
 
 /// The worst error ratio over many random trees, printed for calibrating `ERROR_FACTOR`

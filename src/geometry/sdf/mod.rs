@@ -166,11 +166,28 @@ pub struct SdfTree {
 }
 
 impl SdfTree {
-    /// Compiles an object tree; `None` when it holds a mesh.
+    /// Compiles an object tree; `None` when it holds a mesh. Repetitions evaluate the
+    /// nearest cell and its neighbours on every repeated axis: the field that grids are
+    /// sampled from and meshes extracted from, whose values away from the surface are the
+    /// distance to the nearest copy.
     pub fn new(object: &Object) -> Option<Self> {
+        Self::compiled(object, false)
+    }
+
+    /// [`SdfTree::new`] for sphere tracing: along an axis where a finite repetition's child
+    /// stays inside its cell ([`cell_gaps`]), the neighbours are bounded by the cell's face
+    /// instead of evaluated, except under a smooth blend. The bound is positive where the
+    /// neighbours' value is and only lowers positive values, and sharp CSG depends only on
+    /// its operands' signs, so the surface is the same; away from it the value is a bound
+    /// a march may step by, but not what a grid or a mesh extraction should interpolate.
+    pub fn for_marching(object: &Object) -> Option<Self> {
+        Self::compiled(object, true)
+    }
+
+    fn compiled(object: &Object, cell_faces: bool) -> Option<Self> {
         let mut exact = true;
         let mut node_count = 0;
-        let root = compile(object, &mut exact, &mut node_count)?;
+        let root = compile(object, cell_faces, &mut exact, &mut node_count)?;
         let signed = !contains_triangle(object);
         Some(SdfTree { root, exact, signed, node_count })
     }
@@ -203,8 +220,9 @@ fn contains_triangle(object: &Object) -> bool {
     }
 }
 
-/// Compiles `object`, or `None` when it holds a mesh or a grid file (no analytic SDF).
-fn compile(object: &Object, exact: &mut bool, count: &mut usize) -> Option<SdfNode> {
+/// Compiles `object` (`cell_faces`: see [`SdfTree::for_marching`]), or `None` when it holds
+/// a mesh or a grid file (no analytic SDF).
+fn compile(object: &Object, cell_faces: bool, exact: &mut bool, count: &mut usize) -> Option<SdfNode> {
     *count += 1;
     let transform = object.compiled_transform();
     if !transform.is_uniform() {
@@ -224,13 +242,18 @@ fn compile(object: &Object, exact: &mut bool, count: &mut usize) -> Option<SdfNo
             if !matches!(op, CsgOp::Union) {
                 *exact = false;
             }
-            let children = children.iter().map(|c| compile(c, exact, count)).collect::<Option<_>>()?;
+            // A smooth blend's operands shape its surface wherever they are within the
+            // blend radius of each other, also away from their own surfaces: below one,
+            // repetitions keep their neighbours so that the surface stays the same.
+            let sharp = matches!(op, CsgOp::Union | CsgOp::Intersection | CsgOp::Subtraction);
+            let faces = cell_faces && sharp;
+            let children = children.iter().map(|c| compile(c, faces, exact, count)).collect::<Option<_>>()?;
             SdfNode::Csg { op: *op, children, transform }
         }
         ObjectKind::Repeat { period, count: reps, child } => {
             *exact = false;
-            let gaps = cell_gaps(*period, *reps, child);
-            let child = Box::new(compile(child, exact, count)?);
+            let gaps = if cell_faces { cell_gaps(*period, *reps, child) } else { [None; 3] };
+            let child = Box::new(compile(child, cell_faces, exact, count)?);
             SdfNode::Repeat { period: *period, count: *reps, child, transform, gaps }
         }
     })
@@ -432,7 +455,7 @@ thread_local! {
 impl SdfField {
     /// Compiles `object`'s tree and tape, the tape relative to the centre of `bounds`.
     pub fn new(object: &Object, bounds: Option<crate::geometry::Aabb>) -> Option<Self> {
-        let tree = SdfTree::new(object)?;
+        let tree = SdfTree::for_marching(object)?;
         let tape = tape::Tape::compile(&tree, bounds);
         // A single primitive is cheaper in the f64 tree (a few operations) than through the
         // tape's interpreter: the tape pays off for compound objects.

@@ -555,10 +555,10 @@ impl Tape {
         }
     }
 
-    /// Compiles an object tree relative to the centre of its bounds; `None` when it holds a
-    /// mesh or a grid (no analytic SDF).
+    /// Compiles an object's tree for marching ([`SdfTree::for_marching`]) relative to the
+    /// centre of its bounds; `None` when it holds a mesh or a grid (no analytic SDF).
     pub fn from_object(object: &Object) -> Option<Tape> {
-        Some(Tape::compile(&SdfTree::new(object)?, object.bounds()))
+        Some(Tape::compile(&SdfTree::for_marching(object)?, object.bounds()))
     }
 
     /// The operations, in evaluation order.
