@@ -62,7 +62,7 @@ struct Prepared {
 }
 
 fn prepare(o: &Object, camera: &Camera, n: usize, rng: &mut Rng) -> Option<Prepared> {
-    let tree = SdfTree::new(o)?;
+    let tree = SdfTree::for_marching(o)?;
     let tape = Tape::from_object(o)?;
     let (lo, hi) = match o.bounds() {
         Some(b) => {
