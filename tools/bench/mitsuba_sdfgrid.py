@@ -11,7 +11,7 @@ position, geometric and smooth shading normal) and through the `depth` integrato
 and times both after a warm-up that JIT-compiles the kernels (the compile is reported
 separately). Ours: `toolkit render` of a scene that places the same grid file under the
 same camera with one ambient light and no reflection (camera rays only), one frame per
-process. Prints a report and compares the hit masks pixel by pixel.
+process, interleaved with Mitsuba's timed calls. Prints a report and compares the hit masks pixel by pixel.
 """
 
 import argparse
@@ -198,29 +198,6 @@ def main():
         dr.sync_thread()
         return img
 
-    results = {}
-    for t in threads:
-        dr.set_thread_count(t)
-        row = {}
-        for name, fn in KINDS(intersect, preliminary, render):
-            warm = []
-            for _ in range(WARMUP):
-                t0 = time.perf_counter()
-                out = fn()
-                warm.append((time.perf_counter() - t0) * 1e3)
-            first = warm[0]
-            times = []
-            for _ in range(args.runs):
-                t0 = time.perf_counter()
-                out = fn()
-                times.append((time.perf_counter() - t0) * 1e3)
-            row[name] = (first, median(times), times, warm)
-            if name == "ray_intersect":
-                si, valid = out
-                mask_mi = np.array(valid, dtype=bool).reshape(h, w)
-                t_mi = np.array(si.t, dtype=np.float64).reshape(h, w)
-        results[t] = row
-
     # Ours: the same grid file in a scene, camera rays only (one ambient light, depth 0).
     tmp = tempfile.mkdtemp(prefix="bench-mitsuba-")
     scene_path = os.path.join(tmp, "grid.toml")
@@ -237,22 +214,45 @@ def main():
         )
     png = os.path.join(tmp, "ours.png")
     pat = re.compile(r"frame ([0-9.]+) ms, (\d+) rays \((\d+) shadow\), ([0-9.]+) Mrays/s, ([0-9.]+) march steps/ray")
-    ours = {}
     describe = ""
-    for t in threads:
+
+    def ours_frame(t):
+        """One `toolkit render` process at t threads: (frame ms, rays, shadow rays, steps/ray)."""
+        nonlocal describe
         env = dict(os.environ, RAYON_NUM_THREADS=str(t))
+        p = subprocess.run([args.toolkit, "render", scene_path, "-o", png], env=env, capture_output=True, text=True)
+        if p.returncode != 0:
+            raise SystemExit(f"toolkit render failed: {p.stderr.strip()}")
+        m = pat.search(p.stdout + p.stderr)
+        if not m:
+            raise SystemExit(f"no summary line in toolkit output: {p.stdout}{p.stderr}")
+        describe = (p.stdout + p.stderr).strip()
+        return float(m.group(1)), int(m.group(2)), int(m.group(3)), float(m.group(5))
+
+    def timed(fn):
+        t0 = time.perf_counter()
+        out = fn()
+        return (time.perf_counter() - t0) * 1e3, out
+
+    # Per thread count: Mitsuba's warm-up calls, then interleaved rounds (one toolkit
+    # process, then one call of each Mitsuba kind), so that both sides see the same load.
+    results = {}
+    ours = {}
+    for t in threads:
+        dr.set_thread_count(t)
+        warm = {name: [timed(fn)[0] for _ in range(WARMUP)] for name, fn in KINDS(intersect, preliminary, render)}
+        times = {name: [] for name in warm}
         frames = []
         for _ in range(args.runs):
-            p = subprocess.run(
-                [args.toolkit, "render", scene_path, "-o", png], env=env, capture_output=True, text=True
-            )
-            if p.returncode != 0:
-                raise SystemExit(f"toolkit render failed: {p.stderr.strip()}")
-            m = pat.search(p.stdout + p.stderr)
-            if not m:
-                raise SystemExit(f"no summary line in toolkit output: {p.stdout}{p.stderr}")
-            frames.append((float(m.group(1)), int(m.group(2)), int(m.group(3)), float(m.group(5))))
-            describe = (p.stdout + p.stderr).strip()
+            frames.append(ours_frame(t))
+            for name, fn in KINDS(intersect, preliminary, render):
+                ms, out = timed(fn)
+                times[name].append(ms)
+                if name == "ray_intersect":
+                    si, valid = out
+                    mask_mi = np.array(valid, dtype=bool).reshape(h, w)
+                    t_mi = np.array(si.t, dtype=np.float64).reshape(h, w)
+        results[t] = {name: (warm[name][0], median(times[name]), times[name], warm[name]) for name in warm}
         ours[t] = frames
     mask_ours = read_png_rgb(png).max(axis=2) > 0
 
@@ -262,7 +262,7 @@ def main():
         print(f"  {line}")
     print()
     rays = w * h
-    print(f"{w}x{h} = {rays} camera rays; medians of {args.runs} runs; ms and Mrays/s")
+    print(f"{w}x{h} = {rays} camera rays; medians of {args.runs} interleaved rounds; ms and Mrays/s")
     print(f"{'threads':>7} {'side':<34} {'first ms':>9} {'median ms':>10} {'Mrays/s':>8} {'ours/them':>9}")
     for t in threads:
         frames = ours[t]
