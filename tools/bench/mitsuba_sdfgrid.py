@@ -278,7 +278,8 @@ def main():
             print(f"{t:>7} {'mitsuba ' + name:<34} {first:>9.1f} {med:>10.2f} {mr:>8.2f} {ours_mr / mr:>8.2f}x"
                   f"   (warm-up: {', '.join(f'{x:.1f}' for x in warm)}; runs: {', '.join(f'{x:.1f}' for x in times)})")
     print(f"first ms: the first of {WARMUP} untimed warm-up calls at that thread count, which traces and")
-    print("JIT-compiles the kernel (Dr.Jit caches kernels, so a later thread count mostly reuses them).")
+    print("JIT-compiles the kernels (tools/bench-mitsuba starts with an empty kernel cache; kernels are")
+    print("cached, so a later thread count mostly reuses them).")
     print("ray_intersect: closest hit + surface interaction (position, normals); preliminary: closest hit")
     print("distance only; render depth 1spp: the `depth` integrator through Mitsuba's own sensor, sampler")
     print("and film (its rays jittered within the pixel). ours/them: Mitsuba's median ms / ours.")
