@@ -15,8 +15,10 @@ process, interleaved with Mitsuba's timed calls. Prints a report and compares th
 """
 
 import argparse
+import atexit
 import os
 import re
+import shutil
 import statistics
 import struct
 import subprocess
@@ -146,8 +148,8 @@ def main():
     print(f"mitsuba {mi.__version__}, drjit {dr.__version__}, variant {args.variant}")
     mi.set_variant(args.variant)
 
-    # Distances in unit-cube units (the intersection only needs the sign change; the
-    # shading normal is normalised; scaling keeps Mitsuba's values consistent anyway).
+    # Distances in the unit cube's units (the padded grid is a cube, so the scale is uniform;
+    # the intersection only needs the sign changes and normals are normalised anyway).
     grid = mi.TensorXf(np.ascontiguousarray((samples / np.max(extent))[..., None], dtype=np.float32))
     to_world = mi.ScalarTransform4f().translate(origin.tolist()).scale(extent.tolist())
     t0 = time.perf_counter()
@@ -200,6 +202,7 @@ def main():
 
     # Ours: the same grid file in a scene, camera rays only (one ambient light, depth 0).
     tmp = tempfile.mkdtemp(prefix="bench-mitsuba-")
+    atexit.register(shutil.rmtree, tmp, True)
     scene_path = os.path.join(tmp, "grid.toml")
     with open(scene_path, "w") as f:
         f.write(
