@@ -34,6 +34,36 @@ pub struct SceneGeometry {
 }
 
 impl SceneGeometry {
+    /// The bounded objects (BVH leaves) that `rays` (each with its `t_max`) reach within
+    /// their intervals, each once, for a packet query; `None` when they are more than
+    /// [`PACKET_CANDIDATES`] (the caller then goes ray by ray).
+    fn packet_leaves<'r>(
+        &self,
+        rays: impl Iterator<Item = (&'r Ray, f32)>,
+        t_min: f32,
+        stats: &mut RayStats,
+    ) -> Option<([u32; PACKET_CANDIDATES], usize)> {
+        let mut candidates = [0u32; PACKET_CANDIDATES];
+        let mut count = 0usize;
+        let mut overflow = false;
+        for (ray, reach) in rays {
+            bvh2::traverse(&self.bvh, ray, t_min, reach, stats, |prim, _, _| {
+                if !candidates[..count].contains(&prim) {
+                    if count == PACKET_CANDIDATES {
+                        overflow = true;
+                        return Err(());
+                    }
+                    candidates[count] = prim;
+                    count += 1;
+                }
+                Ok(None)
+            });
+            if overflow {
+                return None;
+            }
+        }
+        Some((candidates, count))
+    }
     /// Builds the top-level BVH over `objects`.
     pub fn new(objects: Vec<Box<dyn Geometry>>) -> Self {
         let mut boxes = Vec::new();
@@ -155,25 +185,11 @@ impl Geometry for SceneGeometry {
         if rays.len() > PACKET || !self.prefers_packets() {
             return closest_hits_one_by_one(self, rays, t_min, t_max, hits, stats);
         }
-        let mut candidates = [0u32; PACKET_CANDIDATES];
-        let mut count = 0usize;
-        let mut overflow = false;
-        for (ray, &reach) in rays.iter().zip(t_max.iter()) {
-            bvh2::traverse(&self.bvh, ray, t_min, reach, stats, |prim, _, _| {
-                if !candidates[..count].contains(&prim) {
-                    if count == PACKET_CANDIDATES {
-                        overflow = true;
-                        return Err(());
-                    }
-                    candidates[count] = prim;
-                    count += 1;
-                }
-                Ok(None)
-            });
-            if overflow {
-                return closest_hits_one_by_one(self, rays, t_min, t_max, hits, stats);
-            }
-        }
+        let Some((candidates, count)) =
+            self.packet_leaves(rays.iter().zip(t_max.iter().copied()), t_min, stats)
+        else {
+            return closest_hits_one_by_one(self, rays, t_min, t_max, hits, stats);
+        };
         for &i in &self.unbounded {
             self.objects[i as usize].closest_hits(rays, t_min, t_max, hits, stats);
         }
@@ -191,25 +207,11 @@ impl Geometry for SceneGeometry {
         for &i in &self.unbounded {
             self.objects[i as usize].any_hits(rays, t_min, t_max, occluded, stats);
         }
-        let mut candidates = [0u32; PACKET_CANDIDATES];
-        let mut count = 0usize;
-        let mut overflow = false;
-        for ((ray, &reach), _) in rays.iter().zip(t_max).zip(occluded.iter()).filter(|(_, o)| !**o) {
-            bvh2::traverse(&self.bvh, ray, t_min, reach, stats, |prim, _, _| {
-                if !candidates[..count].contains(&prim) {
-                    if count == PACKET_CANDIDATES {
-                        overflow = true;
-                        return Err(());
-                    }
-                    candidates[count] = prim;
-                    count += 1;
-                }
-                Ok(None)
-            });
-            if overflow {
-                return any_hits_one_by_one(self, rays, t_min, t_max, occluded, stats);
-            }
-        }
+        let live =
+            rays.iter().zip(t_max.iter().copied()).zip(occluded.iter()).filter(|(_, o)| !**o).map(|(r, _)| r);
+        let Some((candidates, count)) = self.packet_leaves(live, t_min, stats) else {
+            return any_hits_one_by_one(self, rays, t_min, t_max, occluded, stats);
+        };
         for &prim in &candidates[..count] {
             if occluded.iter().all(|&o| o) {
                 break;
