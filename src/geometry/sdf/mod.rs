@@ -468,13 +468,20 @@ impl SdfField {
         Some(SdfField { tree, tape, uniform_material, regions })
     }
 
-    /// The operations to run at relative point `rel`: its region's shortened tape, or the
-    /// whole tape.
+    /// The region of relative point `rel` ([`prune::TapeRegions::cell`]), `u32::MAX` where
+    /// there is none (no regions, or outside them).
     #[inline]
-    fn ops_at<'a>(&'a self, tape: &'a tape::Tape, rel: Vec3) -> tape::Ops<'a> {
-        match self.regions.as_ref().and_then(|r| Some((r, r.cell(rel)?))) {
-            Some((r, cell)) => r.ops(cell),
-            None => tape::Ops::All(tape.ops()),
+    fn region(&self, rel: Vec3) -> u32 {
+        self.regions.as_ref().and_then(|r| r.cell(rel)).unwrap_or(u32::MAX)
+    }
+
+    /// The operations to run in `region` (from [`SdfField::region`]): its shortened tape,
+    /// or the whole tape.
+    #[inline]
+    fn ops_in<'a>(&'a self, tape: &'a tape::Tape, region: u32) -> tape::Ops<'a> {
+        match &self.regions {
+            Some(r) if region != u32::MAX => r.ops(region),
+            _ => tape::Ops::All(tape.ops()),
         }
     }
 
@@ -513,25 +520,19 @@ impl SdfField {
         for i in 0..8 {
             let r = tape.relative(points[if i < n { i } else { 0 }]);
             (xs[i], ys[i], zs[i]) = (r.x, r.y, r.z);
-            if let Some(regions) = &self.regions {
-                cell[i] = regions.cell(r).unwrap_or(u32::MAX);
-            }
+            cell[i] = self.region(r);
         }
-        let ops_of = |c: u32| match &self.regions {
-            Some(r) if c != u32::MAX => r.ops(c),
-            _ => tape::Ops::All(tape.ops()),
-        };
         SCRATCH.with(|s| {
             let mut s = s.borrow_mut();
             s.fit(tape);
-            let first = tape.eval8_ops(ops_of(cell[0]), &xs, &ys, &zs, &mut s);
+            let first = tape.eval8_ops(self.ops_in(tape, cell[0]), &xs, &ys, &zs, &mut s);
             if cell.iter().all(|&c| c == cell[0]) {
                 return first;
             }
             let mut out = first;
             let mut done = cell.map(|c| c == cell[0]);
             while let Some(i) = done.iter().position(|d| !d) {
-                let d = tape.eval8_ops(ops_of(cell[i]), &xs, &ys, &zs, &mut s);
+                let d = tape.eval8_ops(self.ops_in(tape, cell[i]), &xs, &ys, &zs, &mut s);
                 for j in i..8 {
                     if cell[j] == cell[i] {
                         out[j] = d[j];
@@ -550,7 +551,7 @@ impl SdfField {
     #[inline]
     fn eval_tape(&self, tape: &tape::Tape, p: DVec3) -> f64 {
         let rel = tape.relative(p);
-        let ops = self.ops_at(tape, rel);
+        let ops = self.ops_in(tape, self.region(rel));
         SCRATCH.with(|s| {
             let mut s = s.borrow_mut();
             s.fit(tape);
