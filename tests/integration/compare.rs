@@ -409,7 +409,9 @@ fn scaling_experiment_writes_a_row_per_primitive_count_and_representation() {
 /// different folders are refused.
 #[test]
 fn default_inputs_are_searched_recursively_with_their_class() {
-    let dir = temp_dir("default_inputs");
+    // One level down, so that `../shared` (where compare also looks for the bunny) is the
+    // test's own empty folder, never a `shared` beside the system's temporary folder.
+    let dir = temp_dir("default_inputs").join("work");
     let scenes = dir.join("data/scenes");
     std::fs::create_dir_all(scenes.join("blend")).unwrap();
     std::fs::write(scenes.join("top.toml"), SCENE).unwrap();
