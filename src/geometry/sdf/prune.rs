@@ -48,7 +48,7 @@ use std::collections::HashMap;
 use glam::{UVec3, Vec3};
 
 use crate::geometry::Aabb;
-use crate::geometry::sdf::tape::{NO_REG, Op, Ops, Tape, TapeScratch};
+use crate::geometry::sdf::tape::{NO_REG, Op, Ops, Tape, TapeScratch, cell_index};
 
 /// The most cells a [`TapeRegions`] grid has.
 pub const MAX_CELLS: usize = 32_768;
@@ -246,7 +246,7 @@ impl Bounds {
                 }
                 Op::Cells { p, axis, base, other, period, inv_period, shift, lo, hi } => {
                     let x = self.pts[p as usize][axis as usize].scale(inv_period);
-                    let id = |x: f32| ((x - shift + 0.5).floor() + shift).max(lo).min(hi);
+                    let id = |x: f32| cell_index(x, shift, lo, hi);
                     let (id0, id1) = (id(x.lo), id(x.hi));
                     self.vals[base as usize] = Interval::new(id0 * period, id1 * period);
                     // The neighbour is on `x`'s side of the cell index (`id < x`: above): in
@@ -266,7 +266,7 @@ impl Bounds {
                 Op::CellFace { p, axis, base, face, period, inv_period, shift, lo, hi, half_gap } => {
                     let v = self.pts[p as usize][axis as usize];
                     let x = v.scale(inv_period);
-                    let id = |x: f32| ((x - shift + 0.5).floor() + shift).max(lo).min(hi);
+                    let id = |x: f32| cell_index(x, shift, lo, hi);
                     let (id0, id1) = (id(x.lo), id(x.hi));
                     self.vals[base as usize] = Interval::new(id0 * period, id1 * period);
                     // In one cell: the faces' distances over the box; across cells, a

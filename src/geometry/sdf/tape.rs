@@ -1121,6 +1121,18 @@ fn clamp01<L: Lane>(x: L) -> L {
     x.vmax(L::splat(0.0)).vmin(L::splat(1.0))
 }
 
+/// The repetition cell holding `x` (the coordinate in periods) of [`Op::Cells`] and
+/// [`Op::CellFace`]: `clamp(floor(x - shift + 0.5) + shift, lo, hi)`.
+#[inline(always)]
+fn cell_id<L: Lane>(x: L, shift: L, lo: L, hi: L) -> L {
+    ((x - shift + L::splat(0.5)).vfloor() + shift).vmax(lo).vmin(hi)
+}
+
+/// [`cell_id`] for one value, as the interval bounds of [`super::prune`] need it.
+pub(crate) fn cell_index(x: f32, shift: f32, lo: f32, hi: f32) -> f32 {
+    cell_id(x, shift, lo, hi)
+}
+
 /// The polynomial smooth minimum of [`crate::geometry::sdf`] (`k` and `1 / k` given).
 #[inline(always)]
 fn smooth_min<L: Lane>(a: L, b: L, k: f32, inv_k: f32) -> L {
@@ -1273,8 +1285,8 @@ fn run<'a, L: Lane>(
             }
             Op::Cells { p, axis, base, other, period, inv_period, shift, lo, hi } => {
                 let x = pts[p as usize][axis as usize] * L::splat(inv_period);
-                let (lo, hi, shift) = (L::splat(lo), L::splat(hi), L::splat(shift));
-                let id = ((x - shift + L::splat(0.5)).vfloor() + shift).vmax(lo).vmin(hi);
+                let (lo, hi) = (L::splat(lo), L::splat(hi));
+                let id = cell_id(x, L::splat(shift), lo, hi);
                 let step = L::select_lt(id, x, L::splat(1.0), L::splat(-1.0));
                 let next = (id + step).vmax(lo).vmin(hi);
                 vals[base as usize] = id * L::splat(period);
@@ -1283,8 +1295,8 @@ fn run<'a, L: Lane>(
             Op::CellFace { p, axis, base, face, period, inv_period, shift, lo, hi, half_gap } => {
                 let v = pts[p as usize][axis as usize];
                 let x = v * L::splat(inv_period);
-                let (lo, hi, shift) = (L::splat(lo), L::splat(hi), L::splat(shift));
-                let id = ((x - shift + L::splat(0.5)).vfloor() + shift).vmax(lo).vmin(hi);
+                let (lo, hi) = (L::splat(lo), L::splat(hi));
+                let id = cell_id(x, L::splat(shift), lo, hi);
                 let offset = id * L::splat(period);
                 let local = v - offset;
                 let inf = L::splat(f32::INFINITY);
