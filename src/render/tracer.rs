@@ -60,17 +60,18 @@ impl<'a> Tracer<'a> {
         // occluded[i][l]: whether hit i's shadow ray towards light l is blocked (only read
         // where that ray exists, i.e. where the light is in front of the surface).
         let mut occluded = [[false; PACKET_LIGHTS]; PACKET];
+        let frames: [Option<SurfaceFrame>; PACKET] =
+            std::array::from_fn(|i| hits.get(i).and_then(|h| h.as_ref()).map(|h| surface_frame(&rays[i], h)));
         for (l, light) in self.scene.lights.iter().take(PACKET_LIGHTS).enumerate() {
             let mut shadow = [Ray::new(Vec3::ZERO, Vec3::Z); PACKET];
             let mut reach = [0.0f32; PACKET];
             let mut lane_of = [0usize; PACKET];
             let mut m = 0;
-            for i in 0..n {
-                let Some(hit) = &hits[i] else { continue };
-                let (n_shade, above) = surface_frame(&rays[i], hit);
-                let Some((to_light, dist, ..)) = self.light_towards(light, above) else { continue };
-                if n_shade.dot(to_light) > 0.0 {
-                    (shadow[m], reach[m], lane_of[m]) = (Ray::new(above, to_light), dist, i);
+            for (i, frame) in frames.iter().enumerate().take(n) {
+                let Some(f) = frame else { continue };
+                let Some((to_light, dist, ..)) = self.light_towards(light, f.above) else { continue };
+                if f.n.dot(to_light) > 0.0 {
+                    (shadow[m], reach[m], lane_of[m]) = (Ray::new(f.above, to_light), dist, i);
                     m += 1;
                 }
             }
@@ -130,10 +131,7 @@ impl<'a> Tracer<'a> {
         stats: &mut RayStats,
     ) -> Vec3 {
         let m: &Material = &self.scene.materials[hit.material as usize];
-        let leaving = hit.normal.dot(ray.dir) > 0.0;
-        let face = if leaving { -hit.normal } else { hit.normal };
-        let (n, above) = surface_frame(ray, hit);
-        let offset = spawn_offset(hit);
+        let SurfaceFrame { leaving, face, n, offset, above } = surface_frame(ray, hit);
         let view = -ray.dir;
 
         let mut local = m.ka * self.ambient * m.color;
@@ -202,18 +200,32 @@ impl<'a> Tracer<'a> {
     }
 }
 
-/// The shading normal of `hit` turned towards the viewer of `ray` (and to the side of the
-/// geometric normal facing them), and the point shadow and reflection rays start from:
-/// the hit point moved off the surface along that facing geometric normal.
+/// Where a hit is shaded from: which side of the surface the ray is on, and the normals
+/// and spawn point that follow.
+#[derive(Clone, Copy, Debug)]
+struct SurfaceFrame {
+    /// Whether the ray leaves the solid (it meets the geometric normal's back).
+    leaving: bool,
+    /// The geometric normal turned towards the viewer.
+    face: Vec3,
+    /// The shading normal turned to the same side (the facing normal where it leans past
+    /// the facet).
+    n: Vec3,
+    /// How far spawned rays start off the surface ([`spawn_offset`]).
+    offset: f32,
+    /// The hit point moved `offset` along `face`: where shadow and reflection rays start.
+    above: Vec3,
+}
+
+/// The [`SurfaceFrame`] of `hit` seen along `ray`.
 #[inline]
-fn surface_frame(ray: &Ray, hit: &Hit) -> (Vec3, Vec3) {
-    // Face the geometric normal towards the viewer (`leaving`: the ray leaves the solid);
-    // shading uses the shading normal turned to the same side.
+fn surface_frame(ray: &Ray, hit: &Hit) -> SurfaceFrame {
     let leaving = hit.normal.dot(ray.dir) > 0.0;
     let face = if leaving { -hit.normal } else { hit.normal };
     let n = if leaving { -hit.shading_normal } else { hit.shading_normal };
     let n = if n.dot(face) > 0.0 { n } else { face };
-    (n, hit.point + face * spawn_offset(hit))
+    let offset = spawn_offset(hit);
+    SurfaceFrame { leaving, face, n, offset, above: hit.point + face * offset }
 }
 
 /// Refracts unit `d` through a surface with unit normal `n` facing against `d`, with
