@@ -246,6 +246,10 @@ struct MeshArgs {
     /// bricks within K cells of the surface (a distance bound elsewhere).
     #[arg(long, default_value_t = 0)]
     band: u32,
+    /// --repr grid with --band K: one narrow band shared by every object gridded whole, on
+    /// one world lattice at the median of the objects' own voxel sizes.
+    #[arg(long, requires = "band")]
+    scene_grid: bool,
 }
 
 impl MeshArgs {
@@ -267,7 +271,10 @@ fn representation(repr: Repr, mesh: &MeshArgs, march: MarchParams) -> Representa
         Repr::Grid => Representation::Grid {
             resolution: mesh.res,
             fill: mesh.fill.grid_fill(),
-            storage: grid_storage(mesh.band),
+            storage: match grid_storage(mesh.band) {
+                GridStorage::Band { cells } if mesh.scene_grid => GridStorage::Scene { cells },
+                s => s,
+            },
             march,
         },
     }

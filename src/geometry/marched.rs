@@ -17,7 +17,9 @@
 use glam::{DVec3, Vec3};
 
 use crate::geometry::march::{MarchHit, MarchLane, MarchParams, Segment, gradient_normal, sphere_trace};
-use crate::geometry::{Aabb, Census, Geometry, Hit, MaterialId, PACKET, Ray, RayStats, f32_error, max_abs};
+use crate::geometry::{
+    Aabb, Census, Geometry, Hit, MaterialId, PACKET, Ray, RayStats, Shared, f32_error, max_abs,
+};
 
 /// A distance field that [`Marched`] sphere traces, in world space.
 pub trait DistanceField: Send + Sync {
@@ -79,6 +81,11 @@ pub trait DistanceField: Send + Sync {
 
     /// What the field stores, for measurement tables ([`Geometry::census`]).
     fn census(&self) -> Census;
+
+    /// Data the field shares with other fields ([`Geometry::shared`]); `None` by default.
+    fn shared(&self) -> Option<Shared> {
+        None
+    }
 
     /// Unsigned distance from `p` to the field's surface, for measuring error
     /// ([`Geometry::surface_distance`]); `size` is the object's characteristic size.
@@ -292,6 +299,10 @@ impl<F: DistanceField> Geometry for Marched<F> {
 
     fn census(&self) -> Census {
         self.field.census()
+    }
+
+    fn shared(&self) -> Option<Shared> {
+        self.field.shared()
     }
 
     fn surface_distance(&self, p: DVec3) -> f64 {

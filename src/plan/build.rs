@@ -5,6 +5,8 @@
 //! an instanced repetition ([`Build::Instanced`]) builds its child's mesh once and places
 //! it per copy.
 
+use std::sync::Arc;
+
 use glam::{DVec3, Vec3};
 
 use super::{
@@ -12,8 +14,11 @@ use super::{
     ObjectPlan, Representation, plan_object,
 };
 use crate::convert::extract::{ExtractMethod, Field, extract, extract_object};
-use crate::convert::mesh_to_grid::band::{band_from_function, band_from_mesh};
+use crate::convert::mesh_to_grid::MeshSampler;
+use crate::convert::mesh_to_grid::band::{BandMember, band_from_function, band_from_members, band_from_mesh};
+use crate::convert::mesh_to_grid::closest::TriangleBvh;
 use crate::convert::mesh_to_grid::voxelize::voxelize_mesh;
+use crate::convert::mesh_to_grid::winding::{FastWinding, is_closed};
 use crate::convert::mesh_to_grid::{sample_function, sample_mesh};
 use crate::convert::tessellate::{plane_view_mesh, tessellate};
 use crate::error::Result;
@@ -21,12 +26,13 @@ use crate::geometry::analytic::AnalyticObject;
 use crate::geometry::grid::SdfGrid;
 use crate::geometry::grid::band::BandGrid;
 use crate::geometry::grid::object::{ClippedGrid, GridObject, GridStore};
+use crate::geometry::grid::scene::{SceneGrid, SceneGridObject};
 use crate::geometry::march::MarchParams;
 use crate::geometry::mesh::MeshGeometry;
 use crate::geometry::mesh::instance::{InstancedMesh, compose, repeat_offsets};
 use crate::geometry::scene::SceneGeometry;
 use crate::geometry::sdf::{SdfObject, SdfTree, sdf_geometry};
-use crate::geometry::{Geometry, aabb};
+use crate::geometry::{Geometry, MaterialId, aabb};
 use crate::mesh::TriangleMesh;
 use crate::scene::Scene;
 use crate::scene::shape::{Object, ObjectKind, Primitive, Shading};
@@ -58,9 +64,34 @@ fn build_with_plans(scene: &Scene, repr: Representation) -> (Vec<Box<dyn Geometr
     let mut meshes: Vec<Option<MeshGeometry>> = Vec::with_capacity(scene.objects.len());
     let mut objects = Vec::with_capacity(scene.objects.len());
     let mut plans = Vec::with_capacity(scene.objects.len());
-    for o in &scene.objects {
-        let plan = plan_object(scene, o, repr);
+    let asked: Vec<ObjectPlan> = scene.objects.iter().map(|o| plan_object(scene, o, repr)).collect();
+    let shared = SharedGrid::build(scene, &asked);
+    for (i, (o, plan)) in scene.objects.iter().zip(asked).enumerate() {
         let (g, realised, mesh): (Box<dyn Geometry>, _, _) = match plan.build {
+            Build::Grid { storage: GridStorage::Scene { .. }, clip: None, resolution, march, .. } => {
+                match &shared {
+                    Some(s) if s.members[i] => {
+                        let (g, label) = (&s.grid, &s.label);
+                        let voxel = g.band().voxel;
+                        let b = o.bounds().expect("members are bounded");
+                        let margin = Vec3::splat(GRID_MARGIN_CELLS as f32 * voxel);
+                        let bounds = aabb(Vec3::from(b.min) - margin, Vec3::from(b.max) + margin);
+                        let text = format!("{} '{}' sampled at {resolution} {label}", o.kind_name(), o.label);
+                        (Box::new(SceneGridObject::new(g.clone(), bounds, march, text)), plan, None)
+                    }
+                    _ => {
+                        let Build::Grid { storage, fill, .. } = plan.build else {
+                            unreachable!("a grid plan")
+                        };
+                        let own = ObjectPlan::fallback(
+                            Build::Grid { resolution, fill, storage: storage.own(), march, clip: None },
+                            Fallback::OwnGrid,
+                        );
+                        let (g, realised) = build_object(scene, o, repr, own);
+                        (g, realised, None)
+                    }
+                }
+            }
             Build::SharedMesh { of } => {
                 let source = meshes.get(of as usize).and_then(Option::as_ref);
                 let of_label = scene.objects.get(of as usize).map_or("", |x| x.label.as_str());
@@ -96,6 +127,99 @@ fn build_with_plans(scene: &Scene, repr: Representation) -> (Vec<Box<dyn Geometr
         meshes.push(mesh);
     }
     (objects, plans)
+}
+
+/// The grid that the objects planned [`GridStorage::Scene`] (and gridded whole) share.
+struct SharedGrid {
+    grid: Arc<SceneGrid>,
+    /// Per object of the scene: whether it is in the grid.
+    members: Vec<bool>,
+    /// How the grid is named in its objects' descriptions.
+    label: String,
+}
+
+impl SharedGrid {
+    /// The shared grid of the objects whose plans ask for one: their signed distances
+    /// (analytic objects from their SDF, meshes sampled exactly with winding-number signs)
+    /// in one band at the median of their own voxel sizes (longest extent / resolution);
+    /// `None` when no object asks or the grid cannot be built (each then gets its own).
+    fn build(scene: &Scene, plans: &[ObjectPlan]) -> Option<SharedGrid> {
+        enum Source {
+            Sdf(SdfTree),
+            Mesh { tree: TriangleBvh, wind: FastWinding, closed: bool },
+        }
+        let mut cells = 0;
+        let mut voxels = Vec::new();
+        let mut sources = Vec::new();
+        for (i, (o, p)) in scene.objects.iter().zip(plans).enumerate() {
+            let Build::Grid { storage: GridStorage::Scene { cells: c }, clip: None, resolution, .. } =
+                p.build
+            else {
+                continue;
+            };
+            let Some(b) = o.bounds() else { continue };
+            let source = match &o.kind {
+                ObjectKind::Mesh { mesh, .. } => {
+                    let mut world = TriangleMesh::clone(mesh);
+                    world.transform(&o.compiled_transform().to_world);
+                    if world.triangles.is_empty() {
+                        continue;
+                    }
+                    let closed = is_closed(&world);
+                    let tree = TriangleBvh::new(&world);
+                    let wind = FastWinding::new(&tree);
+                    Source::Mesh { tree, wind, closed }
+                }
+                _ => match SdfTree::new(o) {
+                    Some(t) => Source::Sdf(t),
+                    None => continue,
+                },
+            };
+            cells = c;
+            voxels.push((Vec3::from(b.max) - Vec3::from(b.min)).max_element() / resolution.max(1) as f32);
+            sources.push((i, b, o.material, source));
+        }
+        if sources.is_empty() {
+            return None;
+        }
+        voxels.sort_by(f32::total_cmp);
+        let voxel = voxels[voxels.len() / 2];
+        let mut materials: Vec<MaterialId> = sources.iter().map(|s| s.2).collect();
+        materials.sort_unstable();
+        materials.dedup();
+        if materials.len() > u16::MAX as usize {
+            return None;
+        }
+        let fields: Vec<Box<dyn Fn(DVec3) -> f64 + Sync + '_>> = sources
+            .iter()
+            .map(|(_, _, _, s)| -> Box<dyn Fn(DVec3) -> f64 + Sync + '_> {
+                match s {
+                    Source::Sdf(t) => Box::new(move |p| t.distance(p)),
+                    Source::Mesh { tree, wind, closed } => Box::new(move |p: DVec3| {
+                        MeshSampler::new(tree, wind, *closed).sample(p.as_vec3()) as f64
+                    }),
+                }
+            })
+            .collect();
+        let members: Vec<BandMember<'_>> = sources
+            .iter()
+            .zip(&fields)
+            .map(|((_, b, m, _), f)| BandMember {
+                bounds: *b,
+                distance: f.as_ref(),
+                material: materials.binary_search(m).unwrap_or(0) as u16,
+            })
+            .collect();
+        let (band, bricks) = band_from_members(&members, voxel, GRID_MARGIN_CELLS, cells).ok()?;
+        let mut flags = vec![false; scene.objects.len()];
+        for (i, ..) in &sources {
+            flags[*i] = true;
+        }
+        let n = sources.len();
+        let grid = Arc::new(SceneGrid::new(band, materials, bricks, n));
+        let label = format!("into the scene grid (voxel {:.5}, {n} objects)", grid.band().voxel);
+        Some(SharedGrid { grid, members: flags, label })
+    }
 }
 
 /// A [`Build::SharedMesh`] object built as its own mesh (as the first object of its
@@ -350,7 +474,8 @@ fn grid_file_marched(o: &Object, build: Build) -> (Box<dyn Geometry>, ObjectPlan
     let Build::GridFileMarched { storage, march } = build else { unreachable!("a marched grid file") };
     let label = format!("grid '{}' ({})", o.label, grid_file_name(o));
     let (store, plan): (GridStore, _) = match storage {
-        GridStorage::Band { cells } => match BandGrid::from_dense(grid, cells) {
+        GridStorage::Band { cells } | GridStorage::Scene { cells } => match BandGrid::from_dense(grid, cells)
+        {
             Ok(b) => (b.into(), ObjectPlan::as_asked(build)),
             Err(_) => (
                 SdfGrid::clone(grid).into(),
@@ -449,10 +574,14 @@ fn gridded(o: &Object, plan: ObjectPlan) -> Option<(Box<dyn Geometry>, ObjectPla
     let b = clip.or_else(|| o.bounds())?;
     let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
     let kind = o.kind_name();
+    // A scene grid that could not take the object: a band of its own.
+    let storage = storage.own();
     let band = |g: SdfGrid| -> Option<GridStore> {
         Some(match storage {
             GridStorage::Dense => g.into(),
-            GridStorage::Band { cells } => BandGrid::from_dense(&g, cells).ok()?.into(),
+            GridStorage::Band { cells } | GridStorage::Scene { cells } => {
+                BandGrid::from_dense(&g, cells).ok()?.into()
+            }
         })
     };
     let mut realised = plan;
@@ -480,7 +609,7 @@ fn gridded(o: &Object, plan: ObjectPlan) -> Option<(Box<dyn Geometry>, ObjectPla
         match (voxelized, storage) {
             (Some(g), _) => band(g)?,
             (None, GridStorage::Dense) => sample_mesh(&world, resolution, GRID_MARGIN_CELLS).ok()?.into(),
-            (None, GridStorage::Band { cells }) => {
+            (None, GridStorage::Band { cells } | GridStorage::Scene { cells }) => {
                 band_from_mesh(&world, resolution, GRID_MARGIN_CELLS, cells).ok()?.into()
             }
         }
@@ -489,7 +618,7 @@ fn gridded(o: &Object, plan: ObjectPlan) -> Option<(Box<dyn Geometry>, ObjectPla
         let f = |p| tree.distance(p);
         match storage {
             GridStorage::Dense => sample_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS).ok()?.into(),
-            GridStorage::Band { cells } => {
+            GridStorage::Band { cells } | GridStorage::Scene { cells } => {
                 band_from_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS, cells).ok()?.into()
             }
         }

@@ -105,6 +105,27 @@ pub enum GridStorage {
         /// Half-width of the stored band, in cells, `>= 1`.
         cells: u32,
     },
+    /// One narrow band of `cells` cells shared by every object of the scene gridded whole
+    /// ([`crate::geometry::grid::scene::SceneGrid`]): one world-space lattice whose voxel is
+    /// the median of the objects' own voxels at the asked resolution, so that bytes follow
+    /// the surface, not the number of objects. Meshes in it are sampled exactly
+    /// (voxelizing works on an object's own lattice); an object clipped to the view region
+    /// and a grid file keep a band of their own.
+    Scene {
+        /// Half-width of the stored band, in cells, `>= 1`.
+        cells: u32,
+    },
+}
+
+impl GridStorage {
+    /// The storage of a grid of one object's own: a [`GridStorage::Scene`] band becomes a
+    /// [`GridStorage::Band`] of the same width.
+    pub fn own(self) -> GridStorage {
+        match self {
+            GridStorage::Scene { cells } => GridStorage::Band { cells },
+            s => s,
+        }
+    }
 }
 
 impl Representation {
@@ -322,6 +343,9 @@ pub enum Fallback {
     /// Mesh: a grid file holds no surface to extract; its grid is ray marched (known while
     /// building).
     NoSurfaceInGridFile,
+    /// Grid with [`GridStorage::Scene`]: the scene grid could not be built (too large); the
+    /// object has a band grid of its own (known while building).
+    OwnGrid,
     /// Grid with [`GridStorage::Band`]: a grid file's narrow band could not be built; it is
     /// stored dense (known while building).
     DenseInsteadOfBand,
@@ -340,6 +364,7 @@ impl fmt::Display for Fallback {
             Fallback::OpenMeshSampled => f.write_str("voxelizing found the mesh open: sampled"),
             Fallback::EmptyExtraction => f.write_str("extraction gave no triangles: sphere traced"),
             Fallback::GridNotBuilt => f.write_str("the grid could not be built"),
+            Fallback::OwnGrid => f.write_str("the scene grid could not be built: a grid of its own"),
             Fallback::NoSurfaceInGridFile => f.write_str("no surface in the grid: ray marched"),
             Fallback::DenseInsteadOfBand => f.write_str("the narrow band could not be built: dense"),
         }
@@ -377,7 +402,9 @@ pub fn plan_object(scene: &Scene, o: &Object, repr: Representation) -> ObjectPla
                 method: method.extract_method(),
                 resolution: resolution.min(MAX_EXTRACT_RESOLUTION),
             },
-            Representation::Grid { storage, march, .. } => Build::GridFileMarched { storage, march },
+            Representation::Grid { storage, march, .. } => {
+                Build::GridFileMarched { storage: storage.own(), march }
+            }
             Representation::Analytic { march } | Representation::Sdf { march } => {
                 Build::GridFileMarched { storage: GridStorage::Dense, march }
             }
@@ -447,7 +474,8 @@ pub fn plan_object(scene: &Scene, o: &Object, repr: Representation) -> ObjectPla
                 return ObjectPlan::fallback(build, Fallback::Unbounded);
             };
             if is_mesh {
-                // Meshes are never clipped to the view region.
+                // Meshes are never clipped to the view region; a scene grid samples them.
+                let fill = if matches!(storage, GridStorage::Scene { .. }) { GridFill::Sample } else { fill };
                 return ObjectPlan::as_asked(grid(fill, None));
             }
             let clip = match view_region(scene, o) {
@@ -466,7 +494,10 @@ pub fn plan_object(scene: &Scene, o: &Object, repr: Representation) -> ObjectPla
                 return marched(Some(Fallback::Unsigned));
             }
             let fallback = clip.map(|_| Fallback::ClippedToViewRegion);
-            ObjectPlan { build: grid(GridFill::Sample, clip), fallback }
+            // A clipped object's grid is its own (the scene grid holds whole objects).
+            let storage = if clip.is_some() { storage.own() } else { storage };
+            let build = Build::Grid { resolution, fill: GridFill::Sample, storage, march, clip };
+            ObjectPlan { build, fallback }
         }
     }
 }

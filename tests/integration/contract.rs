@@ -1,5 +1,6 @@
 //! The `Geometry` contract (`src/geometry/mod.rs`), checked once for every representation
-//! (closed form, analytic SDF, relaxed SDF, dense grid, narrow-band grid, tessellated mesh)
+//! (closed form, analytic SDF, relaxed SDF, dense grid, narrow-band grid, one narrow band
+//! shared by the scene's objects, tessellated mesh)
 //! on every test scene (single primitives, CSG, a union of 9 primitives, a mesh read from a
 //! file, a scene of several objects with an infinite plane, and repetition and repeated
 //! objects, instanced and shared in the mesh representation): each object's geometry and the scene aggregate
@@ -71,6 +72,15 @@ fn grid_band() -> Representation {
         resolution: 48,
         fill: GridFill::Sample,
         storage: GridStorage::Band { cells: 2 },
+        march: MarchParams::default(),
+    }
+}
+
+fn grid_scene() -> Representation {
+    Representation::Grid {
+        resolution: 48,
+        fill: GridFill::Sample,
+        storage: GridStorage::Scene { cells: 2 },
         march: MarchParams::default(),
     }
 }
@@ -584,6 +594,10 @@ macro_rules! contract_tests {
             #[test]
             fn grid_band() {
                 super::check(super::$scene(), super::grid_band());
+            }
+            #[test]
+            fn grid_scene() {
+                super::check(super::$scene(), super::grid_scene());
             }
             #[test]
             fn mesh() {

@@ -32,6 +32,7 @@ mod mesh_tracing;
 mod representations;
 mod round_trip;
 mod scene_errors;
+mod scene_grid;
 mod sdf_prune;
 mod sdf_tape;
 mod tessellate;

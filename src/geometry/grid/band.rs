@@ -145,6 +145,14 @@ impl BandGrid {
         if s & EMPTY == 0 { 0 } else { s & !EMPTY }
     }
 
+    /// The slot (index among the stored bricks) of brick `b` (bricks per axis), `None` for a
+    /// brick without samples.
+    #[inline]
+    pub fn slot(&self, b: UVec3) -> Option<usize> {
+        let s = self.slots[self.brick_index(b)];
+        (s & EMPTY == 0).then_some(s as usize)
+    }
+
     #[inline]
     pub(crate) fn brick_index(&self, b: UVec3) -> usize {
         b.x as usize + self.bricks.x as usize * (b.y as usize + self.bricks.y as usize * b.z as usize)

@@ -1,6 +1,7 @@
 //! Discrete signed distance grids: the dense [`SdfGrid`] (with its layout,
 //! [`grid_layout`], and size check, [`check_size`]), the narrow-band [`band::BandGrid`],
-//! grid files ([`io`]) and grids as scene objects ([`object`]). Filling a grid from a
+//! grid files ([`io`]), grids as scene objects ([`object`]) and one grid shared by a scene's
+//! objects ([`scene`]). Filling a grid from a
 //! mesh or a distance function is a conversion: [`crate::convert::mesh_to_grid`].
 //!
 //! An [`SdfGrid`] stores signed distances (negative inside) at the CORNERS of a regular
@@ -14,6 +15,7 @@ pub mod band;
 pub mod io;
 pub mod object;
 mod packet;
+pub mod scene;
 
 use glam::{UVec3, Vec3};
 
