@@ -936,7 +936,11 @@ fn marches(plans: &[ObjectPlan]) -> bool {
     plans.iter().any(|p| {
         matches!(
             p.build,
-            PlanBuild::Marched { .. } | PlanBuild::Grid { .. } | PlanBuild::GridFileMarched { .. }
+            PlanBuild::Marched { .. }
+                | PlanBuild::Grid { .. }
+                | PlanBuild::LocalGrid { .. }
+                | PlanBuild::SharedGrid { .. }
+                | PlanBuild::GridFileMarched { .. }
         )
     })
 }

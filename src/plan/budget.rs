@@ -166,7 +166,10 @@ pub fn object_bytes(o: &Object, plan: &ObjectPlan) -> u64 {
         Build::ClosedForm | Build::Marched { .. } | Build::PlaneDisc { .. } => 0,
         Build::MeshTriangles => (triangles as u64).saturating_mul(BYTES_PER_TRACED_TRIANGLE),
         Build::Tessellated { resolution, .. } => tessellation_bytes(resolution),
-        Build::SharedMesh { .. } => BYTES_PER_INSTANCE,
+        Build::SharedMesh { .. } | Build::SharedGrid { .. } => BYTES_PER_INSTANCE,
+        Build::LocalGrid { resolution, .. } => {
+            mesh_to_grid_bytes(0, UVec3::splat(grid_samples_per_axis(resolution)), GridFill::Sample)
+        }
         Build::Instanced { mesh, copies, .. } => {
             let mesh = match mesh {
                 InstanceMesh::Tessellated { resolution, .. } => tessellation_bytes(resolution),

@@ -36,7 +36,7 @@ use crate::geometry::{Geometry, MaterialId, aabb};
 use crate::mesh::TriangleMesh;
 use crate::scene::Scene;
 use crate::scene::shape::{Object, ObjectKind, Primitive, Shading};
-use crate::scene::transform::Transform;
+use crate::scene::transform::{Transform, TransformDesc};
 
 /// Builds the geometry of every top-level object of `scene` in representation `repr`.
 /// Sphere tracing takes its pixel footprint from the scene's camera.
@@ -62,12 +62,55 @@ fn build_with_plans(scene: &Scene, repr: Representation) -> (Vec<Box<dyn Geometr
     // The mesh of each object built as a single mesh, which later objects of the same
     // geometry place (an `Arc` each, dropped at the end).
     let mut meshes: Vec<Option<MeshGeometry>> = Vec::with_capacity(scene.objects.len());
+    // Likewise the grid of each object built in its own frame ([`Build::LocalGrid`]).
+    let mut grids: Vec<Option<Arc<GridStore>>> = Vec::with_capacity(scene.objects.len());
     let mut objects = Vec::with_capacity(scene.objects.len());
     let mut plans = Vec::with_capacity(scene.objects.len());
     let asked: Vec<ObjectPlan> = scene.objects.iter().map(|o| plan_object(scene, o, repr)).collect();
     let shared = SharedGrid::build(scene, &asked);
     for (i, (o, plan)) in scene.objects.iter().zip(asked).enumerate() {
+        let mut grid = None;
         let (g, realised, mesh): (Box<dyn Geometry>, _, _) = match plan.build {
+            Build::SharedGrid { of, march } => {
+                let of_label = scene.objects.get(of as usize).map_or("", |x| x.label.as_str());
+                let label = format!("{} '{}' sharing the grid of '{of_label}'", o.kind_name(), o.label);
+                match grids.get(of as usize).and_then(Option::clone) {
+                    Some(shared) => {
+                        let g = GridObject::placed_shared(
+                            shared,
+                            &o.compiled_transform(),
+                            o.material,
+                            march,
+                            label,
+                        );
+                        (Box::new(g), plan, None)
+                    }
+                    // Not reached: the first object of a primitive is built in its own frame.
+                    None => {
+                        let (g, realised) = build_object(scene, o, repr, plan);
+                        (g, realised, None)
+                    }
+                }
+            }
+            Build::LocalGrid { resolution, storage, march } => match local_grid(o, resolution, storage) {
+                Some((store, how)) => {
+                    let label =
+                        format!("{} '{}' {how} at {resolution} in its own frame", o.kind_name(), o.label);
+                    let g = GridObject::placed_shared(
+                        store.clone(),
+                        &o.compiled_transform(),
+                        o.material,
+                        march,
+                        label,
+                    );
+                    grid = Some(store);
+                    (Box::new(g) as Box<dyn Geometry>, plan, None)
+                }
+                None => {
+                    let (g, realised) = build_object(scene, o, repr, plan);
+                    (g, realised, None)
+                }
+            },
             Build::Grid { storage: GridStorage::Scene { .. }, clip: None, resolution, march, .. } => {
                 match &shared {
                     Some(s) if s.members[i] => {
@@ -125,6 +168,7 @@ fn build_with_plans(scene: &Scene, repr: Representation) -> (Vec<Box<dyn Geometr
         objects.push(g);
         plans.push(realised);
         meshes.push(mesh);
+        grids.push(grid);
     }
     (objects, plans)
 }
@@ -288,6 +332,16 @@ fn build_object(
         Build::GridFileMarched { .. } => {
             let (g, realised) = grid_file_marched(o, plan.build);
             (g, ObjectPlan { fallback: plan.fallback.or(realised.fallback), ..realised })
+        }
+        // Reached only when a grid could not be shared: the object is gridded on its own.
+        Build::LocalGrid { resolution, storage, march } => {
+            let own = Build::Grid { resolution, fill: GridFill::Sample, storage, march, clip: None };
+            build_object(scene, o, repr, ObjectPlan { build: own, ..plan })
+        }
+        Build::SharedGrid { march, .. } => {
+            let Representation::Grid { resolution, storage, .. } = repr else { unreachable!("a grid plan") };
+            let own = Build::Grid { resolution, fill: GridFill::Sample, storage, march, clip: None };
+            build_object(scene, o, repr, ObjectPlan { build: own, ..plan })
         }
         Build::Grid { .. } => match gridded(o, plan) {
             Some(built) => built,
@@ -551,6 +605,24 @@ pub fn scene_mesh(scene: &Scene, repr: Representation) -> Option<TriangleMesh> {
         all.triangles.extend(mesh.triangles.iter().map(|t| t.map(|i| i + base)));
     }
     (!all.triangles.is_empty()).then_some(all)
+}
+
+/// The grid of primitive `o` in its own frame (its local box, `resolution` cells along the
+/// longest axis, with [`GRID_MARGIN_CELLS`]), stored as `storage` says, and how it was
+/// filled; `None` when it cannot be built.
+fn local_grid(o: &Object, resolution: u32, storage: GridStorage) -> Option<(Arc<GridStore>, &'static str)> {
+    let local = Object { transform: TransformDesc::default(), ..o.clone() };
+    let b = local.bounds()?;
+    let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
+    let tree = SdfTree::new(&local)?;
+    let f = |p| tree.distance(p);
+    let store: GridStore = match storage {
+        GridStorage::Dense => sample_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS).ok()?.into(),
+        GridStorage::Band { cells } | GridStorage::Scene { cells } => {
+            band_from_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS, cells).ok()?.into()
+        }
+    };
+    Some((Arc::new(store), "sampled"))
 }
 
 /// A [`Build::Grid`] plan built: `o` sampled into a world-space SDF grid, or `None` when

@@ -22,7 +22,11 @@
 //! - [`Build::SharedMesh`]: a top-level object with the same geometry (kind and
 //!   parameters) as an earlier one placed from that one's mesh and BVH (not a copy).
 //! - [`Build::Grid`]: an object sampled (or a mesh voxelized) into an SDF grid, dense or
-//!   narrow band, possibly clipped to the view region.
+//!   narrow band, possibly clipped to the view region, or into the one narrow band the
+//!   scene's objects share ([`GridStorage::Scene`]).
+//! - [`Build::LocalGrid`], [`Build::SharedGrid`]: primitives of the same kind and
+//!   parameters share one grid sampled in the first one's frame and placed by each one's
+//!   transform (rigid, uniform scale), as meshes share one mesh.
 //! - [`Build::GridFileMarched`], [`Build::GridFileExtracted`]: a grid file ray marched,
 //!   or its surface extracted.
 //!
@@ -273,6 +277,27 @@ pub enum Build {
         /// Index of that object in the scene's objects.
         of: u32,
     },
+    /// A primitive gridded in its own frame (its local box, `resolution` cells along the
+    /// longest axis) and placed by its transform (rigid, uniform scale), because later
+    /// objects of the same primitive share the grid ([`Build::SharedGrid`]), as a polygon
+    /// renderer instances one mesh.
+    LocalGrid {
+        /// Cells along the longest axis of the primitive's local box.
+        resolution: u32,
+        /// How the samples are stored ([`GridStorage::Dense`] or [`GridStorage::Band`]).
+        storage: GridStorage,
+        /// Ray marching parameters (pixel footprint from the camera).
+        march: MarchParams,
+    },
+    /// The grid of top-level object `of` (an earlier primitive of the same kind and
+    /// parameters, built [`Build::LocalGrid`]) placed under this object's transform (rigid,
+    /// uniform scale) and material, not sampled again.
+    SharedGrid {
+        /// Index of that object in the scene's objects.
+        of: u32,
+        /// Ray marching parameters (pixel footprint from the camera).
+        march: MarchParams,
+    },
     /// A grid file ray marched.
     GridFileMarched {
         /// How its samples are stored.
@@ -478,20 +503,17 @@ pub fn plan_object(scene: &Scene, o: &Object, repr: Representation) -> ObjectPla
                 let fill = if matches!(storage, GridStorage::Scene { .. }) { GridFill::Sample } else { fill };
                 return ObjectPlan::as_asked(grid(fill, None));
             }
-            let clip = match view_region(scene, o) {
-                Some(region) => {
-                    let c = region.intersection(&b);
-                    let (clo, chi) = (Vec3::from(c.min), Vec3::from(c.max));
-                    let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
-                    if !(chi - clo).cmpge(Vec3::ZERO).all() {
-                        return marched(Some(Fallback::OutsideViewRegion));
-                    }
-                    ((chi - clo).max_element() < VIEW_CLIP_FRACTION * (hi - lo).max_element()).then_some(c)
-                }
-                None => None,
+            let Some(clip) = view_clip(scene, o, &b) else {
+                return marched(Some(Fallback::OutsideViewRegion));
             };
             if !signed(o) {
                 return marched(Some(Fallback::Unsigned));
+            }
+            if clip.is_none()
+                && !matches!(storage, GridStorage::Scene { .. })
+                && let Some(shared) = grid_share(scene, o, repr)
+            {
+                return ObjectPlan::as_asked(shared);
             }
             let fallback = clip.map(|_| Fallback::ClippedToViewRegion);
             // A clipped object's grid is its own (the scene grid holds whole objects).
@@ -535,7 +557,12 @@ fn instance_mesh(
 /// or `o` is not one of `scene`'s objects.
 fn first_alike(scene: &Scene, o: &Object) -> Option<u32> {
     let me = scene.objects.iter().position(|x| std::ptr::eq(x, o))?;
-    let alike = |x: &Object| match (&x.kind, &o.kind) {
+    scene.objects[..me].iter().position(|x| alike(x, o)).map(|i| i as u32)
+}
+
+/// Whether `x` and `o` have one geometry (see [`first_alike`]).
+fn alike(x: &Object, o: &Object) -> bool {
+    match (&x.kind, &o.kind) {
         (ObjectKind::Primitive(p), ObjectKind::Primitive(q)) => {
             p == q && !matches!(p, Primitive::Plane { .. })
         }
@@ -544,8 +571,49 @@ fn first_alike(scene: &Scene, o: &Object) -> Option<u32> {
             ObjectKind::Mesh { mesh: n, source: b, shading: t },
         ) => s == t && (std::sync::Arc::ptr_eq(m, n) || (a == b && m == n)),
         _ => false,
+    }
+}
+
+/// How a primitive `o` (gridded whole, not into a scene grid, under the grid
+/// representation `repr`) shares its grid with the other objects of the same primitive:
+/// [`Build::SharedGrid`] when an earlier one is built [`Build::LocalGrid`],
+/// [`Build::LocalGrid`] when it is the first of several; `None` when it shares nothing
+/// (the grid is then sampled in world space, fitted to the object's world box). Sharing
+/// needs a transform that keeps distances exact up to one factor (rigid, uniform scale).
+fn grid_share(scene: &Scene, o: &Object, repr: Representation) -> Option<Build> {
+    let Representation::Grid { resolution, storage, march, .. } = repr.with_pixel_footprint(scene) else {
+        return None;
     };
-    scene.objects[..me].iter().position(alike).map(|i| i as u32)
+    // Gridded whole (inside the view region, not clipped to it) under such a transform.
+    let shareable = |x: &Object| {
+        matches!(x.kind, ObjectKind::Primitive(p) if !matches!(p, Primitive::Plane { .. }))
+            && x.compiled_transform().is_uniform()
+            && x.bounds().is_some_and(|b| view_clip(scene, x, &b) == Some(None))
+    };
+    if !shareable(o) {
+        return None;
+    }
+    if let Some(of) = first_alike(scene, o).filter(|&of| shareable(&scene.objects[of as usize])) {
+        return Some(Build::SharedGrid { of, march });
+    }
+    let me = scene.objects.iter().position(|x| std::ptr::eq(x, o))?;
+    let later = scene.objects[me + 1..].iter().any(|x| alike(x, o) && shareable(x));
+    later.then_some(Build::LocalGrid { resolution, storage, march })
+}
+
+/// The part of `o`'s box `b` that a grid covers: `Some(None)` the whole box;
+/// `Some(Some(clip))` only `clip`, the view region's part of a box much larger than it
+/// (less than [`VIEW_CLIP_FRACTION`] of its longest extent, see [`view_region`]); `None`
+/// when the box lies outside the view region.
+fn view_clip(scene: &Scene, o: &Object, b: &Aabb) -> Option<Option<Aabb>> {
+    let Some(region) = view_region(scene, o) else { return Some(None) };
+    let c = region.intersection(b);
+    let (clo, chi) = (Vec3::from(c.min), Vec3::from(c.max));
+    let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
+    if !(chi - clo).cmpge(Vec3::ZERO).all() {
+        return None;
+    }
+    Some(((chi - clo).max_element() < VIEW_CLIP_FRACTION * (hi - lo).max_element()).then_some(c))
 }
 
 /// Whether `o` has a signed analytic distance (false when it holds a triangle, a mesh or a

@@ -314,7 +314,14 @@ fn accuracy(marched: bool, t: f32, size: f32) -> f64 {
 /// Whether the realised plan marches the object (analytic SDF or grid, entirely or in
 /// part) rather than intersecting it in closed form or as triangles.
 fn marched(plan: &ObjectPlan) -> bool {
-    matches!(plan.build, Build::Marched { .. } | Build::Grid { .. } | Build::GridFileMarched { .. })
+    matches!(
+        plan.build,
+        Build::Marched { .. }
+            | Build::Grid { .. }
+            | Build::LocalGrid { .. }
+            | Build::SharedGrid { .. }
+            | Build::GridFileMarched { .. }
+    )
 }
 
 fn footprint() -> f64 {

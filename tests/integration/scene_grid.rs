@@ -1,8 +1,14 @@
+//! Grids shared between objects.
+//!
 //! One narrow band shared by a scene's objects (`GridStorage::Scene`,
 //! `geometry::grid::scene`): with one object it is that object's own band; its field is a
 //! lower bound of the union's distance everywhere (the per-brick candidate lists cap the
 //! far objects, never drop a near one) and the union's distance within the band; hit
 //! materials are the nearest object's; a scene counts the shared grid once.
+//!
+//! Objects of one primitive share one grid sampled in its own frame (`Build::LocalGrid`,
+//! `Build::SharedGrid`), as the mesh representation shares one mesh: placed by rigid
+//! transforms with uniform scale, hits where the analytic ones are, counted once.
 
 use glam::{DVec3, Vec3};
 use sdfmesh::convert::mesh_to_grid::band::{BandMember, band_from_function, band_from_members};
@@ -10,6 +16,7 @@ use sdfmesh::geometry::grid::scene::SceneGrid;
 use sdfmesh::geometry::march::MarchParams;
 use sdfmesh::geometry::{Geometry, Ray, RayStats, aabb};
 use sdfmesh::plan::{Build, GridFill, GridStorage, Representation, build_scene_with_plans};
+use sdfmesh::scene::shape::ObjectKind;
 use sdfmesh::scene::shape::Primitive;
 
 use crate::util::{Lcg, lit_scene, object};
@@ -150,4 +157,59 @@ fn clipped_objects_and_grid_files_keep_their_own_band() {
         plans[1].build,
         Build::Grid { storage: GridStorage::Scene { cells: 2 }, clip: None, .. }
     ));
+}
+
+#[test]
+fn alike_primitives_share_one_grid_placed_by_their_transforms() {
+    let n = 12;
+    let mut objects: Vec<_> = (0..n)
+        .map(|i| {
+            let rotate = Vec3::new(17.0 * i as f32, 40.0 * i as f32, 0.0);
+            let scale = if i == 5 { Vec3::splat(1.5) } else { Vec3::ONE };
+            let half = Vec3::new(0.2, 0.1, 0.15);
+            object(Primitive::Box { half }, row_centre(i, n), rotate, scale)
+        })
+        .collect();
+    // A non-uniform scale cannot be placed exactly: that box gets its own world grid.
+    objects[7].transform.scale = Vec3::new(1.0, 2.0, 1.0);
+    let scene = lit_scene(objects, 128);
+    let repr = Representation::Grid {
+        resolution: 24,
+        fill: GridFill::Sample,
+        storage: GridStorage::Band { cells: 2 },
+        march: MarchParams::default(),
+    };
+    let (g, plans) = build_scene_with_plans(&scene, repr);
+    assert!(matches!(plans[0].build, Build::LocalGrid { resolution: 24, .. }), "{:?}", plans[0]);
+    for (i, p) in plans.iter().enumerate().skip(1) {
+        match i {
+            7 => assert!(matches!(p.build, Build::Grid { clip: None, .. }), "{p:?}"),
+            _ => assert!(matches!(p.build, Build::SharedGrid { of: 0, .. }), "{i}: {p:?}"),
+        }
+    }
+    // The shared grid counted once: the scene holds two grids' samples, not twelve.
+    let own = g.objects()[7].census().grid_samples;
+    assert_eq!(g.census().grid_samples, g.objects()[0].census().grid_samples + own);
+    // Hits where the closed form's are, within a voxel of the local grid (0.4 / 24).
+    let analytic =
+        sdfmesh::plan::build_scene(&scene, Representation::Analytic { march: MarchParams::default() });
+    let mut stats = RayStats::default();
+    let mut rng = Lcg(11);
+    let mut hits = 0;
+    for i in 0..n {
+        let ObjectKind::Primitive(_) = scene.objects[i].kind else { unreachable!() };
+        for _ in 0..40 {
+            let c = row_centre(i, n) + 0.1 * Vec3::new(rng.unit() - 0.5, rng.unit() - 0.5, rng.unit() - 0.5);
+            let from = c + Vec3::new(0.3 * (rng.unit() - 0.5), 1.0, -3.0);
+            let ray = Ray::new(from, (c - from).normalize());
+            let a = analytic.closest_hit(&ray, 0.0, f32::INFINITY, &mut stats);
+            let b = g.closest_hit(&ray, 0.0, f32::INFINITY, &mut stats);
+            if let (Some(a), Some(b)) = (a, b) {
+                hits += 1;
+                let voxel = 0.4 * scene.objects[i].transform.scale.max_element() / 24.0;
+                assert!((a.t - b.t).abs() < voxel, "box {i}: t {} vs analytic {}", b.t, a.t);
+            }
+        }
+    }
+    assert!(hits > 300, "{hits} hits");
 }

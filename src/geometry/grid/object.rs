@@ -9,6 +9,8 @@
 //! prefer packets: eight rays' points are interpolated by one 8-wide kernel
 //! ([`GridStore::march_distance8`]), lane by lane equal to the scalar field.
 
+use std::sync::Arc;
+
 use glam::{DVec3, Vec3};
 
 use crate::geometry::grid::SdfGrid;
@@ -16,7 +18,8 @@ use crate::geometry::grid::band::BandGrid;
 use crate::geometry::march::MarchParams;
 use crate::geometry::marched::{DistanceField, Marched};
 use crate::geometry::{
-    Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, aabb, box_distance, distance_by_projection,
+    Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, Shared, aabb, box_distance,
+    distance_by_projection,
 };
 use crate::scene::Scene;
 use crate::scene::shape::Object;
@@ -146,7 +149,8 @@ pub type GridObject = Marched<GridField>;
 /// The field of a [`GridObject`]: the trilinear interpolation of the samples, placed in
 /// the world, with steps scaled by [`GRID_STEP_SCALE`] and one material.
 pub struct GridField {
-    grid: GridStore,
+    /// The samples; shared by the objects that place one grid several times.
+    grid: Arc<GridStore>,
     /// Where the grid's local frame sits in the world; `None` when the samples are in
     /// world space.
     placement: Option<Placement>,
@@ -165,7 +169,7 @@ struct Placement {
 impl GridObject {
     /// Wraps `grid` (world-space samples, a [`SdfGrid`] or a [`BandGrid`]) with a material.
     pub fn new(grid: impl Into<GridStore>, material: MaterialId, march: MarchParams, label: String) -> Self {
-        let grid = grid.into();
+        let grid = Arc::new(grid.into());
         let (lo, hi) = grid.bounds();
         let size = (hi - lo).length() as f64;
         let field = GridField { grid, placement: None, material };
@@ -185,7 +189,18 @@ impl GridObject {
         if transform.identity {
             return Self::new(grid, material, march, label);
         }
-        let grid = grid.into();
+        Self::placed_shared(Arc::new(grid.into()), transform, material, march, label)
+    }
+
+    /// [`GridObject::placed`] for a grid that other objects place too (each counts it in
+    /// its bytes; a scene counts it once, [`Geometry::shared`]).
+    pub fn placed_shared(
+        grid: Arc<GridStore>,
+        transform: &Transform,
+        material: MaterialId,
+        march: MarchParams,
+        label: String,
+    ) -> Self {
         let (lo, hi) = grid.bounds();
         let bounds = transform.box_to_world(&aabb(lo, hi));
         let size = (bounds.max - bounds.min).length() as f64;
@@ -275,11 +290,19 @@ impl DistanceField for GridField {
     }
 
     fn heap_bytes(&self) -> usize {
-        self.grid.bytes_used() - std::mem::size_of::<GridStore>()
+        self.grid.bytes_used()
     }
 
     fn census(&self) -> Census {
         Census { triangles: 0, grid_samples: self.grid.stored_values(), accel_bytes: 0 }
+    }
+
+    fn shared(&self) -> Option<Shared> {
+        Some(Shared {
+            id: Arc::as_ptr(&self.grid) as usize,
+            bytes: self.grid.bytes_used(),
+            census: self.census(),
+        })
     }
 
     fn surface_distance(&self, p: DVec3, _size: f64) -> f64 {
@@ -304,7 +327,7 @@ impl DistanceField for GridField {
 
     fn describe(&self, label: &str) -> String {
         let d = self.grid.dims();
-        let storage = match &self.grid {
+        let storage = match &*self.grid {
             GridStore::Dense(_) => String::new(),
             GridStore::Band(b) => format!(
                 ", narrow band of {} cells ({} of {} bricks stored)",
