@@ -552,6 +552,14 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
                 resolution: res,
                 build: grid(r, GridFill::Sample, band),
             });
+            if scene.objects.len() > 1 {
+                runs.push(Run {
+                    repr: RunRepr::Grid,
+                    method: "scene-band",
+                    resolution: res,
+                    build: grid(r, GridFill::Sample, GridStorage::Scene { cells: opts.band_cells }),
+                });
+            }
         }
     }
     runs
