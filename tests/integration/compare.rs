@@ -94,11 +94,13 @@ fn csv_header_is_the_documented_schema() {
         "mesh/extracted",
         "grid/dense",
         "grid/band",
+        "grid/scene-band",
     ] {
         assert!(kinds.iter().any(|x| x == k), "{k} missing from {kinds:?}");
     }
-    // The reference, 3 x 2 SDF sweep runs and 4 runs per resolution.
-    assert_eq!(rows.len(), 1 + 6 + 4 * 2);
+    // The reference, 3 x 2 SDF sweep runs and 5 runs per resolution (4, and the scene grid
+    // of its two objects).
+    assert_eq!(rows.len(), 1 + 6 + 5 * 2);
     assert!(rows.iter().all(|r| r.reference == "analytic/closed-form"));
     let class = dir.file_name().unwrap().to_string_lossy().into_owned();
     assert!(rows.iter().all(|r| r.class == class && r.replicate == 0 && r.schema_version == 2));
@@ -234,11 +236,11 @@ fn interrupted_run_keeps_its_rows_and_resume_completes_it() {
         std::fs::read_to_string(&csv).unwrap().lines().count().saturating_sub(2)
     });
     assert!(kept >= 3, "{kept} rows kept");
-    assert!(!finished_early && kept < 7 + 4 * 4, "the run was not interrupted ({kept} rows)");
+    assert!(!finished_early && kept < 7 + 5 * 4, "the run was not interrupted ({kept} rows)");
     let out = run_compare(&scene, &csv, &["--res", "8,12,16,24", "--resume"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let rows = read_rows(&csv).unwrap();
-    assert_eq!(rows.len(), 7 + 4 * 4, "finished early: {finished_early}");
+    assert_eq!(rows.len(), 7 + 5 * 4, "finished early: {finished_early}");
     let mut keys: Vec<_> = rows.iter().map(Row::key).collect();
     keys.sort();
     keys.dedup();
@@ -260,20 +262,20 @@ fn resume_key_includes_replicate_and_march_knob() {
     let first = sweep("1");
     let out = run_compare(&scene, &csv, &args(&first));
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    assert_eq!(read_rows(&csv).unwrap().len(), 1 + 1 + 4);
+    assert_eq!(read_rows(&csv).unwrap().len(), 1 + 1 + 5);
     let mut more = sweep("1,2").to_vec();
     more.push("--resume".into());
     let out = run_compare(&scene, &csv, &args(&more));
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let rows = read_rows(&csv).unwrap();
-    assert_eq!(rows.len(), 1 + 1 + 4 + 1);
+    assert_eq!(rows.len(), 1 + 1 + 5 + 1);
     assert_eq!(rows.last().unwrap().tolerance_px, Some(2.0));
     more.extend(["--replicate".into(), "1".into()]);
     let out = run_compare(&scene, &csv, &args(&more));
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let rows = read_rows(&csv).unwrap();
-    assert_eq!(rows.len(), 2 * 7);
-    assert_eq!(rows.iter().filter(|r| r.replicate == 1).count(), 7);
+    assert_eq!(rows.len(), 2 * 8);
+    assert_eq!(rows.iter().filter(|r| r.replicate == 1).count(), 8);
     let mut keys: Vec<_> = rows.iter().map(Row::key).collect();
     keys.sort();
     keys.dedup();
