@@ -468,19 +468,20 @@ impl SdfField {
         Some(SdfField { tree, tape, uniform_material, regions })
     }
 
-    /// The region of relative point `rel` ([`prune::TapeRegions::cell`]), `u32::MAX` where
-    /// there is none (no regions, or outside them).
+    /// The shortened tape of the region of relative point `rel`
+    /// ([`prune::TapeRegions::cell`], [`prune::TapeRegions::tape_of`]: cells with equal
+    /// tapes give one number), `u32::MAX` where there is none (no regions, or outside them).
     #[inline]
     fn region(&self, rel: Vec3) -> u32 {
-        self.regions.as_ref().and_then(|r| r.cell(rel)).unwrap_or(u32::MAX)
+        self.regions.as_ref().and_then(|r| r.cell(rel).map(|c| r.tape_of(c))).unwrap_or(u32::MAX)
     }
 
-    /// The operations to run in `region` (from [`SdfField::region`]): its shortened tape,
+    /// The operations to run for `region` (from [`SdfField::region`]): its shortened tape,
     /// or the whole tape.
     #[inline]
     fn ops_in<'a>(&'a self, tape: &'a tape::Tape, region: u32) -> tape::Ops<'a> {
         match &self.regions {
-            Some(r) if region != u32::MAX => r.ops(region),
+            Some(r) if region != u32::MAX => r.tape(region),
             _ => tape::Ops::All(tape.ops()),
         }
     }
@@ -509,8 +510,8 @@ impl SdfField {
     }
 
     /// The tape at 1 to 8 world points in 8-wide evaluations (lanes past `points` repeat
-    /// the first point and are ignored): one evaluation per distinct region among the
-    /// points, each running that region's shortened tape, so that every lane gets what
+    /// the first point and are ignored): one evaluation per distinct shortened tape among
+    /// the points' regions, each running that region's shortened tape, so that every lane gets what
     /// [`SdfField::eval_tape`] gives at its point alone.
     #[inline]
     fn eval_tape8(&self, tape: &tape::Tape, points: &[DVec3]) -> [f32; 8] {

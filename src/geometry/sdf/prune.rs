@@ -539,7 +539,19 @@ impl TapeRegions {
     /// The shortened tape of cell `cell` (from [`TapeRegions::cell`]).
     #[inline]
     pub fn ops(&self, cell: u32) -> Ops<'_> {
-        Ops::Picked { ops: &self.ops, order: &self.orders[self.cell_tape[cell as usize] as usize] }
+        self.tape(self.tape_of(cell))
+    }
+
+    /// Which distinct shortened tape cell `cell` runs (cells with equal tapes share one).
+    #[inline]
+    pub fn tape_of(&self, cell: u32) -> u32 {
+        self.cell_tape[cell as usize]
+    }
+
+    /// Distinct shortened tape `tape` (from [`TapeRegions::tape_of`]).
+    #[inline]
+    pub fn tape(&self, tape: u32) -> Ops<'_> {
+        Ops::Picked { ops: &self.ops, order: &self.orders[tape as usize] }
     }
 
     /// Cells per axis.
