@@ -260,6 +260,13 @@ pub struct Shared {
     pub census: Census,
 }
 
+impl Shared {
+    /// The data behind `arc`, identified by its address, with its `bytes` and `census`.
+    pub fn of<T>(arc: &std::sync::Arc<T>, bytes: usize, census: Census) -> Shared {
+        Shared { id: std::sync::Arc::as_ptr(arc) as usize, bytes, census }
+    }
+}
+
 /// What a geometry stores. `bytes_used() - accel_bytes` is the geometry itself.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Census {

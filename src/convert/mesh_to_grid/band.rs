@@ -172,14 +172,8 @@ pub fn band_from_members(
         )));
     }
     let (origin, voxel, dims) = grid_layout(lo, hi, cells_long as u32, margin_cells)?;
-    let bricks = (dims - UVec3::ONE + UVec3::splat(BRICK - 1)) / BRICK;
-    let count = bricks.x as u64 * bricks.y as u64 * bricks.z as u64;
-    if count * 8 > DEFAULT_MAX_GRID_BYTES {
-        return Err(Error::Usage(format!(
-            "a scene grid of {}x{}x{} bricks is too large; use a lower resolution",
-            bricks.x, bricks.y, bricks.z
-        )));
-    }
+    let (bricks, count) = brick_lattice(dims, "scene grid")?;
+    let count = count as u64;
     // The members each brick evaluates (compressed rows: `starts[b]..starts[b + 1]` of
     // `list`), from the bricks whose centres lie in a member's box grown by `reach`.
     let edge = BRICK as f32 * voxel;
@@ -301,6 +295,23 @@ pub fn band_from_members(
     Ok((band, materials.into_iter().map(|(_, m)| m).collect()))
 }
 
+/// Bricks per axis of a lattice of `dims` samples, and their number, checked against
+/// [`DEFAULT_MAX_GRID_BYTES`] at 8 bytes per brick (its slot and bound).
+///
+/// # Errors
+/// [`Error::Usage`] naming `what` when the bricks alone would pass the limit.
+fn brick_lattice(dims: UVec3, what: &str) -> Result<(UVec3, usize)> {
+    let bricks = (dims - UVec3::ONE + UVec3::splat(BRICK - 1)) / BRICK;
+    let count = bricks.x as u64 * bricks.y as u64 * bricks.z as u64;
+    if count * 8 > DEFAULT_MAX_GRID_BYTES {
+        return Err(Error::Usage(format!(
+            "a {what} of {}x{}x{} bricks is too large; use a lower resolution",
+            bricks.x, bricks.y, bricks.z
+        )));
+    }
+    Ok((bricks, count as usize))
+}
+
 /// Calls `f` for every brick of the inclusive range `a..=z`.
 fn for_bricks(a: UVec3, z: UVec3, mut f: impl FnMut(UVec3)) {
     for k in a.z..=z.z {
@@ -328,15 +339,7 @@ fn build<S>(
     if cells == 0 {
         return Err(Error::Usage("the narrow band must be at least 1 cell wide".into()));
     }
-    let bricks = (dims - UVec3::ONE + UVec3::splat(BRICK - 1)) / BRICK;
-    let count = bricks.x as u64 * bricks.y as u64 * bricks.z as u64;
-    if count * 8 > DEFAULT_MAX_GRID_BYTES {
-        return Err(Error::Usage(format!(
-            "a narrow-band grid of {}x{}x{} bricks is too large; use a lower resolution",
-            bricks.x, bricks.y, bricks.z
-        )));
-    }
-    let count = count as usize;
+    let (bricks, count) = brick_lattice(dims, "narrow-band grid")?;
     let band = cells as f32 * voxel;
     let brick_of = |b: usize| {
         let (bx, by) = (bricks.x as usize, bricks.y as usize);

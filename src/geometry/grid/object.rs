@@ -298,11 +298,7 @@ impl DistanceField for GridField {
     }
 
     fn shared(&self) -> Option<Shared> {
-        Some(Shared {
-            id: Arc::as_ptr(&self.grid) as usize,
-            bytes: self.grid.bytes_used(),
-            census: self.census(),
-        })
+        Some(Shared::of(&self.grid, self.grid.bytes_used(), self.census()))
     }
 
     fn surface_distance(&self, p: DVec3, _size: f64) -> f64 {

@@ -336,11 +336,7 @@ impl Geometry for MeshGeometry {
     }
 
     fn shared(&self) -> Option<Shared> {
-        Some(Shared {
-            id: Arc::as_ptr(&self.shape) as usize,
-            bytes: self.shape.bytes_used(),
-            census: self.shape.census(),
-        })
+        Some(Shared::of(&self.shape, self.shape.bytes_used(), self.shape.census()))
     }
 
     fn surface_distance(&self, p: DVec3) -> f64 {
