@@ -948,6 +948,7 @@ fn marches(plans: &[ObjectPlan]) -> bool {
                 | PlanBuild::Grid { .. }
                 | PlanBuild::LocalGrid { .. }
                 | PlanBuild::SharedGrid { .. }
+                | PlanBuild::InstancedGrid { .. }
                 | PlanBuild::GridFileMarched { .. }
         )
     })

@@ -31,6 +31,9 @@ pub struct SceneGeometry {
     part: Vec<u32>,
     /// Whether any object prefers packets ([`Geometry::prefers_packets`]), decided once.
     packets: bool,
+    /// What [`Geometry::describe`] says when this is one object's parts (the copies of an
+    /// instanced grid), not a whole scene.
+    label: Option<String>,
 }
 
 impl SceneGeometry {
@@ -95,7 +98,13 @@ impl SceneGeometry {
         }
         let bvh = bvh2::build(&boxes, BvhBuildParams::medium_build());
         let packets = objects.iter().any(|o| o.prefers_packets());
-        SceneGeometry { objects, bvh, unbounded, bounded, part, packets }
+        SceneGeometry { objects, bvh, unbounded, bounded, part, packets, label: None }
+    }
+
+    /// `objects` as the parts of one object (the copies of an instanced grid) under a BVH of
+    /// their own, described by `label`.
+    pub fn labelled(objects: Vec<Box<dyn Geometry>>, label: String) -> Self {
+        SceneGeometry { label: Some(label), ..Self::new(objects) }
     }
 
     /// The geometry of top-level BVH primitive `prim`: an object or one of its instances.
@@ -232,6 +241,7 @@ impl Geometry for SceneGeometry {
     /// Every object's bytes (shared data once) and the top-level structure's.
     fn bytes_used(&self) -> usize {
         std::mem::size_of::<Self>()
+            + self.label.as_ref().map_or(0, String::capacity)
             + self
                 .objects
                 .iter()
@@ -242,6 +252,9 @@ impl Geometry for SceneGeometry {
     }
 
     fn describe(&self) -> String {
+        if let Some(label) = &self.label {
+            return label.clone();
+        }
         let instances: usize = self.objects.iter().map(|o| o.instances().len()).sum();
         if instances == 0 {
             return format!(

@@ -170,6 +170,10 @@ pub fn object_bytes(o: &Object, plan: &ObjectPlan) -> u64 {
         Build::LocalGrid { resolution, .. } => {
             mesh_to_grid_bytes(0, UVec3::splat(grid_samples_per_axis(resolution)), GridFill::Sample)
         }
+        Build::InstancedGrid { resolution, copies, .. } => {
+            mesh_to_grid_bytes(0, UVec3::splat(grid_samples_per_axis(resolution)), GridFill::Sample)
+                .saturating_add((copies as u64).saturating_mul(BYTES_PER_INSTANCE))
+        }
         Build::Instanced { mesh, copies, .. } => {
             let mesh = match mesh {
                 InstanceMesh::Tessellated { resolution, .. } => tessellation_bytes(resolution),

@@ -343,6 +343,10 @@ fn build_object(
             let own = Build::Grid { resolution, fill: GridFill::Sample, storage, march, clip: None };
             build_object(scene, o, repr, ObjectPlan { build: own, ..plan })
         }
+        Build::InstancedGrid { .. } => match instanced_grid(scene, o, plan.build) {
+            Some(g) => (g, plan),
+            None => marched(Fallback::GridNotBuilt),
+        },
         Build::Grid { .. } => match gridded(o, plan) {
             Some(built) => built,
             None if matches!(o.kind, ObjectKind::Mesh { .. }) => (
@@ -513,6 +517,55 @@ fn instanced(scene: &Scene, o: &Object, build: Build) -> Option<(InstancedMesh, 
         format!("repeat '{}' instanced ({which}): {n} placements of one mesh, the child {what}", o.label);
     let build = Build::Instanced { mesh: realised, copies: n as u32, reach: copies.reach };
     Some((InstancedMesh::new(instances, label), build))
+}
+
+/// A [`Build::InstancedGrid`] plan built: the repetition `o`'s child gridded once in the
+/// repetition's frame and placed at every copy ([`repeat_offsets`]) under the copies' own
+/// BVH; `None` when the child's grid cannot be built or the copies cannot be placed.
+fn instanced_grid(scene: &Scene, o: &Object, build: Build) -> Option<Box<dyn Geometry>> {
+    let Build::InstancedGrid { resolution, storage, march, .. } = build else {
+        unreachable!("an instanced grid")
+    };
+    let ObjectKind::Repeat { child, count, .. } = &o.kind else { unreachable!("repetitions only") };
+    let copies = repeat_offsets(scene, o, MAX_INSTANCES)?;
+    // In the repetition's frame: the child's own transform is in its SDF.
+    let b = child.bounds()?;
+    let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
+    let tree = SdfTree::new(child)?;
+    let f = |p| tree.distance(p);
+    let store: GridStore = match storage {
+        GridStorage::Dense => sample_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS).ok()?.into(),
+        GridStorage::Band { cells } | GridStorage::Scene { cells } => {
+            band_from_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS, cells).ok()?.into()
+        }
+    };
+    let store = Arc::new(store);
+    let outer = o.compiled_transform();
+    let placed: Vec<Box<dyn Geometry>> = copies
+        .offsets
+        .iter()
+        .map(|&offset| -> Box<dyn Geometry> {
+            let t = compose(&outer, offset, &Transform::IDENTITY);
+            Box::new(GridObject::placed_shared(store.clone(), &t, child.material, march, String::new()))
+        })
+        .collect();
+    let n = placed.len();
+    let which = match (count, copies.reach) {
+        (Some(c), _) => format!("{}x{}x{} copies", c.x, c.y, c.z),
+        (None, Some(reach)) => format!("infinite, the {n} copies in view out to {reach}"),
+        (None, None) => unreachable!("an infinite repetition has a reach"),
+    };
+    let d = store.dims();
+    let label = format!(
+        "repeat '{}' instanced ({which}): {n} placements of one grid of {}x{}x{} samples, the child {} sampled \
+         at {resolution}",
+        o.label,
+        d.x,
+        d.y,
+        d.z,
+        child.kind_name()
+    );
+    Some(Box::new(SceneGeometry::labelled(placed, label)))
 }
 
 /// A grid file's name for descriptions.

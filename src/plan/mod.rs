@@ -27,6 +27,8 @@
 //! - [`Build::LocalGrid`], [`Build::SharedGrid`]: primitives of the same kind and
 //!   parameters share one grid sampled in the first one's frame and placed by each one's
 //!   transform (rigid, uniform scale), as meshes share one mesh.
+//! - [`Build::InstancedGrid`]: a repetition's child gridded once and placed per copy (the
+//!   copies of [`Build::Instanced`]).
 //! - [`Build::GridFileMarched`], [`Build::GridFileExtracted`]: a grid file ray marched,
 //!   or its surface extracted.
 //!
@@ -298,6 +300,22 @@ pub enum Build {
         /// Ray marching parameters (pixel footprint from the camera).
         march: MarchParams,
     },
+    /// A repetition's child gridded once in the repetition's frame (`resolution` cells along
+    /// the longest axis of the child's box) and placed once per copy, the copies under a
+    /// BVH of their own, as [`Build::Instanced`] places one mesh.
+    InstancedGrid {
+        /// Cells along the longest axis of the child's box.
+        resolution: u32,
+        /// How the child's samples are stored ([`GridStorage::Dense`] or
+        /// [`GridStorage::Band`]).
+        storage: GridStorage,
+        /// Ray marching parameters (pixel footprint from the camera).
+        march: MarchParams,
+        /// Copies placed, as [`Build::Instanced`]'s.
+        copies: u32,
+        /// As [`Build::Instanced`]'s.
+        reach: Option<f32>,
+    },
     /// A grid file ray marched.
     GridFileMarched {
         /// How its samples are stored.
@@ -490,6 +508,21 @@ pub fn plan_object(scene: &Scene, o: &Object, repr: Representation) -> ObjectPla
         },
         Representation::Grid { resolution, fill, storage, march } => {
             let grid = |fill, clip| Build::Grid { resolution, fill, storage, march, clip };
+            // Repetition is instanced, as in the mesh representation: the child's grid once,
+            // placed per copy.
+            if let ObjectKind::Repeat { child, .. } = &o.kind
+                && child.bounds().is_some()
+                && signed(child)
+                && let Some(c) = repeat_offsets(scene, o, MAX_INSTANCES)
+            {
+                return ObjectPlan::as_asked(Build::InstancedGrid {
+                    resolution,
+                    storage: storage.own(),
+                    march,
+                    copies: c.offsets.len() as u32,
+                    reach: c.reach,
+                });
+            }
             let Some(b) = o.bounds() else {
                 let build = match o.kind {
                     _ if is_mesh => Build::MeshTriangles,

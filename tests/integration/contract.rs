@@ -320,6 +320,7 @@ fn marched(plan: &ObjectPlan) -> bool {
             | Build::Grid { .. }
             | Build::LocalGrid { .. }
             | Build::SharedGrid { .. }
+            | Build::InstancedGrid { .. }
             | Build::GridFileMarched { .. }
     )
 }

@@ -11,7 +11,10 @@ use sdfmesh::geometry::march::MarchParams;
 use sdfmesh::geometry::scene::SceneGeometry;
 use sdfmesh::geometry::{Geometry, RayStats};
 use sdfmesh::plan::budget::{BYTES_PER_INSTANCE, scene_bytes};
-use sdfmesh::plan::{Build, InstanceMesh, MeshMethod, Representation, build_scene, build_scene_with_plans};
+use sdfmesh::plan::{
+    Build, GridFill, GridStorage, InstanceMesh, MeshMethod, Representation, build_scene,
+    build_scene_with_plans,
+};
 use sdfmesh::scene::camera::RayGenerator;
 use sdfmesh::scene::shape::Shading;
 use sdfmesh::scene::{Scene, parse_scene};
@@ -85,6 +88,38 @@ fn a_finite_repetition_is_one_mesh_placed_per_copy_and_hits_what_the_sdf_hits() 
         eprintln!("{shape}: {hits} hits, {agree} agree");
         assert!(hits > 1000, "{shape}: {hits} hits");
         assert!(agree > 0.96, "{shape}: {agree} of the rays agree with the SDF");
+    }
+}
+
+/// The grid representation instances repetition too: the child's grid once, placed per copy.
+#[test]
+fn a_repetition_is_one_grid_placed_per_copy_and_hits_what_the_sdf_hits() {
+    let grid = Representation::Grid {
+        resolution: 24,
+        fill: GridFill::Sample,
+        storage: GridStorage::Band { cells: 2 },
+        march: MarchParams::default(),
+    };
+    for (count, copies) in [(Some("[10, 1, 10]"), 100), (None, 0)] {
+        let s = scene(&repeat("[1, 0, 1]", count, SPHERE), 12.0);
+        let (g, plans) = build_scene_with_plans(&s, grid);
+        let Build::InstancedGrid { copies: n, reach, .. } = plans[0].build else {
+            panic!("not instanced: {:?}", plans[0])
+        };
+        assert_eq!(reach.is_some(), count.is_none());
+        if copies > 0 {
+            assert_eq!(n, copies);
+        }
+        let d = g.objects()[0].describe();
+        assert!(d.contains(&format!("{n} placements of one grid")), "{d}");
+        // One grid's samples, however many copies.
+        let one = build_scene(&scene(&repeat("[1, 0, 1]", Some("[1, 1, 1]"), SPHERE), 12.0), grid);
+        assert_eq!(g.census().grid_samples, one.census().grid_samples);
+        let reference = build_scene(&s, sdf());
+        let (agree, hits) = agreement(&s, &g, &reference, 0.02, 11.0);
+        eprintln!("{count:?}: {hits} hits, {agree} agree");
+        assert!(hits > 1000, "{hits} hits");
+        assert!(agree > 0.96, "{agree} of the rays agree with the SDF");
     }
 }
 
