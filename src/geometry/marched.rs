@@ -16,7 +16,9 @@
 
 use glam::{DVec3, Vec3};
 
-use crate::geometry::march::{MarchHit, MarchLane, MarchParams, Segment, gradient_normal, sphere_trace};
+use crate::geometry::march::{
+    MarchHit, MarchLane, MarchParams, Segment, gradient_normal, gradient_normal2, sphere_trace,
+};
 use crate::geometry::{Aabb, Census, Geometry, Hit, MaterialId, PACKET, Ray, RayStats, f32_error, max_abs};
 
 /// A distance field that [`Marched`] sphere traces, in world space.
@@ -60,6 +62,14 @@ pub trait DistanceField: Send + Sync {
     #[inline]
     fn distance4_within(&self, points: &[DVec3; 4], tolerance: f64) -> [f64; 4] {
         points.map(|p| self.distance_within(p, tolerance))
+    }
+
+    /// [`Self::distance4_within`] at two stencils at once (the normals of two hits of a
+    /// packet, [`gradient_normal2`]), each as [`Self::distance4_within`] gives it alone.
+    /// The default evaluates them one after the other.
+    #[inline]
+    fn distance4x2_within(&self, a: &[DVec3; 4], ta: f64, b: &[DVec3; 4], tb: f64) -> ([f64; 4], [f64; 4]) {
+        (self.distance4_within(a, ta), self.distance4_within(b, tb))
     }
 
     /// Whether the field is the exact Euclidean distance everywhere (false: a bound).
@@ -207,19 +217,20 @@ impl<F: DistanceField> Marched<F> {
         }
     }
 
-    /// The hit record of a converged march of `ray`: point, normal from the gradient,
-    /// material and error bound.
-    fn hit(&self, ray: &Ray, hit: MarchHit, stats: &mut RayStats) -> Hit {
+    /// Where the normal of a converged march of `ray` is taken: the hit point, its error
+    /// bound `eps` and the gradient step `h`.
+    #[inline]
+    fn hit_point(&self, ray: &Ray, hit: MarchHit) -> (DVec3, f64, f64) {
         let MarchHit { t, residual } = hit;
         let p = ray.origin.as_dvec3() + ray.dir.as_dvec3() * t;
         let eps = self.march.tolerance(t, self.size).max(residual);
-        let h = self.field.normal_step(p, eps);
-        // The gradient's error is about the distance error over h: a field evaluates the
-        // stencil with an error of at most h / 20 (a quarter of the tolerance asked), so
-        // the normal's direction is off by at most a few percent where the evaluator's
-        // error bound is reached, far less in practice.
-        let f4 = |q: &[DVec3; 4]| self.field.distance4_within(q, 0.2 * h);
-        let normal = gradient_normal(&f4, p, h, stats).as_vec3();
+        (p, eps, self.field.normal_step(p, eps))
+    }
+
+    /// The hit record at `p` (error bound `eps`) of a march converged at `t`, with `normal`.
+    #[inline]
+    fn record(&self, t: f64, p: DVec3, eps: f64, normal: DVec3) -> Hit {
+        let normal = normal.as_vec3();
         let material = self.field.material(p);
         let point: Vec3 = p.as_vec3();
         Hit {
@@ -230,6 +241,30 @@ impl<F: DistanceField> Marched<F> {
             material,
             error: 4.0 * eps as f32 + f32_error(max_abs(point)),
         }
+    }
+
+    /// The hit record of a converged march of `ray`: point, normal from the gradient,
+    /// material and error bound.
+    fn hit(&self, ray: &Ray, hit: MarchHit, stats: &mut RayStats) -> Hit {
+        let (p, eps, h) = self.hit_point(ray, hit);
+        // The gradient's error is about the distance error over h: a field evaluates the
+        // stencil with an error of at most h / 20 (a quarter of the tolerance asked), so
+        // the normal's direction is off by at most a few percent where the evaluator's
+        // error bound is reached, far less in practice.
+        let f4 = |q: &[DVec3; 4]| self.field.distance4_within(q, 0.2 * h);
+        let normal = gradient_normal(&f4, p, h, stats);
+        self.record(hit.t, p, eps, normal)
+    }
+
+    /// [`Marched::hit`] for two converged marches at once, their normals' stencils
+    /// evaluated together ([`DistanceField::distance4x2_within`]); each record is bit for
+    /// bit the one [`Marched::hit`] gives alone.
+    fn hit2(&self, (ra, a): (&Ray, MarchHit), (rb, b): (&Ray, MarchHit), stats: &mut RayStats) -> (Hit, Hit) {
+        let (pa, ea, ha) = self.hit_point(ra, a);
+        let (pb, eb, hb) = self.hit_point(rb, b);
+        let f8 = |qa: &[DVec3; 4], qb: &[DVec3; 4]| self.field.distance4x2_within(qa, 0.2 * ha, qb, 0.2 * hb);
+        let (na, nb) = gradient_normal2(&f8, (pa, ha), (pb, hb), stats);
+        (self.record(a.t, pa, ea, na), self.record(b.t, pb, eb, nb))
     }
 }
 
@@ -261,11 +296,24 @@ impl<F: DistanceField> Geometry for Marched<F> {
         debug_assert!(rays.len() <= PACKET && t_max.len() == rays.len() && hits.len() == rays.len());
         let live = [true; PACKET];
         let reach: [f32; PACKET] = std::array::from_fn(|i| t_max.get(i).copied().unwrap_or(0.0));
-        self.march_packet(rays, t_min, &reach, &live, stats, |i, mh, stats| {
-            let hit = self.hit(&rays[i], mh, stats);
-            t_max[i] = hit.t;
-            hits[i] = Some(hit);
-        });
+        let mut converged: [Option<MarchHit>; PACKET] = [None; PACKET];
+        self.march_packet(rays, t_min, &reach, &live, stats, |i, mh, _| converged[i] = Some(mh));
+        // The hit records two at a time: both normals' stencils in one evaluation.
+        let mut pending: Option<(usize, MarchHit)> = None;
+        for (i, c) in converged.iter().enumerate() {
+            let Some(mh) = *c else { continue };
+            let Some((j, first)) = pending.take() else {
+                pending = Some((i, mh));
+                continue;
+            };
+            let (a, b) = self.hit2((&rays[j], first), (&rays[i], mh), stats);
+            (t_max[j], hits[j]) = (a.t, Some(a));
+            (t_max[i], hits[i]) = (b.t, Some(b));
+        }
+        if let Some((j, mh)) = pending {
+            let hit = self.hit(&rays[j], mh, stats);
+            (t_max[j], hits[j]) = (hit.t, Some(hit));
+        }
     }
 
     /// The packet march of [`Geometry::closest_hits`] for the lanes not yet occluded; a

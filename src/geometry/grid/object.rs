@@ -255,6 +255,13 @@ impl DistanceField for GridField {
         std::array::from_fn(|i| v[i] * GRID_STEP_SCALE)
     }
 
+    #[inline]
+    fn distance4x2_within(&self, a: &[DVec3; 4], _ta: f64, b: &[DVec3; 4], _tb: f64) -> ([f64; 4], [f64; 4]) {
+        // Both stencils in one 8-wide evaluation.
+        let v = self.field8(&std::array::from_fn(|i| if i < 4 { a[i] } else { b[i - 4] }));
+        (std::array::from_fn(|i| v[i] * GRID_STEP_SCALE), std::array::from_fn(|i| v[i + 4] * GRID_STEP_SCALE))
+    }
+
     fn is_signed(&self) -> bool {
         true
     }
