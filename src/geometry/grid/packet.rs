@@ -145,10 +145,30 @@ mod avx2 {
         }
     }
 
-    /// The samples at `base + o` lane by lane.
+    /// The sample pairs at `i + o` and `i + o + 1` (x and x + 1) lane by lane, as the two
+    /// vectors of first and second samples, in 64-bit gathers of four pairs (half the
+    /// element loads of two 32-bit gathers). `idx` holds the lanes' `i` in the order
+    /// (0, 1, 4, 5) and (2, 3, 6, 7) ([`pair_order`]), which the two shuffles undo.
     #[inline(always)]
-    unsafe fn gather(v: *const f32, base: __m256i, o: i32) -> __m256 {
-        unsafe { _mm256_i32gather_ps::<4>(v, _mm256_add_epi32(base, _mm256_set1_epi32(o))) }
+    unsafe fn gather_pairs(v: *const f32, idx: (__m128i, __m128i), o: i32) -> (__m256, __m256) {
+        unsafe {
+            let off = _mm_set1_epi32(o);
+            let p = v as *const i64;
+            // lo: the pairs of lanes 0, 1 | 4, 5; hi: of lanes 2, 3 | 6, 7.
+            let lo = _mm256_castsi256_ps(_mm256_i32gather_epi64::<4>(p, _mm_add_epi32(idx.0, off)));
+            let hi = _mm256_castsi256_ps(_mm256_i32gather_epi64::<4>(p, _mm_add_epi32(idx.1, off)));
+            (_mm256_shuffle_ps::<0b10_00_10_00>(lo, hi), _mm256_shuffle_ps::<0b11_01_11_01>(lo, hi))
+        }
+    }
+
+    /// The eight lanes of `i` as the index halves [`gather_pairs`] takes: lanes
+    /// (0, 1, 4, 5) and (2, 3, 6, 7).
+    #[inline(always)]
+    unsafe fn pair_order(i: __m256i) -> (__m128i, __m128i) {
+        unsafe {
+            let p = _mm256_permute4x64_epi64::<0b11_01_10_00>(i);
+            (_mm256_castsi256_si128(p), _mm256_extracti128_si256::<1>(p))
+        }
     }
 
     /// The 16-bit samples at `base + o` and `base + o + 1` (x and x + 1, always in the same
@@ -207,10 +227,16 @@ mod avx2 {
                 ),
             );
             let v = g.values.as_ptr();
-            let x00 = lerp(gather(v, base, 0), gather(v, base, 1), t[0]);
-            let x10 = lerp(gather(v, base, sy), gather(v, base, sy + 1), t[0]);
-            let x01 = lerp(gather(v, base, sz), gather(v, base, sz + 1), t[0]);
-            let x11 = lerp(gather(v, base, sz + sy), gather(v, base, sz + sy + 1), t[0]);
+            // Each lane's x and x + 1 samples sit side by side: one 64-bit load per pair.
+            let idx = pair_order(base);
+            let (a0, a1) = gather_pairs(v, idx, 0);
+            let (b0, b1) = gather_pairs(v, idx, sy);
+            let (c0, c1) = gather_pairs(v, idx, sz);
+            let (e0, e1) = gather_pairs(v, idx, sz + sy);
+            let x00 = lerp(a0, a1, t[0]);
+            let x10 = lerp(b0, b1, t[0]);
+            let x01 = lerp(c0, c1, t[0]);
+            let x11 = lerp(e0, e1, t[0]);
             let value = lerp(lerp(x00, x10, t[1]), lerp(x01, x11, t[1]), t[2]);
             store(continue_outside(value, d))
         }
