@@ -57,6 +57,26 @@ pub trait DistanceField: Send + Sync {
         std::array::from_fn(|i| self.distance_within(points[i], tolerances[i]))
     }
 
+    /// [`Self::distance8_within`] at the points `origin + dir * t[l]` of eight rays
+    /// (`origin[a][l]` is component `a` of lane `l`), each computed as `DVec3` arithmetic
+    /// does (`o + d * t` per component, rounded after the product and the sum). A field may
+    /// compute the points in its own 8-wide kernel; the default builds them and calls
+    /// [`Self::distance8_within`].
+    #[inline]
+    fn distance8_rays(
+        &self,
+        origin: &[[f64; 8]; 3],
+        dir: &[[f64; 8]; 3],
+        t: &[f64; 8],
+        tolerances: &[f64; 8],
+    ) -> [f64; 8] {
+        let points = std::array::from_fn(|l| {
+            DVec3::new(origin[0][l], origin[1][l], origin[2][l])
+                + DVec3::new(dir[0][l], dir[1][l], dir[2][l]) * t[l]
+        });
+        self.distance8_within(&points, tolerances)
+    }
+
     /// [`Self::distance_within`] at four points at once (the stencil of
     /// [`gradient_normal`]). The default evaluates them one by one.
     #[inline]
@@ -175,41 +195,54 @@ impl<F: DistanceField> Marched<F> {
         mut on_hit: impl FnMut(usize, MarchHit, &mut RayStats),
     ) {
         let refine = self.field.is_signed();
-        let mut lanes: [Option<(MarchLane, Segment)>; PACKET] = [None; PACKET];
+        let mut lanes: [Option<MarchLane>; PACKET] = [None; PACKET];
+        let mut segs = [Segment { origin: DVec3::ZERO, dir: DVec3::ZERO, t0: 0.0, t1: 0.0 }; PACKET];
+        let mut first = None;
         for (i, ray) in rays.iter().enumerate().take(PACKET) {
             if !live[i] {
                 continue;
             }
             if let Some(seg) = self.segment(ray, t_min, t_max[i]) {
-                lanes[i] = Some((MarchLane::new(&seg, stats), seg));
+                lanes[i] = Some(MarchLane::new(&seg, stats));
+                segs[i] = seg;
+                first.get_or_insert(i);
             }
         }
-        let mut points = [DVec3::ZERO; PACKET];
+        let Some(first) = first else { return };
+        // The rays by component for the field's 8-wide evaluation at `origin + dir * t`
+        // ([`DistanceField::distance8_rays`]). Lanes that never march evaluate the first
+        // live lane's point, lanes whose march is over their last point, with no tolerance
+        // to meet; their values are not used.
+        let mut origin = [[0.0; PACKET]; 3];
+        let mut dir = [[0.0; PACKET]; 3];
+        let mut t = [segs[first].t0; PACKET];
+        for (i, lane) in lanes.iter().enumerate() {
+            let seg = if lane.is_some() { &segs[i] } else { &segs[first] };
+            for a in 0..3 {
+                (origin[a][i], dir[a][i]) = (seg.origin[a], seg.dir[a]);
+            }
+        }
         let mut tolerances = [f64::INFINITY; PACKET];
         loop {
-            let mut first = None;
+            let mut marching = false;
             for (i, lane) in lanes.iter().enumerate() {
-                if let Some((lane, seg)) = lane {
-                    points[i] = seg.origin + seg.dir * lane.t();
+                if let Some(lane) = lane {
+                    t[i] = lane.t();
                     tolerances[i] = lane.tolerance(&self.march, self.size);
-                    first.get_or_insert(i);
+                    marching = true;
                 }
             }
-            let Some(first) = first else { break };
-            // Idle lanes evaluate a copy of a live lane's point with no tolerance to meet.
-            for (i, lane) in lanes.iter().enumerate() {
-                if lane.is_none() {
-                    points[i] = points[first];
-                    tolerances[i] = f64::INFINITY;
-                }
+            if !marching {
+                break;
             }
-            let d = self.field.distance8_within(&points, &tolerances);
+            let d = self.field.distance8_rays(&origin, &dir, &t, &tolerances);
             for i in 0..PACKET {
-                let Some((lane, seg)) = &mut lanes[i] else { continue };
-                let Some(outcome) = lane.feed(d[i], seg, self.size, &self.march, refine, stats) else {
+                let Some(lane) = &mut lanes[i] else { continue };
+                let Some(outcome) = lane.feed(d[i], &segs[i], self.size, &self.march, refine, stats) else {
                     continue;
                 };
                 lanes[i] = None;
+                tolerances[i] = f64::INFINITY;
                 if let Some(mh) = outcome.filter(|h| h.t >= t_min as f64 && h.t <= t_max[i] as f64) {
                     on_hit(i, mh, stats);
                 }
