@@ -364,8 +364,34 @@ pub fn gradient_normal(
     stats: &mut RayStats,
 ) -> DVec3 {
     stats.march_steps += 4;
-    let points = TETRAHEDRON.map(|k| p + k * h);
-    let d = f4(&points);
+    tetrahedron_normal(f4(&tetrahedron_points(p, h)))
+}
+
+/// [`gradient_normal`] at two points at once (`a` with step `ha`, `b` with step `hb`):
+/// `f8` evaluates both stencils together (a field does that with one 8-wide evaluation),
+/// each lane as [`gradient_normal`]'s `f4` would, so each normal is bit for bit the one
+/// [`gradient_normal`] gives at that point alone.
+pub fn gradient_normal2(
+    f8: &impl Fn(&[DVec3; 4], &[DVec3; 4]) -> ([f64; 4], [f64; 4]),
+    (a, ha): (DVec3, f64),
+    (b, hb): (DVec3, f64),
+    stats: &mut RayStats,
+) -> (DVec3, DVec3) {
+    stats.march_steps += 8;
+    let (da, db) = f8(&tetrahedron_points(a, ha), &tetrahedron_points(b, hb));
+    (tetrahedron_normal(da), tetrahedron_normal(db))
+}
+
+/// The stencil of [`gradient_normal`]: `p + h * k` for each of [`TETRAHEDRON`]'s `k`.
+#[inline]
+fn tetrahedron_points(p: DVec3, h: f64) -> [DVec3; 4] {
+    TETRAHEDRON.map(|k| p + k * h)
+}
+
+/// The unit gradient from the field's values `d` at [`tetrahedron_points`] (+y where it
+/// vanishes).
+#[inline]
+fn tetrahedron_normal(d: [f64; 4]) -> DVec3 {
     let g = TETRAHEDRON.iter().zip(d).fold(DVec3::ZERO, |acc, (k, d)| acc + *k * d);
     g.try_normalize().unwrap_or(DVec3::Y)
 }

@@ -16,7 +16,9 @@
 
 use glam::{DVec3, Vec3};
 
-use crate::geometry::march::{MarchHit, MarchLane, MarchParams, Segment, gradient_normal, sphere_trace};
+use crate::geometry::march::{
+    MarchHit, MarchLane, MarchParams, Segment, gradient_normal, gradient_normal2, sphere_trace,
+};
 use crate::geometry::{
     Aabb, Census, Geometry, Hit, MaterialId, PACKET, Ray, RayStats, Shared, f32_error, max_abs,
 };
@@ -57,11 +59,39 @@ pub trait DistanceField: Send + Sync {
         std::array::from_fn(|i| self.distance_within(points[i], tolerances[i]))
     }
 
+    /// [`Self::distance8_within`] at the points `origin + dir * t[l]` of eight rays
+    /// (`origin[a][l]` is component `a` of lane `l`), each computed as `DVec3` arithmetic
+    /// does (`o + d * t` per component, rounded after the product and the sum). A field may
+    /// compute the points in its own 8-wide kernel; the default builds them and calls
+    /// [`Self::distance8_within`].
+    #[inline]
+    fn distance8_rays(
+        &self,
+        origin: &[[f64; 8]; 3],
+        dir: &[[f64; 8]; 3],
+        t: &[f64; 8],
+        tolerances: &[f64; 8],
+    ) -> [f64; 8] {
+        let points = std::array::from_fn(|l| {
+            DVec3::new(origin[0][l], origin[1][l], origin[2][l])
+                + DVec3::new(dir[0][l], dir[1][l], dir[2][l]) * t[l]
+        });
+        self.distance8_within(&points, tolerances)
+    }
+
     /// [`Self::distance_within`] at four points at once (the stencil of
     /// [`gradient_normal`]). The default evaluates them one by one.
     #[inline]
     fn distance4_within(&self, points: &[DVec3; 4], tolerance: f64) -> [f64; 4] {
         points.map(|p| self.distance_within(p, tolerance))
+    }
+
+    /// [`Self::distance4_within`] at two stencils at once (the normals of two hits of a
+    /// packet, [`gradient_normal2`]), each as [`Self::distance4_within`] gives it alone.
+    /// The default evaluates them one after the other.
+    #[inline]
+    fn distance4x2_within(&self, a: &[DVec3; 4], ta: f64, b: &[DVec3; 4], tb: f64) -> ([f64; 4], [f64; 4]) {
+        (self.distance4_within(a, ta), self.distance4_within(b, tb))
     }
 
     /// Whether the field is the exact Euclidean distance everywhere (false: a bound).
@@ -147,6 +177,38 @@ impl<F: DistanceField> Marched<F> {
         Some(Segment { origin: ray.origin.as_dvec3(), dir: ray.dir.as_dvec3(), t0: t0 as f64, t1: t1 as f64 })
     }
 
+    /// The intervals of [`Self::segment`] for up to [`PACKET`] rays (ray `i` up to
+    /// `t_max[i]`), bit for bit: where the CPU has SSE (the x86-64 baseline) the box clip
+    /// ([`Ray::clip_to_box`]) runs four rays at a time ([`clip4`]).
+    #[inline]
+    fn segments8(&self, rays: &[Ray], t_min: f32, t_max: &[f32; PACKET]) -> [Option<(f64, f64)>; PACKET] {
+        let n = rays.len().min(PACKET);
+        if !self.bounded {
+            return std::array::from_fn(|i| (i < n).then_some((t_min as f64, t_max[i] as f64)));
+        }
+        #[cfg(target_arch = "x86_64")]
+        {
+            let mut out = [None; PACKET];
+            for half in 0..n.div_ceil(4) {
+                // Lanes past the packet's end clip a copy of its first ray (not used).
+                let lane = |k: usize| rays.get(4 * half + k).unwrap_or(&rays[0]);
+                let quad = [lane(0), lane(1), lane(2), lane(3)];
+                let tq = std::array::from_fn(|k| t_max[(4 * half + k).min(PACKET - 1)]);
+                for (k, c) in clip4(quad, &self.bounds, t_min, tq).into_iter().enumerate() {
+                    if 4 * half + k < n {
+                        out[4 * half + k] = c.map(|(t0, t1)| (t0 as f64, t1 as f64));
+                    }
+                }
+            }
+            out
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        std::array::from_fn(|i| {
+            let (t0, t1) = rays.get(i)?.clip_to_box(&self.bounds, t_min, t_max[i])?;
+            Some((t0 as f64, t1 as f64))
+        })
+    }
+
     /// Sphere traces the world ray `ray` (unit direction) through the field, only inside
     /// the bounds when there are any, and keeps hits with `t` in `[t_min, t_max]`.
     fn march(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<MarchHit> {
@@ -172,41 +234,56 @@ impl<F: DistanceField> Marched<F> {
         mut on_hit: impl FnMut(usize, MarchHit, &mut RayStats),
     ) {
         let refine = self.field.is_signed();
-        let mut lanes: [Option<(MarchLane, Segment)>; PACKET] = [None; PACKET];
+        let mut lanes: [Option<MarchLane>; PACKET] = [None; PACKET];
+        let mut segs = [Segment { origin: DVec3::ZERO, dir: DVec3::ZERO, t0: 0.0, t1: 0.0 }; PACKET];
+        let mut first = None;
+        let clipped = self.segments8(rays, t_min, t_max);
         for (i, ray) in rays.iter().enumerate().take(PACKET) {
             if !live[i] {
                 continue;
             }
-            if let Some(seg) = self.segment(ray, t_min, t_max[i]) {
-                lanes[i] = Some((MarchLane::new(&seg, stats), seg));
+            if let Some((t0, t1)) = clipped[i] {
+                let seg = Segment { origin: ray.origin.as_dvec3(), dir: ray.dir.as_dvec3(), t0, t1 };
+                lanes[i] = Some(MarchLane::new(&seg, stats));
+                segs[i] = seg;
+                first.get_or_insert(i);
             }
         }
-        let mut points = [DVec3::ZERO; PACKET];
+        let Some(first) = first else { return };
+        // The rays by component for the field's 8-wide evaluation at `origin + dir * t`
+        // ([`DistanceField::distance8_rays`]). Lanes that never march evaluate the first
+        // live lane's point, lanes whose march is over their last point, with no tolerance
+        // to meet; their values are not used.
+        let mut origin = [[0.0; PACKET]; 3];
+        let mut dir = [[0.0; PACKET]; 3];
+        let mut t = [segs[first].t0; PACKET];
+        for (i, lane) in lanes.iter().enumerate() {
+            let seg = if lane.is_some() { &segs[i] } else { &segs[first] };
+            for a in 0..3 {
+                (origin[a][i], dir[a][i]) = (seg.origin[a], seg.dir[a]);
+            }
+        }
         let mut tolerances = [f64::INFINITY; PACKET];
         loop {
-            let mut first = None;
+            let mut marching = false;
             for (i, lane) in lanes.iter().enumerate() {
-                if let Some((lane, seg)) = lane {
-                    points[i] = seg.origin + seg.dir * lane.t();
+                if let Some(lane) = lane {
+                    t[i] = lane.t();
                     tolerances[i] = lane.tolerance(&self.march, self.size);
-                    first.get_or_insert(i);
+                    marching = true;
                 }
             }
-            let Some(first) = first else { break };
-            // Idle lanes evaluate a copy of a live lane's point with no tolerance to meet.
-            for (i, lane) in lanes.iter().enumerate() {
-                if lane.is_none() {
-                    points[i] = points[first];
-                    tolerances[i] = f64::INFINITY;
-                }
+            if !marching {
+                break;
             }
-            let d = self.field.distance8_within(&points, &tolerances);
+            let d = self.field.distance8_rays(&origin, &dir, &t, &tolerances);
             for i in 0..PACKET {
-                let Some((lane, seg)) = &mut lanes[i] else { continue };
-                let Some(outcome) = lane.feed(d[i], seg, self.size, &self.march, refine, stats) else {
+                let Some(lane) = &mut lanes[i] else { continue };
+                let Some(outcome) = lane.feed(d[i], &segs[i], self.size, &self.march, refine, stats) else {
                     continue;
                 };
                 lanes[i] = None;
+                tolerances[i] = f64::INFINITY;
                 if let Some(mh) = outcome.filter(|h| h.t >= t_min as f64 && h.t <= t_max[i] as f64) {
                     on_hit(i, mh, stats);
                 }
@@ -214,19 +291,20 @@ impl<F: DistanceField> Marched<F> {
         }
     }
 
-    /// The hit record of a converged march of `ray`: point, normal from the gradient,
-    /// material and error bound.
-    fn hit(&self, ray: &Ray, hit: MarchHit, stats: &mut RayStats) -> Hit {
+    /// Where the normal of a converged march of `ray` is taken: the hit point, its error
+    /// bound `eps` and the gradient step `h`.
+    #[inline]
+    fn hit_point(&self, ray: &Ray, hit: MarchHit) -> (DVec3, f64, f64) {
         let MarchHit { t, residual } = hit;
         let p = ray.origin.as_dvec3() + ray.dir.as_dvec3() * t;
         let eps = self.march.tolerance(t, self.size).max(residual);
-        let h = self.field.normal_step(p, eps);
-        // The gradient's error is about the distance error over h: a field evaluates the
-        // stencil with an error of at most h / 20 (a quarter of the tolerance asked), so
-        // the normal's direction is off by at most a few percent where the evaluator's
-        // error bound is reached, far less in practice.
-        let f4 = |q: &[DVec3; 4]| self.field.distance4_within(q, 0.2 * h);
-        let normal = gradient_normal(&f4, p, h, stats).as_vec3();
+        (p, eps, self.field.normal_step(p, eps))
+    }
+
+    /// The hit record at `p` (error bound `eps`) of a march converged at `t`, with `normal`.
+    #[inline]
+    fn record(&self, t: f64, p: DVec3, eps: f64, normal: DVec3) -> Hit {
+        let normal = normal.as_vec3();
         let material = self.field.material(p);
         let point: Vec3 = p.as_vec3();
         Hit {
@@ -237,6 +315,30 @@ impl<F: DistanceField> Marched<F> {
             material,
             error: 4.0 * eps as f32 + f32_error(max_abs(point)),
         }
+    }
+
+    /// The hit record of a converged march of `ray`: point, normal from the gradient,
+    /// material and error bound.
+    fn hit(&self, ray: &Ray, hit: MarchHit, stats: &mut RayStats) -> Hit {
+        let (p, eps, h) = self.hit_point(ray, hit);
+        // The gradient's error is about the distance error over h: a field evaluates the
+        // stencil with an error of at most h / 20 (a quarter of the tolerance asked), so
+        // the normal's direction is off by at most a few percent where the evaluator's
+        // error bound is reached, far less in practice.
+        let f4 = |q: &[DVec3; 4]| self.field.distance4_within(q, 0.2 * h);
+        let normal = gradient_normal(&f4, p, h, stats);
+        self.record(hit.t, p, eps, normal)
+    }
+
+    /// [`Marched::hit`] for two converged marches at once, their normals' stencils
+    /// evaluated together ([`DistanceField::distance4x2_within`]); each record is bit for
+    /// bit the one [`Marched::hit`] gives alone.
+    fn hit2(&self, (ra, a): (&Ray, MarchHit), (rb, b): (&Ray, MarchHit), stats: &mut RayStats) -> (Hit, Hit) {
+        let (pa, ea, ha) = self.hit_point(ra, a);
+        let (pb, eb, hb) = self.hit_point(rb, b);
+        let f8 = |qa: &[DVec3; 4], qb: &[DVec3; 4]| self.field.distance4x2_within(qa, 0.2 * ha, qb, 0.2 * hb);
+        let (na, nb) = gradient_normal2(&f8, (pa, ha), (pb, hb), stats);
+        (self.record(a.t, pa, ea, na), self.record(b.t, pb, eb, nb))
     }
 }
 
@@ -268,11 +370,24 @@ impl<F: DistanceField> Geometry for Marched<F> {
         debug_assert!(rays.len() <= PACKET && t_max.len() == rays.len() && hits.len() == rays.len());
         let live = [true; PACKET];
         let reach: [f32; PACKET] = std::array::from_fn(|i| t_max.get(i).copied().unwrap_or(0.0));
-        self.march_packet(rays, t_min, &reach, &live, stats, |i, mh, stats| {
-            let hit = self.hit(&rays[i], mh, stats);
-            t_max[i] = hit.t;
-            hits[i] = Some(hit);
-        });
+        let mut converged: [Option<MarchHit>; PACKET] = [None; PACKET];
+        self.march_packet(rays, t_min, &reach, &live, stats, |i, mh, _| converged[i] = Some(mh));
+        // The hit records two at a time: both normals' stencils in one evaluation.
+        let mut pending: Option<(usize, MarchHit)> = None;
+        for (i, c) in converged.iter().enumerate() {
+            let Some(mh) = *c else { continue };
+            let Some((j, first)) = pending.take() else {
+                pending = Some((i, mh));
+                continue;
+            };
+            let (a, b) = self.hit2((&rays[j], first), (&rays[i], mh), stats);
+            (t_max[j], hits[j]) = (a.t, Some(a));
+            (t_max[i], hits[i]) = (b.t, Some(b));
+        }
+        if let Some((j, mh)) = pending {
+            let hit = self.hit(&rays[j], mh, stats);
+            (t_max[j], hits[j]) = (hit.t, Some(hit));
+        }
     }
 
     /// The packet march of [`Geometry::closest_hits`] for the lanes not yet occluded; a
@@ -307,5 +422,92 @@ impl<F: DistanceField> Geometry for Marched<F> {
 
     fn surface_distance(&self, p: DVec3) -> f64 {
         self.field.surface_distance(p, self.size)
+    }
+}
+
+/// [`Ray::clip_to_box`] for four rays at once (ray `k` over `[t_min, t_max[k]]`), bit for
+/// bit: the same single precision operations, with the scalar code's comparisons as SSE
+/// `min`/`max` in its operand order (`a > t0 ? a : t0` is `max(a, t0)`, NaN keeping
+/// `t0`) and its early exits as masks (the interval only narrows from one axis to the
+/// next, so an interval found empty at one axis is empty at the end).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+fn clip4(rays: [&Ray; 4], b: &Aabb, t_min: f32, t_max: [f32; 4]) -> [Option<(f32, f32)>; 4] {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE and SSE2 are part of the x86-64 baseline; the transmutes are between
+    // `__m128` and four f32.
+    unsafe {
+        let lanes = |f: &dyn Fn(&Ray) -> f32| _mm_setr_ps(f(rays[0]), f(rays[1]), f(rays[2]), f(rays[3]));
+        let mut t0 = _mm_set1_ps(t_min);
+        let mut t1 = std::mem::transmute::<[f32; 4], __m128>(t_max);
+        let mut dead = _mm_setzero_ps();
+        let mut moving = _mm_setzero_ps();
+        for axis in 0..3 {
+            let o = lanes(&|r| r.origin[axis]);
+            let d = lanes(&|r| r.dir[axis]);
+            let (lo, hi) = (_mm_set1_ps(b.min[axis]), _mm_set1_ps(b.max[axis]));
+            // A ray parallel to the slab: inside it for all t or for none.
+            let flat = _mm_cmpeq_ps(d, _mm_setzero_ps());
+            dead = _mm_or_ps(dead, _mm_and_ps(flat, _mm_or_ps(_mm_cmplt_ps(o, lo), _mm_cmpgt_ps(o, hi))));
+            moving = _mm_or_ps(moving, _mm_andnot_ps(flat, _mm_castsi128_ps(_mm_set1_epi32(-1))));
+            let inv = _mm_div_ps(_mm_set1_ps(1.0), d);
+            let ta = _mm_mul_ps(_mm_sub_ps(lo, o), inv);
+            let tb = _mm_mul_ps(_mm_sub_ps(hi, o), inv);
+            // `if ta > tb { swap }`.
+            let (near, far) = (_mm_min_ps(tb, ta), _mm_max_ps(ta, tb));
+            // `if near > t0 { t0 = near }`, `if far < t1 { t1 = far }`, not for flat lanes.
+            t0 = _mm_or_ps(_mm_and_ps(flat, t0), _mm_andnot_ps(flat, _mm_max_ps(near, t0)));
+            t1 = _mm_or_ps(_mm_and_ps(flat, t1), _mm_andnot_ps(flat, _mm_min_ps(far, t1)));
+        }
+        dead = _mm_or_ps(dead, _mm_and_ps(moving, _mm_cmpgt_ps(t0, t1)));
+        let dead = _mm_movemask_ps(dead);
+        let (t0, t1) =
+            (std::mem::transmute::<__m128, [f32; 4]>(t0), std::mem::transmute::<__m128, [f32; 4]>(t1));
+        std::array::from_fn(|k| (dead & (1 << k) == 0).then_some((t0[k], t1[k])))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3;
+
+    use super::*;
+    use crate::geometry::aabb;
+
+    #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn four_box_clips_at_once_equal_one_by_one() {
+        let b = aabb(Vec3::new(-1.0, -0.5, 0.25), Vec3::new(2.0, 1.5, 3.0));
+        let mut s = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 24) as f32 * 8.0 - 4.0
+        };
+        let mut rays = Vec::new();
+        for i in 0..4000 {
+            let mut o = Vec3::new(next(), next(), next());
+            let mut d = Vec3::new(next(), next(), next());
+            // Zero components (inside and outside the slab), slab-face origins, -0.0.
+            match i % 7 {
+                0 => d.x = 0.0,
+                1 => (d.y, d.z) = (-0.0, 0.0),
+                2 => o.x = b.min.x,
+                3 => (d, o.y) = (Vec3::ZERO, 0.5),
+                _ => {}
+            }
+            rays.push(Ray::new(o, d));
+        }
+        for (q, chunk) in rays.chunks(4).enumerate() {
+            let t_min = if q % 5 == 0 { 1.0 } else { 0.0 };
+            let t_max = std::array::from_fn(|k| [100.0, 2.0, 0.5, f32::INFINITY][(q + k) % 4]);
+            let wide = clip4([&chunk[0], &chunk[1], &chunk[2], &chunk[3]], &b, t_min, t_max);
+            for k in 0..4 {
+                let one = chunk[k].clip_to_box(&b, t_min, t_max[k]);
+                let bits = |c: Option<(f32, f32)>| c.map(|(a, b)| (a.to_bits(), b.to_bits()));
+                assert_eq!(bits(wide[k]), bits(one), "{:?} over [{t_min}, {}]", chunk[k], t_max[k]);
+            }
+        }
     }
 }

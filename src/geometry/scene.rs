@@ -182,7 +182,8 @@ impl Geometry for SceneGeometry {
     /// [`Geometry::closest_hit`]) unless an object prefers packets. Then the BVH leaves
     /// (objects or instances) that any ray of the packet reaches (up to
     /// [`PACKET_CANDIDATES`]) and the unbounded objects each take the whole packet, nearest
-    /// hits composing through `t_max`.
+    /// hits composing through `t_max`; a scene with a single bounded leaf hands it the
+    /// packet without traversing the BVH (which could only test the leaf's own bounds).
     fn closest_hits(
         &self,
         rays: &[Ray],
@@ -193,6 +194,14 @@ impl Geometry for SceneGeometry {
     ) {
         if rays.len() > PACKET || !self.prefers_packets() {
             return closest_hits_one_by_one(self, rays, t_min, t_max, hits, stats);
+        }
+        if self.bounded.len() == 1 {
+            // One bounded leaf: it takes the whole packet without a trip through the BVH
+            // (whose one box is the leaf's own bounds, which it clips each ray to anyway).
+            for &i in &self.unbounded {
+                self.objects[i as usize].closest_hits(rays, t_min, t_max, hits, stats);
+            }
+            return self.leaf(0).closest_hits(rays, t_min, t_max, hits, stats);
         }
         let Some((candidates, count)) =
             self.packet_leaves(rays.iter().zip(t_max.iter().copied()), t_min, stats)
@@ -215,6 +224,13 @@ impl Geometry for SceneGeometry {
         }
         for &i in &self.unbounded {
             self.objects[i as usize].any_hits(rays, t_min, t_max, occluded, stats);
+        }
+        if self.bounded.len() == 1 {
+            // One bounded leaf: the whole packet, as in `closest_hits`.
+            if !occluded.iter().all(|&o| o) {
+                self.leaf(0).any_hits(rays, t_min, t_max, occluded, stats);
+            }
+            return;
         }
         let live =
             rays.iter().zip(t_max.iter().copied()).zip(occluded.iter()).filter(|(_, o)| !**o).map(|(r, _)| r);

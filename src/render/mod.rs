@@ -14,7 +14,7 @@ use image::RgbImage;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::geometry::{Geometry, PACKET, Ray, RayStats};
+use crate::geometry::{Geometry, PACKET, RayStats};
 use crate::render::tracer::Tracer;
 use crate::scene::Scene;
 use crate::scene::camera::RayGenerator;
@@ -79,19 +79,23 @@ pub fn render(scene: &Scene, geometry: &dyn Geometry) -> Frame {
             let (x0, y0) = (tx * TILE, ty * TILE);
             let (tw, th) = (TILE.min(w - x0), TILE.min(h - y0));
             let mut px = vec![[0u8; 3]; (tw * th) as usize];
+            // The image-plane coordinates of the tile's columns and rows, once per tile.
+            let us: [f32; TILE as usize] = std::array::from_fn(|x| rays.u(x0 + (x as u32).min(tw - 1)));
+            let vs: [f32; TILE as usize] = std::array::from_fn(|y| rays.v(y0 + (y as u32).min(th - 1)));
             // Primary rays in packets of PACKET_W x PACKET_H pixels (clipped at the tile's
             // edge), which marched geometry traces together.
-            let mut rays_buf = [Ray::new(Vec3::ZERO, Vec3::Z); PACKET];
             let mut colors = [Vec3::ZERO; PACKET];
             for py in (0..th).step_by(PACKET_H as usize) {
                 for pxx in (0..tw).step_by(PACKET_W as usize) {
+                    let (mut u, mut v) = ([us[pxx as usize]; PACKET], [vs[py as usize]; PACKET]);
                     let mut n = 0;
                     for y in py..(py + PACKET_H).min(th) {
                         for x in pxx..(pxx + PACKET_W).min(tw) {
-                            rays_buf[n] = rays.ray(x0 + x, y0 + y);
+                            (u[n], v[n]) = (us[x as usize], vs[y as usize]);
                             n += 1;
                         }
                     }
+                    let rays_buf = rays.rays_uv8(&u, &v);
                     tracer.trace_packet(&rays_buf[..n], &mut colors[..n], &mut stats);
                     let mut i = 0;
                     for y in py..(py + PACKET_H).min(th) {

@@ -20,6 +20,9 @@ pub struct Tracer<'a> {
     scene: &'a Scene,
     geometry: &'a dyn Geometry,
     ambient: f32,
+    /// Whether any of the first [`PACKET_LIGHTS`] lights casts shadow rays (any but the
+    /// ambient light): else [`Tracer::trace_packet`] traces none.
+    casts_shadows: bool,
 }
 
 /// How far to move a spawned ray's origin off the surface: the hit's own error bound,
@@ -37,7 +40,9 @@ impl<'a> Tracer<'a> {
             .iter()
             .map(|l| if let Light::Ambient { intensity } = l { *intensity } else { 0.0 })
             .sum();
-        Tracer { scene, geometry, ambient }
+        let casts_shadows =
+            scene.lights.iter().take(PACKET_LIGHTS).any(|l| !matches!(l, Light::Ambient { .. }));
+        Tracer { scene, geometry, ambient, casts_shadows }
     }
 
     /// The colour seen along `ray` (unit direction), linear RGB, not clamped.
@@ -60,9 +65,15 @@ impl<'a> Tracer<'a> {
         // occluded[i][l]: whether hit i's shadow ray towards light l is blocked (only read
         // where that ray exists, i.e. where the light is in front of the surface).
         let mut occluded = [[false; PACKET_LIGHTS]; PACKET];
-        let frames: [Option<SurfaceFrame>; PACKET] =
-            std::array::from_fn(|i| hits.get(i).and_then(|h| h.as_ref()).map(|h| surface_frame(&rays[i], h)));
+        // Shadow rays only towards lights that cast them, and only from hits.
+        let shadows = self.casts_shadows && hits[..n].iter().any(Option::is_some);
+        let frames: [Option<SurfaceFrame>; PACKET] = std::array::from_fn(|i| {
+            hits.get(i).and_then(|h| h.as_ref()).filter(|_| shadows).map(|h| surface_frame(&rays[i], h))
+        });
         for (l, light) in self.scene.lights.iter().take(PACKET_LIGHTS).enumerate() {
+            if !shadows || matches!(light, Light::Ambient { .. }) {
+                continue;
+            }
             let mut shadow = [Ray::new(Vec3::ZERO, Vec3::Z); PACKET];
             let mut reach = [0.0f32; PACKET];
             let mut lane_of = [0usize; PACKET];

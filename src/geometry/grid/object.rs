@@ -263,11 +263,38 @@ impl DistanceField for GridField {
         self.field8(points).map(|v| v * GRID_STEP_SCALE)
     }
 
+    /// A dense grid in world space computes the points in its interpolation kernel
+    /// ([`SdfGrid::trilinear8_rays`]); other grids go through [`GridField::field8`].
+    #[inline]
+    fn distance8_rays(
+        &self,
+        origin: &[[f64; 8]; 3],
+        dir: &[[f64; 8]; 3],
+        t: &[f64; 8],
+        _tolerances: &[f64; 8],
+    ) -> [f64; 8] {
+        if let (None, GridStore::Dense(g)) = (&self.placement, &*self.grid) {
+            return g.trilinear8_rays(origin, dir, t).map(|v| v as f64 * GRID_STEP_SCALE);
+        }
+        let points = std::array::from_fn(|l| {
+            DVec3::new(origin[0][l], origin[1][l], origin[2][l])
+                + DVec3::new(dir[0][l], dir[1][l], dir[2][l]) * t[l]
+        });
+        self.field8(&points).map(|v| v * GRID_STEP_SCALE)
+    }
+
     #[inline]
     fn distance4_within(&self, points: &[DVec3; 4], _tolerance: f64) -> [f64; 4] {
         // The stencil twice over: one 8-wide evaluation instead of four scalar ones.
         let v = self.field8(&std::array::from_fn(|i| points[i % 4]));
         std::array::from_fn(|i| v[i] * GRID_STEP_SCALE)
+    }
+
+    #[inline]
+    fn distance4x2_within(&self, a: &[DVec3; 4], _ta: f64, b: &[DVec3; 4], _tb: f64) -> ([f64; 4], [f64; 4]) {
+        // Both stencils in one 8-wide evaluation.
+        let v = self.field8(&std::array::from_fn(|i| if i < 4 { a[i] } else { b[i - 4] }));
+        (std::array::from_fn(|i| v[i] * GRID_STEP_SCALE), std::array::from_fn(|i| v[i + 4] * GRID_STEP_SCALE))
     }
 
     fn is_signed(&self) -> bool {

@@ -35,6 +35,25 @@ impl SdfGrid {
         self.trilinear8_portable(xs, ys, zs)
     }
 
+    /// [`SdfGrid::trilinear8`] at the points `origin + dir * t[l]` of eight rays (`origin[a][l]`
+    /// is component `a` of lane `l`), each computed in double precision as `DVec3` does
+    /// (`o + d * t` per component) and rounded to single precision; lane `l` equals
+    /// `trilinear` at that point bit for bit.
+    #[inline]
+    pub fn trilinear8_rays(&self, origin: &[[f64; 8]; 3], dir: &[[f64; 8]; 3], t: &[f64; 8]) -> [f32; 8] {
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx2()
+            && self.values.len() <= i32::MAX as usize
+            && self.dims.max_element() <= MAX_AVX2_DIM
+        {
+            // SAFETY: the CPU has AVX2 and FMA (checked just above), and every sample index
+            // fits the gathers' `i32` offsets.
+            return unsafe { avx2::dense_rays(self, origin, dir, t) };
+        }
+        let p = |a: usize| -> [f32; 8] { std::array::from_fn(|l| (origin[a][l] + dir[a][l] * t[l]) as f32) };
+        self.trilinear8_portable(&p(0), &p(1), &p(2))
+    }
+
     /// The portable build of [`SdfGrid::trilinear8`]: the scalar function lane by lane.
     pub fn trilinear8_portable(&self, xs: &[f32; 8], ys: &[f32; 8], zs: &[f32; 8]) -> [f32; 8] {
         std::array::from_fn(|l| self.trilinear(Vec3::new(xs[l], ys[l], zs[l])))
@@ -113,13 +132,9 @@ mod avx2 {
     unsafe fn common(
         (origin, voxel, dims): (Vec3, f32, UVec3),
         (lo, hi): (Vec3, Vec3),
-        xs: &[f32; 8],
-        ys: &[f32; 8],
-        zs: &[f32; 8],
+        p: [__m256; 3],
     ) -> Common {
         unsafe {
-            let p =
-                [_mm256_loadu_ps(xs.as_ptr()), _mm256_loadu_ps(ys.as_ptr()), _mm256_loadu_ps(zs.as_ptr())];
             let max_cell = (dims - UVec3::splat(2)).as_vec3();
             let zero = _mm256_setzero_ps();
             let one = splat(1.0);
@@ -145,10 +160,30 @@ mod avx2 {
         }
     }
 
-    /// The samples at `base + o` lane by lane.
+    /// The sample pairs at `i + o` and `i + o + 1` (x and x + 1) lane by lane, as the two
+    /// vectors of first and second samples, in 64-bit gathers of four pairs (half the
+    /// element loads of two 32-bit gathers). `idx` holds the lanes' `i` in the order
+    /// (0, 1, 4, 5) and (2, 3, 6, 7) ([`pair_order`]), which the two shuffles undo.
     #[inline(always)]
-    unsafe fn gather(v: *const f32, base: __m256i, o: i32) -> __m256 {
-        unsafe { _mm256_i32gather_ps::<4>(v, _mm256_add_epi32(base, _mm256_set1_epi32(o))) }
+    unsafe fn gather_pairs(v: *const f32, idx: (__m128i, __m128i), o: i32) -> (__m256, __m256) {
+        unsafe {
+            let off = _mm_set1_epi32(o);
+            let p = v as *const i64;
+            // lo: the pairs of lanes 0, 1 | 4, 5; hi: of lanes 2, 3 | 6, 7.
+            let lo = _mm256_castsi256_ps(_mm256_i32gather_epi64::<4>(p, _mm_add_epi32(idx.0, off)));
+            let hi = _mm256_castsi256_ps(_mm256_i32gather_epi64::<4>(p, _mm_add_epi32(idx.1, off)));
+            (_mm256_shuffle_ps::<0b10_00_10_00>(lo, hi), _mm256_shuffle_ps::<0b11_01_11_01>(lo, hi))
+        }
+    }
+
+    /// The eight lanes of `i` as the index halves [`gather_pairs`] takes: lanes
+    /// (0, 1, 4, 5) and (2, 3, 6, 7).
+    #[inline(always)]
+    unsafe fn pair_order(i: __m256i) -> (__m128i, __m128i) {
+        unsafe {
+            let p = _mm256_permute4x64_epi64::<0b11_01_10_00>(i);
+            (_mm256_castsi256_si128(p), _mm256_extracti128_si256::<1>(p))
+        }
     }
 
     /// The 16-bit samples at `base + o` and `base + o + 1` (x and x + 1, always in the same
@@ -189,12 +224,49 @@ mod avx2 {
         out
     }
 
+    /// The eight points `(xs[l], ys[l], zs[l])` as three vectors.
+    #[inline(always)]
+    unsafe fn load(xs: &[f32; 8], ys: &[f32; 8], zs: &[f32; 8]) -> [__m256; 3] {
+        unsafe { [_mm256_loadu_ps(xs.as_ptr()), _mm256_loadu_ps(ys.as_ptr()), _mm256_loadu_ps(zs.as_ptr())] }
+    }
+
     /// [`SdfGrid::trilinear8`]'s kernel. The caller checks that the CPU has AVX2 and FMA
     /// and that `g.values.len() <= i32::MAX`.
     #[target_feature(enable = "avx2,fma")]
     pub(super) unsafe fn dense(g: &SdfGrid, xs: &[f32; 8], ys: &[f32; 8], zs: &[f32; 8]) -> [f32; 8] {
+        unsafe { store(dense_at(g, load(xs, ys, zs))) }
+    }
+
+    /// [`SdfGrid::trilinear8_rays`]'s kernel: the points `origin + dir * t` in double
+    /// precision (a product and a sum, rounded after each), rounded to single precision,
+    /// then [`dense`]'s interpolation. The caller checks as for [`dense`].
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn dense_rays(
+        g: &SdfGrid,
+        origin: &[[f64; 8]; 3],
+        dir: &[[f64; 8]; 3],
+        t: &[f64; 8],
+    ) -> [f32; 8] {
         unsafe {
-            let Common { d, t, cell, .. } = common((g.origin, g.voxel, g.dims), g.bounds(), xs, ys, zs);
+            let (t0, t1) = (_mm256_loadu_pd(t.as_ptr()), _mm256_loadu_pd(t.as_ptr().add(4)));
+            // A plain loop, no closure: everything must inline into this AVX2 function.
+            let mut p = [_mm256_setzero_ps(); 3];
+            for a in 0..3 {
+                let (o, d) = (origin[a].as_ptr(), dir[a].as_ptr());
+                let lo = _mm256_add_pd(_mm256_loadu_pd(o), _mm256_mul_pd(_mm256_loadu_pd(d), t0));
+                let hi =
+                    _mm256_add_pd(_mm256_loadu_pd(o.add(4)), _mm256_mul_pd(_mm256_loadu_pd(d.add(4)), t1));
+                p[a] = _mm256_set_m128(_mm256_cvtpd_ps(hi), _mm256_cvtpd_ps(lo));
+            }
+            store(dense_at(g, p))
+        }
+    }
+
+    /// [`SdfGrid::trilinear`] at the eight points `p` (x, y and z lanes).
+    #[inline(always)]
+    unsafe fn dense_at(g: &SdfGrid, p: [__m256; 3]) -> __m256 {
+        unsafe {
+            let Common { d, t, cell, .. } = common((g.origin, g.voxel, g.dims), g.bounds(), p);
             let (sy, sz) = (g.dims.x as i32, (g.dims.x * g.dims.y) as i32);
             let base = _mm256_add_epi32(
                 cell[0],
@@ -207,12 +279,23 @@ mod avx2 {
                 ),
             );
             let v = g.values.as_ptr();
-            let x00 = lerp(gather(v, base, 0), gather(v, base, 1), t[0]);
-            let x10 = lerp(gather(v, base, sy), gather(v, base, sy + 1), t[0]);
-            let x01 = lerp(gather(v, base, sz), gather(v, base, sz + 1), t[0]);
-            let x11 = lerp(gather(v, base, sz + sy), gather(v, base, sz + sy + 1), t[0]);
+            // Each lane's x and x + 1 samples sit side by side: one 64-bit load per pair.
+            let idx = pair_order(base);
+            let (a0, a1) = gather_pairs(v, idx, 0);
+            let (b0, b1) = gather_pairs(v, idx, sy);
+            let (c0, c1) = gather_pairs(v, idx, sz);
+            let (e0, e1) = gather_pairs(v, idx, sz + sy);
+            let x00 = lerp(a0, a1, t[0]);
+            let x10 = lerp(b0, b1, t[0]);
+            let x01 = lerp(c0, c1, t[0]);
+            let x11 = lerp(e0, e1, t[0]);
             let value = lerp(lerp(x00, x10, t[1]), lerp(x01, x11, t[1]), t[2]);
-            store(continue_outside(value, d))
+            // Every point in the box (the usual case of a march clipped to it): the
+            // continuation outside leaves each value as it is, so skip its square root.
+            if _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(d, _mm256_setzero_ps())) == 0xff {
+                return value;
+            }
+            continue_outside(value, d)
         }
     }
 
@@ -221,7 +304,7 @@ mod avx2 {
     #[target_feature(enable = "avx2,fma")]
     pub(super) unsafe fn band(g: &BandGrid, xs: &[f32; 8], ys: &[f32; 8], zs: &[f32; 8]) -> [f32; 8] {
         unsafe {
-            let Common { d, f, t, cell } = common((g.origin, g.voxel, g.dims), g.bounds(), xs, ys, zs);
+            let Common { d, f, t, cell } = common((g.origin, g.voxel, g.dims), g.bounds(), load(xs, ys, zs));
             let (slots, bounds, ranges, data) = (&g.slots, &g.bounds, &g.ranges, &g.data);
             let brick = [
                 _mm256_srli_epi32::<3>(cell[0]),
