@@ -745,6 +745,14 @@ mod tests {
             let expect = match kind(o) {
                 "plane" => ObjectPlan::fallback(Build::ClosedForm, Fallback::Unbounded),
                 "triangle" => ObjectPlan::fallback(Build::Marched { march }, Fallback::Unsigned),
+                // The child's grid placed per copy, as the mesh representation instances.
+                "repeat" => ObjectPlan::as_asked(Build::InstancedGrid {
+                    resolution: 16,
+                    storage: GridStorage::Dense,
+                    march,
+                    copies: 8,
+                    reach: None,
+                }),
                 // Analytic objects are always sampled.
                 _ => ObjectPlan::as_asked(Build::Grid {
                     resolution: 16,
@@ -811,12 +819,19 @@ mod tests {
         let s = scene("showcase.toml");
         assert_eq!(budget::scene_bytes(&s, Representation::Analytic { march: MarchParams::default() }), 0);
         assert_eq!(budget::scene_bytes(&s, Representation::Sdf { march: MarchParams::default() }), 0);
-        let gridded = plan_scene(&s, grid(GridFill::Sample))
+        let plans = plan_scene(&s, grid(GridFill::Sample));
+        let gridded = plans.iter().filter(|p| matches!(p.build, Build::Grid { .. })).count() as u64;
+        // The repetition's one grid and a placement per copy.
+        let copies: u64 = plans
             .iter()
-            .filter(|p| matches!(p.build, Build::Grid { .. }))
-            .count() as u64;
+            .map(|p| if let Build::InstancedGrid { copies, .. } = p.build { copies as u64 } else { 0 })
+            .sum();
+        assert_eq!(copies, 8);
         let samples = grid_samples_per_axis(16) as u64;
-        assert_eq!(budget::scene_bytes(&s, grid(GridFill::Sample)), gridded * samples.pow(3) * 4);
+        assert_eq!(
+            budget::scene_bytes(&s, grid(GridFill::Sample)),
+            (gridded + 1) * samples.pow(3) * 4 + copies * budget::BYTES_PER_INSTANCE
+        );
         assert_eq!(grid_samples_per_axis(8), 13);
         assert_eq!(grid_samples_per_axis(u32::MAX), u32::MAX);
     }
