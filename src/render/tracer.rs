@@ -67,11 +67,33 @@ impl<'a> Tracer<'a> {
         let mut occluded = [[false; PACKET_LIGHTS]; PACKET];
         // Shadow rays only towards lights that cast them, and only from hits.
         let shadows = self.casts_shadows && hits[..n].iter().any(Option::is_some);
-        let frames: [Option<SurfaceFrame>; PACKET] = std::array::from_fn(|i| {
-            hits.get(i).and_then(|h| h.as_ref()).filter(|_| shadows).map(|h| surface_frame(&rays[i], h))
-        });
+        if shadows {
+            self.packet_shadows(rays, &hits, &mut occluded, stats);
+        }
+        let depth = self.scene.settings.max_depth;
+        for i in 0..n {
+            out[i] = match &hits[i] {
+                Some(hit) => self.shade(&rays[i], hit, depth, 1.0, Some(&occluded[i]), stats),
+                None => self.scene.settings.background,
+            };
+        }
+    }
+
+    /// The shadow rays of a packet's hits towards each of the first [`PACKET_LIGHTS`] lights
+    /// that cast shadows, traced together per light ([`Geometry::any_hits`]): sets
+    /// `occluded[i][l]` where hit `i`'s ray towards light `l` is blocked.
+    fn packet_shadows(
+        &self,
+        rays: &[Ray],
+        hits: &[Option<Hit>; PACKET],
+        occluded: &mut [[bool; PACKET_LIGHTS]; PACKET],
+        stats: &mut RayStats,
+    ) {
+        let n = rays.len().min(PACKET);
+        let frames: [Option<SurfaceFrame>; PACKET] =
+            std::array::from_fn(|i| hits.get(i).and_then(|h| h.as_ref()).map(|h| surface_frame(&rays[i], h)));
         for (l, light) in self.scene.lights.iter().take(PACKET_LIGHTS).enumerate() {
-            if !shadows || matches!(light, Light::Ambient { .. }) {
+            if matches!(light, Light::Ambient { .. }) {
                 continue;
             }
             let mut shadow = [Ray::new(Vec3::ZERO, Vec3::Z); PACKET];
@@ -94,13 +116,6 @@ impl<'a> Tracer<'a> {
             for j in 0..m {
                 occluded[lane_of[j]][l] = blocked[j];
             }
-        }
-        let depth = self.scene.settings.max_depth;
-        for i in 0..n {
-            out[i] = match &hits[i] {
-                Some(hit) => self.shade(&rays[i], hit, depth, 1.0, Some(&occluded[i]), stats),
-                None => self.scene.settings.background,
-            };
         }
     }
 
