@@ -451,7 +451,14 @@ impl TapeRegions {
     /// ([`KEEP_RATIO`]), the bounds are not finite, or the tape is too long for 16-bit
     /// indices.
     pub fn build(tape: &Tape, bounds: Aabb) -> Option<Self> {
-        let target = (tape.ops().len() * CELLS_PER_OP).clamp(64, MAX_CELLS);
+        // Cells per unit of work: a sphere that carries its translation counts as the two
+        // operations it stands for.
+        let work = tape
+            .ops()
+            .iter()
+            .map(|op| 1 + matches!(op, Op::Sphere { t, .. } if *t != [0.0; 3]) as usize)
+            .sum::<usize>();
+        let target = (work * CELLS_PER_OP).clamp(64, MAX_CELLS);
         Self::with_cells(tape, bounds, target).filter(|r| r.mean_ratio <= KEEP_RATIO)
     }
 
