@@ -23,6 +23,16 @@ use crate::geometry::{
     Aabb, Census, Geometry, Hit, MaterialId, PACKET, Ray, RayStats, Shared, f32_error, max_abs,
 };
 
+/// The points `origin + dir * t[l]` of eight rays (`origin[a][l]` is component `a` of lane
+/// `l`), computed as `DVec3` arithmetic does (see [`DistanceField::distance8_rays`]).
+#[inline]
+pub fn ray_points8(origin: &[[f64; 8]; 3], dir: &[[f64; 8]; 3], t: &[f64; 8]) -> [DVec3; 8] {
+    std::array::from_fn(|l| {
+        DVec3::new(origin[0][l], origin[1][l], origin[2][l])
+            + DVec3::new(dir[0][l], dir[1][l], dir[2][l]) * t[l]
+    })
+}
+
 /// A distance field that [`Marched`] sphere traces, in world space.
 pub trait DistanceField: Send + Sync {
     /// The distance marched at world point `p`: signed (negative inside) or unsigned, and
@@ -72,11 +82,7 @@ pub trait DistanceField: Send + Sync {
         t: &[f64; 8],
         tolerances: &[f64; 8],
     ) -> [f64; 8] {
-        let points = std::array::from_fn(|l| {
-            DVec3::new(origin[0][l], origin[1][l], origin[2][l])
-                + DVec3::new(dir[0][l], dir[1][l], dir[2][l]) * t[l]
-        });
-        self.distance8_within(&points, tolerances)
+        self.distance8_within(&ray_points8(origin, dir, t), tolerances)
     }
 
     /// [`Self::distance_within`] at four points at once (the stencil of

@@ -16,7 +16,7 @@ use glam::{DVec3, Vec3};
 use crate::geometry::grid::SdfGrid;
 use crate::geometry::grid::band::BandGrid;
 use crate::geometry::march::MarchParams;
-use crate::geometry::marched::{DistanceField, Marched};
+use crate::geometry::marched::{DistanceField, Marched, ray_points8};
 use crate::geometry::{
     Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, Shared, aabb, box_distance,
     distance_by_projection,
@@ -307,11 +307,7 @@ impl DistanceField for GridField {
         if let (None, GridStore::Dense(g)) = (&self.placement, &*self.grid) {
             return g.trilinear8_rays(origin, dir, t).map(|v| v as f64 * GRID_STEP_SCALE);
         }
-        let points = std::array::from_fn(|l| {
-            DVec3::new(origin[0][l], origin[1][l], origin[2][l])
-                + DVec3::new(dir[0][l], dir[1][l], dir[2][l]) * t[l]
-        });
-        self.field8(&points).map(|v| v * GRID_STEP_SCALE)
+        self.field8(&ray_points8(origin, dir, t)).map(|v| v * GRID_STEP_SCALE)
     }
 
     #[inline]
