@@ -39,8 +39,8 @@ use crate::mesh::{TriangleMesh, save_mesh};
 use crate::metrics::{self, Probe};
 use crate::plan::budget::{MemoryBudget, reextract_bytes, scene_bytes};
 use crate::plan::{
-    Build as PlanBuild, Fallback, GridFill, GridStorage, MeshMethod, ObjectPlan, Representation,
-    build_scene_with_plans, reextract_mesh,
+    Fallback, GridFill, GridStorage, MeshMethod, ObjectPlan, Representation, build_scene_with_plans,
+    reextract_mesh,
 };
 use crate::render::{Frame, render, write_png};
 use crate::scene::Scene;
@@ -941,17 +941,7 @@ fn progress_bar(total: u64, show: bool) -> indicatif::ProgressBar {
 
 /// Whether any object of a built run is ray marched (sphere traced or a grid).
 fn marches(plans: &[ObjectPlan]) -> bool {
-    plans.iter().any(|p| {
-        matches!(
-            p.build,
-            PlanBuild::Marched { .. }
-                | PlanBuild::Grid { .. }
-                | PlanBuild::LocalGrid { .. }
-                | PlanBuild::SharedGrid { .. }
-                | PlanBuild::InstancedGrid { .. }
-                | PlanBuild::GridFileMarched { .. }
-        )
-    })
+    plans.iter().any(ObjectPlan::marches)
 }
 
 /// Builds, times and measures one run (and keeps the reference's images and samples when

@@ -32,7 +32,7 @@ use crate::geometry::mesh::MeshGeometry;
 use crate::geometry::mesh::instance::{InstancedMesh, compose, repeat_offsets};
 use crate::geometry::scene::SceneGeometry;
 use crate::geometry::sdf::{SdfObject, SdfTree, sdf_geometry};
-use crate::geometry::{Geometry, MaterialId, aabb};
+use crate::geometry::{Aabb, Geometry, MaterialId, aabb};
 use crate::mesh::TriangleMesh;
 use crate::scene::Scene;
 use crate::scene::shape::{Object, ObjectKind, Primitive, Shading};
@@ -93,9 +93,9 @@ fn build_with_plans(scene: &Scene, repr: Representation) -> (Vec<Box<dyn Geometr
                 }
             }
             Build::LocalGrid { resolution, storage, march } => match local_grid(o, resolution, storage) {
-                Some((store, how)) => {
+                Some(store) => {
                     let label =
-                        format!("{} '{}' {how} at {resolution} in its own frame", o.kind_name(), o.label);
+                        format!("{} '{}' sampled at {resolution} in its own frame", o.kind_name(), o.label);
                     let g = GridObject::placed_shared(
                         store.clone(),
                         &o.compiled_transform(),
@@ -529,17 +529,7 @@ fn instanced_grid(scene: &Scene, o: &Object, build: Build) -> Option<Box<dyn Geo
     let ObjectKind::Repeat { child, count, .. } = &o.kind else { unreachable!("repetitions only") };
     let copies = repeat_offsets(scene, o, MAX_INSTANCES)?;
     // In the repetition's frame: the child's own transform is in its SDF.
-    let b = child.bounds()?;
-    let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
-    let tree = SdfTree::new(child)?;
-    let f = |p| tree.distance(p);
-    let store: GridStore = match storage {
-        GridStorage::Dense => sample_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS).ok()?.into(),
-        GridStorage::Band { cells } | GridStorage::Scene { cells } => {
-            band_from_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS, cells).ok()?.into()
-        }
-    };
-    let store = Arc::new(store);
+    let store = Arc::new(sampled_grid(child, child.bounds()?, resolution, storage)?);
     let outer = o.compiled_transform();
     let placed: Vec<Box<dyn Geometry>> = copies
         .offsets
@@ -661,21 +651,28 @@ pub fn scene_mesh(scene: &Scene, repr: Representation) -> Option<TriangleMesh> {
 }
 
 /// The grid of primitive `o` in its own frame (its local box, `resolution` cells along the
-/// longest axis, with [`GRID_MARGIN_CELLS`]), stored as `storage` says, and how it was
-/// filled; `None` when it cannot be built.
-fn local_grid(o: &Object, resolution: u32, storage: GridStorage) -> Option<(Arc<GridStore>, &'static str)> {
+/// longest axis, with [`GRID_MARGIN_CELLS`]), stored as `storage` says; `None` when it
+/// cannot be built.
+fn local_grid(o: &Object, resolution: u32, storage: GridStorage) -> Option<Arc<GridStore>> {
     let local = Object { transform: TransformDesc::default(), ..o.clone() };
-    let b = local.bounds()?;
+    sampled_grid(&local, local.bounds()?, resolution, storage).map(Arc::new)
+}
+
+/// The analytic object `o` sampled exactly from its SDF into a grid over the box `b` (in
+/// the frame `o`'s transform maps into: its bounds, or a view-region clip of them),
+/// `resolution` cells along the longest axis with [`GRID_MARGIN_CELLS`], dense or as a
+/// narrow band as `storage` says (a scene grid's width when the object has a grid of its
+/// own); `None` when it cannot be built.
+fn sampled_grid(o: &Object, b: Aabb, resolution: u32, storage: GridStorage) -> Option<GridStore> {
     let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
-    let tree = SdfTree::new(&local)?;
+    let tree = SdfTree::new(o)?;
     let f = |p| tree.distance(p);
-    let store: GridStore = match storage {
+    Some(match storage {
         GridStorage::Dense => sample_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS).ok()?.into(),
         GridStorage::Band { cells } | GridStorage::Scene { cells } => {
             band_from_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS, cells).ok()?.into()
         }
-    };
-    Some((Arc::new(store), "sampled"))
+    })
 }
 
 /// A [`Build::Grid`] plan built: `o` sampled into a world-space SDF grid, or `None` when
@@ -697,7 +694,6 @@ fn gridded(o: &Object, plan: ObjectPlan) -> Option<(Box<dyn Geometry>, ObjectPla
         unreachable!("a grid plan")
     };
     let b = clip.or_else(|| o.bounds())?;
-    let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
     let kind = o.kind_name();
     // A scene grid that could not take the object: a band of its own.
     let storage = storage.own();
@@ -739,14 +735,7 @@ fn gridded(o: &Object, plan: ObjectPlan) -> Option<(Box<dyn Geometry>, ObjectPla
             }
         }
     } else {
-        let tree = SdfTree::new(o)?;
-        let f = |p| tree.distance(p);
-        match storage {
-            GridStorage::Dense => sample_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS).ok()?.into(),
-            GridStorage::Band { cells } | GridStorage::Scene { cells } => {
-                band_from_function(&f, lo, hi, resolution, GRID_MARGIN_CELLS, cells).ok()?.into()
-            }
-        }
+        sampled_grid(o, b, resolution, storage)?
     };
     let label = format!("{kind} '{}' {how} at {resolution}", o.label);
     let grid = GridObject::new(grid, o.material, march, label);

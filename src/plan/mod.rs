@@ -430,6 +430,20 @@ impl ObjectPlan {
     pub fn sphere_traced(&self) -> bool {
         matches!(self.build, Build::Marched { .. } | Build::Grid { clip: Some(_), .. })
     }
+
+    /// Whether the object is ray marched (its analytic SDF or a grid, entirely or in part)
+    /// rather than intersected in closed form or as triangles.
+    pub fn marches(&self) -> bool {
+        matches!(
+            self.build,
+            Build::Marched { .. }
+                | Build::Grid { .. }
+                | Build::LocalGrid { .. }
+                | Build::SharedGrid { .. }
+                | Build::InstancedGrid { .. }
+                | Build::GridFileMarched { .. }
+        )
+    }
 }
 
 /// Decides how `o` (a top-level object of `scene`) is built in `repr`: the one place that

@@ -31,9 +31,7 @@ use sdfmesh::convert::tessellate::tessellate;
 use sdfmesh::geometry::march::MarchParams;
 use sdfmesh::geometry::{Aabb, Geometry, Hit, Ray, RayStats};
 use sdfmesh::mesh::save_mesh;
-use sdfmesh::plan::{
-    Build, GridFill, GridStorage, MeshMethod, ObjectPlan, Representation, build_scene_with_plans,
-};
+use sdfmesh::plan::{GridFill, GridStorage, MeshMethod, ObjectPlan, Representation, build_scene_with_plans};
 use sdfmesh::scene::shape::{CsgOp, Object, ObjectKind, Primitive, Shading};
 use sdfmesh::scene::transform::TransformDesc;
 use sdfmesh::scene::{Scene, parse_scene};
@@ -314,15 +312,7 @@ fn accuracy(marched: bool, t: f32, size: f32) -> f64 {
 /// Whether the realised plan marches the object (analytic SDF or grid, entirely or in
 /// part) rather than intersecting it in closed form or as triangles.
 fn marched(plan: &ObjectPlan) -> bool {
-    matches!(
-        plan.build,
-        Build::Marched { .. }
-            | Build::Grid { .. }
-            | Build::LocalGrid { .. }
-            | Build::SharedGrid { .. }
-            | Build::InstancedGrid { .. }
-            | Build::GridFileMarched { .. }
-    )
+    plan.marches()
 }
 
 fn footprint() -> f64 {
