@@ -336,6 +336,396 @@ impl MarchLane {
     }
 }
 
+/// Eight [`MarchLane`]s side by side, their state by field (one array per field, lane `i`
+/// at index `i`), for packets of rays marched with one 8-wide field evaluation per step
+/// ([`crate::geometry::marched::Marched`]). Every lane takes exactly the steps of its own
+/// [`MarchLane`], bit for bit: [`MarchPacket::feed`] takes the common steps for all lanes
+/// at once on the arrays (AVX2 where the CPU has it): a plain march step (the first one
+/// included) that does not converge and either stays within the segment and the budget or
+/// leaves the segment (a miss). Every other event (a convergence, its probe and
+/// refinement, an over-relaxed step, the budget) is [`MarchLane::feed`] on that lane
+/// alone. Holds no heap memory.
+#[derive(Clone, Debug)]
+pub struct MarchPacket {
+    /// Ray parameter each lane evaluates next ([`MarchLane::t`]); lanes that are not
+    /// marching keep their last value (or the first marching lane's start), a point the
+    /// field can evaluate.
+    t: [f64; 8],
+    sign: [f64; 8],
+    prev_t: [f64; 8],
+    prev_r: [f64; 8],
+    r: [f64; 8],
+    r_t: [f64; 8],
+    omega: [f64; 8],
+    iterations: [u32; 8],
+    touches: [u32; 8],
+    /// The lanes' segments' ends (`Segment::t0`, `Segment::t1`).
+    t0: [f64; 8],
+    t1: [f64; 8],
+    first_touch: [MarchHit; 8],
+    phase: [Phase; 8],
+    /// The tolerance of a lane's probe or refinement (`Phase::Probe`'s or `Phase::Refine`'s
+    /// `eps`); not used in the march phase.
+    phase_eps: [f64; 8],
+    /// Bit `i`: lane `i` is marching.
+    active: u8,
+    /// Bit `i`: lane `i` is in the march phase (`Phase::March`).
+    marching: u8,
+    /// Bit `i`: lane `i` is in the march phase and its next step is plain: its first
+    /// (whose `omega` is [`MarchParams::relaxation`]) or one with `omega` 1.
+    plain: u8,
+    /// Bit `i`: lane `i` has taken no step yet.
+    fresh: u8,
+    /// Calls of [`Self::feed`] so far: no lane has taken more march steps
+    /// ([`MarchLane::step`] counts at most one per value fed).
+    feeds: u32,
+}
+
+/// What [`MarchPacket`]'s common step did: lanes that stepped on, lanes that stepped past
+/// their segment's end (misses).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Common {
+    stay: u8,
+    leave: u8,
+}
+
+impl MarchPacket {
+    /// A packet with lane `i` marching from `t0` to `t1` where `segs[i]` is `Some((t0, t1))`
+    /// (each counted in `stats.marched_rays`); `None` when no lane marches.
+    pub fn new(segs: &[Option<(f64, f64)>; 8], stats: &mut RayStats) -> Option<Self> {
+        let first = segs.iter().flatten().next()?.0;
+        let mut p = MarchPacket {
+            t: [first; 8],
+            sign: [0.0; 8],
+            prev_t: [first; 8],
+            prev_r: [0.0; 8],
+            r: [f64::INFINITY; 8],
+            r_t: [first; 8],
+            omega: [0.0; 8],
+            iterations: [0; 8],
+            touches: [0; 8],
+            t0: [first; 8],
+            t1: [first; 8],
+            first_touch: [MarchHit { t: first, residual: 0.0 }; 8],
+            phase: [Phase::March; 8],
+            phase_eps: [0.0; 8],
+            active: 0,
+            marching: 0,
+            plain: 0,
+            fresh: 0,
+            feeds: 0,
+        };
+        for (i, s) in segs.iter().enumerate() {
+            if let Some((t0, t1)) = *s {
+                let seg = Segment { origin: DVec3::ZERO, dir: DVec3::ZERO, t0, t1 };
+                p.set(i, &MarchLane::new(&seg, stats));
+                (p.t0[i], p.t1[i]) = (t0, t1);
+                p.active |= 1 << i;
+            }
+        }
+        Some(p)
+    }
+
+    /// Whether any lane is still marching.
+    #[inline]
+    pub fn marching(&self) -> bool {
+        self.active != 0
+    }
+
+    /// Where each lane needs the distance next ([`MarchLane::t`]).
+    #[inline]
+    pub fn t(&self) -> &[f64; 8] {
+        &self.t
+    }
+
+    /// Lane `i` as a [`MarchLane`].
+    #[inline]
+    fn lane(&self, i: usize) -> MarchLane {
+        MarchLane {
+            t: self.t[i],
+            sign: self.sign[i],
+            prev_t: self.prev_t[i],
+            prev_r: self.prev_r[i],
+            r: self.r[i],
+            r_t: self.r_t[i],
+            omega: self.omega[i],
+            iterations: self.iterations[i],
+            touches: self.touches[i],
+            first_touch: self.first_touch[i],
+            phase: self.phase[i],
+        }
+    }
+
+    /// Stores `lane` as lane `i`.
+    #[inline]
+    fn set(&mut self, i: usize, lane: &MarchLane) {
+        self.t[i] = lane.t;
+        self.sign[i] = lane.sign;
+        self.prev_t[i] = lane.prev_t;
+        self.prev_r[i] = lane.prev_r;
+        self.r[i] = lane.r;
+        self.r_t[i] = lane.r_t;
+        self.omega[i] = lane.omega;
+        self.iterations[i] = lane.iterations;
+        self.touches[i] = lane.touches;
+        self.first_touch[i] = lane.first_touch;
+        self.phase[i] = lane.phase;
+        let (marching, plain) = match lane.phase {
+            Phase::March => (true, lane.iterations == 0 || lane.omega == 1.0),
+            Phase::Probe { eps, .. } | Phase::Refine { eps, .. } => {
+                self.phase_eps[i] = eps;
+                (false, false)
+            }
+        };
+        let bit = |b: bool| u8::from(b) << i;
+        let keep = !(1u8 << i);
+        self.marching = (self.marching & keep) | bit(marching);
+        self.plain = (self.plain & keep) | bit(plain);
+        self.fresh = (self.fresh & keep) | bit(lane.iterations == 0);
+    }
+
+    /// The tolerance each marching lane's evaluation must resolve
+    /// ([`MarchLane::tolerance`]); infinite for the others.
+    #[inline]
+    pub fn tolerances(&self, params: &MarchParams, size: f64) -> [f64; 8] {
+        let c = params.epsilon.min(params.tolerance_px * params.pixel_footprint);
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx2() {
+            // SAFETY: the CPU has AVX2 (checked above).
+            return unsafe { self.tolerances_avx2(c, 1e-4 * size) };
+        }
+        self.tolerances_scalar(params, size)
+    }
+
+    /// [`Self::tolerances`] lane by lane (CPUs without AVX2).
+    fn tolerances_scalar(&self, params: &MarchParams, size: f64) -> [f64; 8] {
+        std::array::from_fn(|i| {
+            if self.active & (1 << i) == 0 {
+                f64::INFINITY
+            } else if self.marching & (1 << i) != 0 {
+                params.tolerance(self.t[i], size)
+            } else {
+                self.phase_eps[i]
+            }
+        })
+    }
+
+    /// [`Self::tolerances`] with AVX2, `MarchParams::tolerance` as `c * max(t, floor)`:
+    /// `maxpd(t, floor)` is Rust's `t.max(floor)` (a NaN `t` gives `floor`), so the same
+    /// bits.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn tolerances_avx2(&self, c: f64, floor: f64) -> [f64; 8] {
+        use std::arch::x86_64::*;
+        let mut out = [0.0; 8];
+        // SAFETY: loads and stores of four f64 at offsets 0 and 4 of `[f64; 8]`s.
+        unsafe {
+            let (c, floor, inf) = (_mm256_set1_pd(c), _mm256_set1_pd(floor), _mm256_set1_pd(f64::INFINITY));
+            for h in [0usize, 4] {
+                let march = _mm256_mul_pd(c, _mm256_max_pd(_mm256_loadu_pd(self.t.as_ptr().add(h)), floor));
+                let v = _mm256_blendv_pd(
+                    _mm256_loadu_pd(self.phase_eps.as_ptr().add(h)),
+                    march,
+                    lanes(self.marching >> h),
+                );
+                _mm256_storeu_pd(out.as_mut_ptr().add(h), _mm256_blendv_pd(inf, v, lanes(self.active >> h)));
+            }
+        }
+        out
+    }
+
+    /// Takes the field's values `raw` at [`Self::t`] for every marching lane, as
+    /// [`MarchLane::feed`] does lane by lane, and calls `done(i, outcome, stats)` for each
+    /// lane whose march is over (`None`: a miss); that lane stops marching.
+    #[inline]
+    pub fn feed(
+        &mut self,
+        raw: &[f64; 8],
+        size: f64,
+        params: &MarchParams,
+        refine: bool,
+        stats: &mut RayStats,
+        mut done: impl FnMut(usize, Option<MarchHit>, &mut RayStats),
+    ) {
+        // The common step for the plain lanes with steps left, all at once; the tolerance
+        // as `MarchParams::tolerance` computes it.
+        let c = params.epsilon.min(params.tolerance_px * params.pixel_footprint);
+        let floor = 1e-4 * size;
+        let mut candidates = self.active & self.plain;
+        if params.relaxation != 1.0 {
+            candidates &= !self.fresh;
+        }
+        if self.feeds + 1 >= params.max_steps {
+            // Near the budget: only the lanes that have steps left after this one.
+            for i in 0..8 {
+                if self.iterations[i] + 1 >= params.max_steps {
+                    candidates &= !(1 << i);
+                }
+            }
+        }
+        self.feeds += 1;
+        let common =
+            if candidates == 0 { Common::default() } else { self.common_steps(raw, c, floor, candidates) };
+        let stepped = common.stay | common.leave;
+        let mut bits = stepped;
+        while bits != 0 {
+            let i = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            self.iterations[i] += 1;
+            self.touches[i] = 0;
+        }
+        stats.march_steps += u64::from(stepped.count_ones());
+        if stepped & self.fresh != 0 {
+            // Their first step: `omega` from here on is the relaxation (1 for these).
+            let mut bits = stepped & self.fresh;
+            while bits != 0 {
+                let i = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                self.omega[i] = params.relaxation;
+            }
+            self.fresh &= !stepped;
+        }
+        let mut other = self.active & !stepped;
+        self.active &= !common.leave;
+        let mut leave = common.leave;
+        while leave != 0 {
+            let i = leave.trailing_zeros() as usize;
+            leave &= leave - 1;
+            done(i, None, stats);
+        }
+        while other != 0 {
+            let i = other.trailing_zeros() as usize;
+            other &= other - 1;
+            let mut lane = self.lane(i);
+            let seg = Segment { origin: DVec3::ZERO, dir: DVec3::ZERO, t0: self.t0[i], t1: self.t1[i] };
+            let outcome = lane.feed(raw[i], &seg, size, params, refine, stats);
+            self.set(i, &lane);
+            if let Some(outcome) = outcome {
+                self.active &= !(1 << i);
+                done(i, outcome, stats);
+            }
+        }
+    }
+
+    /// Takes the common step in every lane of `candidates` (plain lanes with steps left)
+    /// where it is one, as [`MarchLane::step`] does: the lane's sign is set at its first
+    /// step (`raw`'s, positive for zero); the distance `d = sign * raw` does not converge
+    /// (`|d| >= eps`, `eps = c * max(t, floor)`); the lane moves to `t + d` (`omega` is 1)
+    /// and stays (`t + d` within the segment) or leaves (past its end: a miss). Updates
+    /// those lanes' `sign`, `t`, `r`, `r_t`, `prev_t` and `prev_r` (the caller the rest).
+    #[inline]
+    fn common_steps(&mut self, raw: &[f64; 8], c: f64, floor: f64, candidates: u8) -> Common {
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx2() {
+            // SAFETY: the CPU has AVX2 (checked above).
+            return unsafe { self.common_steps_avx2(raw, c, floor, candidates) };
+        }
+        self.common_steps_scalar(raw, c, floor, candidates)
+    }
+
+    /// [`Self::common_steps`] lane by lane (CPUs without AVX2).
+    #[allow(clippy::needless_range_loop)] // lane `i` of eight arrays
+    fn common_steps_scalar(&mut self, raw: &[f64; 8], c: f64, floor: f64, candidates: u8) -> Common {
+        let mut common = Common::default();
+        for i in 0..8 {
+            let t = self.t[i];
+            let sign = if self.sign[i] != 0.0 {
+                self.sign[i]
+            } else if raw[i] < 0.0 {
+                -1.0
+            } else {
+                1.0
+            };
+            let d = sign * raw[i];
+            let r = d.abs();
+            let next = t + d;
+            if candidates & (1 << i) != 0 && r >= c * t.max(floor) {
+                (self.sign[i], self.r[i], self.r_t[i]) = (sign, r, t);
+                (self.prev_t[i], self.prev_r[i], self.t[i]) = (t, r, next);
+                if next > self.t1[i] {
+                    common.leave |= 1 << i;
+                } else {
+                    common.stay |= 1 << i;
+                }
+            }
+        }
+        common
+    }
+
+    /// [`Self::common_steps`] four lanes at a time with AVX2: the same IEEE double
+    /// operations (`max(t, floor)` as `maxpd`, see [`Self::tolerances_avx2`]), so the same
+    /// bits.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn common_steps_avx2(&mut self, raw: &[f64; 8], c: f64, floor: f64, candidates: u8) -> Common {
+        use std::arch::x86_64::*;
+        let mut common = Common::default();
+        // SAFETY: every load and store is of four f64 at offset 0 or 4 of an `[f64; 8]`.
+        unsafe {
+            let (c, floor, zero) = (_mm256_set1_pd(c), _mm256_set1_pd(floor), _mm256_setzero_pd());
+            let abs = _mm256_castsi256_pd(_mm256_set1_epi64x(i64::MAX));
+            for h in [0usize, 4] {
+                if (candidates >> h) & 0xf == 0 {
+                    continue;
+                }
+                let t = _mm256_loadu_pd(self.t.as_ptr().add(h));
+                let raw = _mm256_loadu_pd(raw.as_ptr().add(h));
+                let old_sign = _mm256_loadu_pd(self.sign.as_ptr().add(h));
+                // `if raw < 0.0 { -1.0 } else { 1.0 }` where the sign is still 0.
+                let own = _mm256_blendv_pd(
+                    _mm256_set1_pd(1.0),
+                    _mm256_set1_pd(-1.0),
+                    _mm256_cmp_pd::<_CMP_LT_OQ>(raw, zero),
+                );
+                let sign = _mm256_blendv_pd(old_sign, own, _mm256_cmp_pd::<_CMP_EQ_OQ>(old_sign, zero));
+                let d = _mm256_mul_pd(sign, raw);
+                let r = _mm256_and_pd(d, abs);
+                let next = _mm256_add_pd(t, d);
+                let eps = _mm256_mul_pd(c, _mm256_max_pd(t, floor));
+                let ok =
+                    _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GE_OQ>(r, eps)) as u8 & (candidates >> h) & 0xf;
+                if ok == 0 {
+                    continue;
+                }
+                let past = _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(
+                    next,
+                    _mm256_loadu_pd(self.t1.as_ptr().add(h)),
+                )) as u8;
+                common.leave |= (ok & past) << h;
+                common.stay |= (ok & !past) << h;
+                let m = lanes(ok);
+                // A macro, not a closure: everything must inline into this AVX2 function.
+                macro_rules! put {
+                    ($field:ident, $v:expr) => {{
+                        let dst = self.$field.as_mut_ptr().add(h);
+                        _mm256_storeu_pd(dst, _mm256_blendv_pd(_mm256_loadu_pd(dst), $v, m));
+                    }};
+                }
+                put!(sign, sign);
+                put!(r, r);
+                put!(r_t, t);
+                put!(prev_t, t);
+                put!(prev_r, r);
+                put!(t, next);
+            }
+        }
+        common
+    }
+}
+
+/// The four-lane mask (all ones in lane `k` where bit `k` of `bits` is set).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx2")]
+fn lanes(bits: u8) -> std::arch::x86_64::__m256d {
+    use std::arch::x86_64::*;
+    let lane_bits = _mm256_setr_epi64x(1, 2, 4, 8);
+    _mm256_castsi256_pd(_mm256_cmpeq_epi64(
+        _mm256_and_si256(_mm256_set1_epi64x(i64::from(bits & 0xf)), lane_bits),
+        lane_bits,
+    ))
+}
+
 /// Where a march stopped.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MarchHit {
@@ -457,6 +847,112 @@ mod tests {
             sphere_trace(&plane, &seg(DVec3::ZERO, dir, 0.0, 1e3), 1.0, &relaxed, true, &mut b).unwrap().t;
         assert!((t_plain - t_relax).abs() < 1e-4 * t_plain);
         assert!(b.march_steps < a.march_steps, "{} vs {}", b.march_steps, a.march_steps);
+    }
+
+    /// A field with the events a march meets: a sphere (hits, grazing rays), a plane
+    /// (long slanted marches), a thin sheet (probes past a skin of near-zero distance) and
+    /// a skin of zero thickness (a box face whose cutter ends on it: touches, no crossing).
+    fn events(p: DVec3, _tol: f64) -> f64 {
+        let sphere = (p - DVec3::new(0.0, 0.0, 5.0)).length() - 1.0;
+        let plane = p.y + 2.0;
+        let sheet = (p.x - 3.0).abs() - 0.002;
+        let skin = (p.z - 8.0).abs().max(p.x.abs() - 1.0);
+        sphere.min(plane).min(sheet).min(skin)
+    }
+
+    fn xorshift(seed: u64) -> impl FnMut() -> f64 {
+        let mut s = seed;
+        move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    #[test]
+    fn packets_take_each_lane_s_own_steps() {
+        let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
+        let settings = [
+            MarchParams::default(),
+            MarchParams { relaxation: 1.6, ..Default::default() },
+            MarchParams { max_steps: 7, pixel_footprint: 0.05, ..Default::default() },
+            MarchParams { max_steps: 40, relaxation: 1.9, tolerance_px: 2.0, ..Default::default() },
+        ];
+        for params in &settings {
+            for batch in 0..200 {
+                let segs: [Segment; 8] = std::array::from_fn(|_| {
+                    let origin = DVec3::new(next() * 4.0 - 2.0, next() * 4.0 - 1.0, next() * 2.0 - 1.0);
+                    let aim = DVec3::new(next() * 8.0 - 3.0, next() * 4.0 - 2.5, 5.0 + next() * 4.0);
+                    let (t0, t1) = if batch % 3 == 0 { (0.0, 100.0) } else { (next(), 2.0 + next() * 10.0) };
+                    Segment { origin, dir: (aim - origin).normalize(), t0, t1 }
+                });
+                let live: [bool; 8] = std::array::from_fn(|i| batch % 5 != 0 || i % 3 != 0);
+                let mut alone = RayStats::default();
+                let expected: [Option<Option<MarchHit>>; 8] = std::array::from_fn(|i| {
+                    live[i].then(|| sphere_trace(&events, &segs[i], 2.0, params, true, &mut alone))
+                });
+                let mut together = RayStats::default();
+                let mut got = [None; 8];
+                let bounds = std::array::from_fn(|i| live[i].then_some((segs[i].t0, segs[i].t1)));
+                if let Some(mut packet) = MarchPacket::new(&bounds, &mut together) {
+                    while packet.marching() {
+                        let tol = packet.tolerances(params, 2.0);
+                        let raw = std::array::from_fn(|i| {
+                            events(segs[i].origin + segs[i].dir * packet.t()[i], tol[i])
+                        });
+                        packet.feed(&raw, 2.0, params, true, &mut together, |i, outcome, _| {
+                            got[i] = Some(outcome)
+                        });
+                    }
+                }
+                assert_eq!(got, expected, "{params:?}");
+                assert_eq!(together, alone, "{params:?}");
+            }
+        }
+    }
+
+    #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn wide_common_steps_equal_lane_by_lane() {
+        if !crate::simd::avx2() {
+            return;
+        }
+        let mut next = xorshift(0x2545_f491_4f6c_dd1d);
+        let special = [0.0, -0.0, f64::NAN, f64::INFINITY, -f64::INFINITY, 1e-300, -1e-9];
+        let mut pick = |scale: f64| {
+            let u = next();
+            if u < 0.1 { special[(u * 70.0) as usize % special.len()] } else { (next() - 0.3) * scale }
+        };
+        for round in 0..5000 {
+            let segs = std::array::from_fn(|i| (i != round % 9).then_some((0.0, 10.0)));
+            let Some(mut a) = MarchPacket::new(&segs, &mut RayStats::default()) else { continue };
+            for i in 0..8 {
+                (a.t[i], a.t1[i], a.phase_eps[i]) = (pick(10.0), pick(12.0), pick(0.01));
+                a.sign[i] = [0.0, 1.0, -1.0][round % 3];
+            }
+            a.marching = (round * 37) as u8;
+            let raw = std::array::from_fn(|_| pick(2.0));
+            // The tolerance's factors are finite and positive (a scene's camera and size).
+            let (c, floor, candidates) =
+                (1e-2 / (1 + round % 7) as f64, 1e-3 * (1 + round % 3) as f64, (round * 101) as u8);
+            let mut b = a.clone();
+            let wide = unsafe { a.common_steps_avx2(&raw, c, floor, candidates) };
+            let one = b.common_steps_scalar(&raw, c, floor, candidates);
+            assert_eq!(wide, one);
+            let bits = |x: &[f64; 8]| x.map(f64::to_bits);
+            for (x, y) in [(&a.t, &b.t), (&a.sign, &b.sign), (&a.r, &b.r), (&a.r_t, &b.r_t)] {
+                assert_eq!(bits(x), bits(y));
+            }
+            assert_eq!(bits(&a.prev_t), bits(&b.prev_t));
+            assert_eq!(bits(&a.prev_r), bits(&b.prev_r));
+            let params = MarchParams { epsilon: c, tolerance_px: 1e9, ..Default::default() };
+            let size = floor / 1e-4;
+            assert_eq!(
+                bits(&unsafe { a.tolerances_avx2(c, 1e-4 * size) }),
+                bits(&a.tolerances_scalar(&params, size))
+            );
+        }
     }
 
     #[test]
