@@ -12,12 +12,12 @@
 //! today; a new marched representation is a new field, not a new marcher. A field that
 //! evaluates eight points at once ([`DistanceField::distance8_within`]) gets packets of
 //! primary rays marched side by side ([`Geometry::closest_hits`]), each lane taking exactly
-//! the steps of its own scalar march ([`MarchPacket`]).
+//! the steps of its own scalar march ([`MarchLane`]).
 
 use glam::{DVec3, Vec3};
 
 use crate::geometry::march::{
-    MarchHit, MarchPacket, MarchParams, Segment, gradient_normal, gradient_normal2, sphere_trace,
+    MarchHit, MarchLane, MarchParams, Segment, gradient_normal, gradient_normal2, sphere_trace,
 };
 use crate::geometry::{
     Aabb, Census, Geometry, Hit, MaterialId, PACKET, Ray, RayStats, Shared, f32_error, max_abs,
@@ -47,13 +47,6 @@ pub trait DistanceField: Send + Sync {
     fn distance_within(&self, p: DVec3, tolerance: f64) -> f64 {
         let _ = tolerance;
         self.distance(p)
-    }
-
-    /// Whether [`Self::distance_within`]'s answer depends on its tolerance; where it does
-    /// not (a grid's interpolation), the marcher computes none and passes infinite ones.
-    /// True by default.
-    fn uses_tolerance(&self) -> bool {
-        true
     }
 
     /// Whether [`Self::distance`] is signed. An unsigned field (a triangle, which has no
@@ -234,7 +227,7 @@ impl<F: DistanceField> Marched<F> {
     /// Marches the `live` lanes of a packet of up to [`PACKET`] rays side by side, one
     /// 8-wide field evaluation per step for every lane still marching
     /// ([`DistanceField::distance8_within`]); each lane takes the steps of its own scalar
-    /// march ([`MarchPacket`]), so it converges where [`Marched::march`] does for that ray
+    /// march ([`MarchLane`]), so it converges where [`Marched::march`] does for that ray
     /// alone, and `on_hit(lane, hit, stats)` is called for each lane whose march converges
     /// within `[t_min, t_max[lane]]`.
     fn march_packet(
@@ -246,36 +239,61 @@ impl<F: DistanceField> Marched<F> {
         stats: &mut RayStats,
         mut on_hit: impl FnMut(usize, MarchHit, &mut RayStats),
     ) {
-        let (refine, uses_tolerance) = (self.field.is_signed(), self.field.uses_tolerance());
+        let refine = self.field.is_signed();
+        let mut lanes: [Option<MarchLane>; PACKET] = [None; PACKET];
+        let mut segs = [Segment { origin: DVec3::ZERO, dir: DVec3::ZERO, t0: 0.0, t1: 0.0 }; PACKET];
+        let mut first = None;
         let clipped = self.segments8(rays, t_min, t_max);
-        let segs: [Option<(f64, f64)>; PACKET] = std::array::from_fn(|i| clipped[i].filter(|_| live[i]));
-        let Some(mut packet) = MarchPacket::new(&segs, stats) else { return };
-        // The rays by component for the field's 8-wide evaluation at `origin + dir * t`
-        // ([`DistanceField::distance8_rays`]). Lanes that never march evaluate the first
-        // marching lane's ray (at its start), lanes whose march is over their last point,
-        // with no tolerance to meet; their values are not used.
-        let first = segs.iter().position(Option::is_some).unwrap_or(0);
-        let mut origin = [[0.0; PACKET]; 3];
-        let mut dir = [[0.0; PACKET]; 3];
-        for i in 0..PACKET {
-            let ray = if segs[i].is_some() { &rays[i] } else { &rays[first] };
-            let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
-            for a in 0..3 {
-                (origin[a][i], dir[a][i]) = (o[a], d[a]);
+        for (i, ray) in rays.iter().enumerate().take(PACKET) {
+            if !live[i] {
+                continue;
+            }
+            if let Some((t0, t1)) = clipped[i] {
+                let seg = Segment { origin: ray.origin.as_dvec3(), dir: ray.dir.as_dvec3(), t0, t1 };
+                lanes[i] = Some(MarchLane::new(&seg, stats));
+                segs[i] = seg;
+                first.get_or_insert(i);
             }
         }
-        while packet.marching() {
-            let tolerances = if uses_tolerance {
-                packet.tolerances(&self.march, self.size)
-            } else {
-                [f64::INFINITY; PACKET]
-            };
-            let d = self.field.distance8_rays(&origin, &dir, packet.t(), &tolerances);
-            packet.feed(&d, self.size, &self.march, refine, stats, |i, outcome, stats| {
+        let Some(first) = first else { return };
+        // The rays by component for the field's 8-wide evaluation at `origin + dir * t`
+        // ([`DistanceField::distance8_rays`]). Lanes that never march evaluate the first
+        // live lane's point, lanes whose march is over their last point, with no tolerance
+        // to meet; their values are not used.
+        let mut origin = [[0.0; PACKET]; 3];
+        let mut dir = [[0.0; PACKET]; 3];
+        let mut t = [segs[first].t0; PACKET];
+        for (i, lane) in lanes.iter().enumerate() {
+            let seg = if lane.is_some() { &segs[i] } else { &segs[first] };
+            for a in 0..3 {
+                (origin[a][i], dir[a][i]) = (seg.origin[a], seg.dir[a]);
+            }
+        }
+        let mut tolerances = [f64::INFINITY; PACKET];
+        loop {
+            let mut marching = false;
+            for (i, lane) in lanes.iter().enumerate() {
+                if let Some(lane) = lane {
+                    t[i] = lane.t();
+                    tolerances[i] = lane.tolerance(&self.march, self.size);
+                    marching = true;
+                }
+            }
+            if !marching {
+                break;
+            }
+            let d = self.field.distance8_rays(&origin, &dir, &t, &tolerances);
+            for i in 0..PACKET {
+                let Some(lane) = &mut lanes[i] else { continue };
+                let Some(outcome) = lane.feed(d[i], &segs[i], self.size, &self.march, refine, stats) else {
+                    continue;
+                };
+                lanes[i] = None;
+                tolerances[i] = f64::INFINITY;
                 if let Some(mh) = outcome.filter(|h| h.t >= t_min as f64 && h.t <= t_max[i] as f64) {
                     on_hit(i, mh, stats);
                 }
-            });
+            }
         }
     }
 
@@ -425,21 +443,14 @@ fn clip4(rays: [&Ray; 4], b: &Aabb, t_min: f32, t_max: [f32; 4]) -> [Option<(f32
     // SAFETY: SSE and SSE2 are part of the x86-64 baseline; the transmutes are between
     // `__m128` and four f32.
     unsafe {
-        // Generic, not `dyn`: four direct loads per vector, no calls.
-        #[inline(always)]
-        fn lanes(rays: &[&Ray; 4], f: impl Fn(&Ray) -> f32) -> __m128 {
-            unsafe { _mm_setr_ps(f(rays[0]), f(rays[1]), f(rays[2]), f(rays[3])) }
-        }
+        let lanes = |f: &dyn Fn(&Ray) -> f32| _mm_setr_ps(f(rays[0]), f(rays[1]), f(rays[2]), f(rays[3]));
         let mut t0 = _mm_set1_ps(t_min);
         let mut t1 = std::mem::transmute::<[f32; 4], __m128>(t_max);
         let mut dead = _mm_setzero_ps();
         let mut moving = _mm_setzero_ps();
         for axis in 0..3 {
-            let (o, d) = match axis {
-                0 => (lanes(&rays, |r| r.origin.x), lanes(&rays, |r| r.dir.x)),
-                1 => (lanes(&rays, |r| r.origin.y), lanes(&rays, |r| r.dir.y)),
-                _ => (lanes(&rays, |r| r.origin.z), lanes(&rays, |r| r.dir.z)),
-            };
+            let o = lanes(&|r| r.origin[axis]);
+            let d = lanes(&|r| r.dir[axis]);
             let (lo, hi) = (_mm_set1_ps(b.min[axis]), _mm_set1_ps(b.max[axis]));
             // A ray parallel to the slab: inside it for all t or for none.
             let flat = _mm_cmpeq_ps(d, _mm_setzero_ps());

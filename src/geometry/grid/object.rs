@@ -289,11 +289,6 @@ impl DistanceField for GridField {
         true
     }
 
-    /// False: the interpolation is what it is at any tolerance.
-    fn uses_tolerance(&self) -> bool {
-        false
-    }
-
     #[inline]
     fn distance8_within(&self, points: &[DVec3; 8], _tolerances: &[f64; 8]) -> [f64; 8] {
         self.field8(points).map(|v| v * GRID_STEP_SCALE)
