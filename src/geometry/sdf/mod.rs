@@ -20,7 +20,7 @@ use glam::{DVec2, DVec3, UVec3, Vec3};
 
 use crate::geometry::MaterialId;
 use crate::scene::shape::{CsgOp, Object, ObjectKind, Primitive};
-use crate::scene::transform::Transform;
+use crate::scene::transform::{Transform, TransformDesc};
 
 /// Signed distance from local point `p` to `prim`: negative inside. Exact except for the
 /// ellipsoid (a Lipschitz-1 lower bound) and the triangle (unsigned, since it has no inside).
@@ -252,10 +252,71 @@ fn compile(object: &Object, cell_faces: bool, exact: &mut bool, count: &mut usiz
         }
         ObjectKind::Repeat { period, count: reps, child } => {
             *exact = false;
+            if cell_faces && let Some(union) = distributed(object) {
+                *count -= 1;
+                return compile(&union, cell_faces, exact, count);
+            }
             let gaps = if cell_faces { cell_gaps(*period, *reps, child) } else { [None; 3] };
             let child = Box::new(compile(child, cell_faces, exact, count)?);
             SdfNode::Repeat { period: *period, count: *reps, child, transform, gaps }
         }
+    })
+}
+
+/// Tape cost of `object` as [`SdfTree::for_marching`] compiles it: primitive evaluations
+/// per distance, a repetition counting its child once per evaluated cell combination
+/// (`2^k` for `k` repeated axes without a [`cell_gaps`] gap).
+fn march_cost(object: &Object) -> f64 {
+    match &object.kind {
+        ObjectKind::Primitive(_) | ObjectKind::Mesh { .. } | ObjectKind::Grid { .. } => 1.0,
+        ObjectKind::Csg { children, .. } => children.iter().map(march_cost).sum(),
+        ObjectKind::Repeat { period, count, child } => {
+            let gaps = cell_gaps(*period, *count, child);
+            let cells = (0..3).filter(|&a| period[a] > 0.0 && gaps[a].is_none()).count();
+            (1u32 << cells) as f64 * march_cost(child)
+        }
+    }
+}
+
+/// A repetition of a sharp union distributed over the union's children, when that is
+/// cheaper to march: `repeat(a | b | c) = repeat(a) | repeat(b) | repeat(c)` (the same
+/// set of copies), and each child's own repetition keeps to the cells it reaches. A
+/// Menger cross (three bars, each reaching into the neighbouring cells along its length
+/// only) costs 3 bars x 8 cell combinations as one repetition, 3 x 2 distributed. The
+/// union's transform and material stay on a one-child union around each child; the
+/// repetition's on the new union. `None` when `object` is not such a repetition or
+/// distributing would not evaluate fewer primitives ([`march_cost`]).
+fn distributed(object: &Object) -> Option<Object> {
+    let ObjectKind::Repeat { period, count, child } = &object.kind else { return None };
+    let ObjectKind::Csg { op: CsgOp::Union, children } = &child.kind else { return None };
+    if children.len() < 2 {
+        return None;
+    }
+    let repeat = |c: &Object| {
+        let inner = if child.transform == TransformDesc::default() {
+            c.clone()
+        } else {
+            Object {
+                kind: ObjectKind::Csg { op: CsgOp::Union, children: vec![c.clone()] },
+                transform: child.transform,
+                material: child.material,
+                label: child.label.clone(),
+            }
+        };
+        Object {
+            kind: ObjectKind::Repeat { period: *period, count: *count, child: Box::new(inner) },
+            transform: TransformDesc::default(),
+            material: object.material,
+            label: object.label.clone(),
+        }
+    };
+    let copies: Vec<Object> = children.iter().map(repeat).collect();
+    let after: f64 = copies.iter().map(march_cost).sum();
+    (after < march_cost(object)).then(|| Object {
+        kind: ObjectKind::Csg { op: CsgOp::Union, children: copies },
+        transform: object.transform,
+        material: object.material,
+        label: object.label.clone(),
     })
 }
 
@@ -860,6 +921,56 @@ mod tests {
                 .unwrap();
         // The smooth union fills the waist between the spheres.
         assert!(su.distance(DVec3::new(0.75, 0.75, 0.0)) < u.distance(DVec3::new(0.75, 0.75, 0.0)));
+    }
+
+    /// A Menger level: three bars that reach past their cell along their length only.
+    fn crosses(transform: TransformDesc) -> Object {
+        let bar = |h: Vec3| obj(ObjectKind::Primitive(Primitive::Box { half: h }));
+        let (l, w) = (0.5, 0.1111);
+        let mut cross = obj(ObjectKind::Csg {
+            op: CsgOp::Union,
+            children: vec![bar(Vec3::new(l, w, w)), bar(Vec3::new(w, l, w)), bar(Vec3::new(w, w, l))],
+        });
+        cross.transform = transform;
+        obj(ObjectKind::Repeat {
+            period: Vec3::splat(0.6667),
+            count: Some(UVec3::splat(3)),
+            child: Box::new(cross),
+        })
+    }
+
+    #[test]
+    fn repeated_union_is_distributed_for_marching() {
+        let turned = TransformDesc { rotate_deg: Vec3::new(0.0, 0.0, 90.0), ..Default::default() };
+        for o in [crosses(TransformDesc::default()), crosses(turned)] {
+            // 3 bars x 8 cell combinations as one repetition; 3 x 2 distributed.
+            assert_eq!(march_cost(&o), 24.0);
+            let d = distributed(&o).expect("distributed");
+            assert_eq!(march_cost(&d), 6.0);
+            let (sampling, marching) = (SdfTree::new(&o).unwrap(), SdfTree::for_marching(&o).unwrap());
+            let n = 24;
+            for i in 0..n * n * n {
+                let c = |k: usize| -1.3 + 2.6 * (k % n) as f64 / (n - 1) as f64;
+                let p = DVec3::new(c(i), c(i / n), c(i / (n * n)));
+                let (a, m) = (sampling.distance(p), marching.distance(p));
+                // The same surface: the same sign, and the marching value a bound of the
+                // distance to the copies (equal to it near the surface).
+                assert!(a * m > 0.0 || a.abs() < 1e-12, "{a} vs {m} at {p}");
+                assert!(m.abs() <= a.abs() + 1e-12, "{a} vs {m} at {p}");
+            }
+        }
+        // A union of spheres that fit their cells is cheaper as it is: not distributed.
+        let s = |x: f32| {
+            let mut o = obj(ObjectKind::Primitive(Primitive::Sphere { radius: 0.1 }));
+            o.transform.translate = Vec3::new(x, 0.0, 0.0);
+            o
+        };
+        let fits = obj(ObjectKind::Repeat {
+            period: Vec3::ONE,
+            count: Some(UVec3::splat(4)),
+            child: Box::new(obj(ObjectKind::Csg { op: CsgOp::Union, children: vec![s(-0.2), s(0.2)] })),
+        });
+        assert!(distributed(&fits).is_none());
     }
 
     #[test]

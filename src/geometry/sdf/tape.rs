@@ -56,8 +56,9 @@
 //! fused multiply-add: Rust does not contract, and `sqrt`, `floor` and division are
 //! correctly rounded), minimum and maximum are the comparisons `a < b` and `a > b` on both
 //! paths, and branches are selects computed the same way, so each lane of `eval8` equals
-//! `eval` at that point exactly (tested). The AVX2 build of the 8-wide path is the same
-//! source compiled with `#[target_feature]`, so it also equals the portable build.
+//! `eval` at that point exactly (tested). The AVX2 build of the 8-wide path runs the same
+//! interpreter over a lane type whose operations are the AVX intrinsics of those same
+//! IEEE operations ([`avx::A8`]), so it also equals the portable build (tested).
 //!
 //! # Not on the tape
 //!
@@ -509,8 +510,8 @@ impl TapeScratch {
         TapeScratch {
             vals: vec![0.0; tape.vals],
             pts: vec![[0.0; 3]; tape.points],
-            vals8: vec![F8([0.0; 8]); tape.vals],
-            pts8: vec![[F8([0.0; 8]); 3]; tape.points],
+            vals8: vec![FW([0.0; 8]); tape.vals],
+            pts8: vec![[FW([0.0; 8]); 3]; tape.points],
         }
     }
 
@@ -522,8 +523,8 @@ impl TapeScratch {
             *self = TapeScratch {
                 vals: vec![0.0; vals],
                 pts: vec![[0.0; 3]; points],
-                vals8: vec![F8([0.0; 8]); vals],
-                pts8: vec![[F8([0.0; 8]); 3]; points],
+                vals8: vec![FW([0.0; 8]); vals],
+                pts8: vec![[FW([0.0; 8]); 3]; points],
             };
         }
     }
@@ -686,7 +687,7 @@ impl Tape {
         zs: &[f32; 8],
         scratch: &mut TapeScratch,
     ) -> [f32; 8] {
-        run_ops!(ops, &self.triangles, &mut scratch.vals8, &mut scratch.pts8, [F8(*xs), F8(*ys), F8(*zs)]).0
+        run_ops!(ops, &self.triangles, &mut scratch.vals8, &mut scratch.pts8, [FW(*xs), FW(*ys), FW(*zs)]).0
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -699,7 +700,9 @@ impl Tape {
         zs: &[f32; 8],
         scratch: &mut TapeScratch,
     ) -> [f32; 8] {
-        run_ops!(ops, &self.triangles, &mut scratch.vals8, &mut scratch.pts8, [F8(*xs), F8(*ys), F8(*zs)]).0
+        use avx::{A8, cast, cast3};
+        let p = [A8::load(xs), A8::load(ys), A8::load(zs)];
+        run_ops!(ops, &self.triangles, cast(&mut scratch.vals8), cast3(&mut scratch.pts8), p).store()
     }
 }
 
@@ -772,9 +775,36 @@ impl Compiler {
                 return;
             }
             SdfNode::Csg { op, children, .. } => {
-                self.node(&children[0], pin, map, mult, inherited, out, next_pt);
+                // The children that would each map the point by this node's `map` as it is
+                // (primitives and repetitions without a transform of their own, but a
+                // sphere, which carries a pure translation for free) share one mapped
+                // point when there are two or more of them: the same f32 operation, done
+                // once (a rotated Menger sponge maps its point once per CSG node, not once
+                // per bar). The others map from `pin` as before, above that register.
+                let shares = |c: &SdfNode| {
+                    c.transform().identity
+                        && match c {
+                            SdfNode::Primitive { prim: Primitive::Sphere { .. }, .. } => {
+                                map.matrix3 != DMat3::IDENTITY
+                            }
+                            SdfNode::Primitive { .. } | SdfNode::Repeat { .. } => true,
+                            SdfNode::Csg { .. } => false,
+                        }
+                };
+                let hoist = map != DAffine3::IDENTITY && children.iter().filter(|c| shares(c)).count() >= 2;
+                let (shared, next_pt) =
+                    if hoist { (self.point(pin, &map, next_pt), next_pt + 1) } else { (pin, next_pt) };
+                let shared_inherited = inherited + mult * map.translation.length();
+                let child = |this: &mut Self, c: &SdfNode, out: u32| {
+                    if hoist && shares(c) {
+                        this.node(c, shared, DAffine3::IDENTITY, mult, shared_inherited, out, next_pt);
+                    } else {
+                        this.node(c, pin, map, mult, inherited, out, next_pt);
+                    }
+                };
+                child(self, &children[0], out);
                 for c in &children[1..] {
-                    self.node(c, pin, map, mult, inherited, out + 1, next_pt);
+                    child(self, c, out + 1);
                     let (a, b) = (out, out + 1);
                     let out = a;
                     let inv = |k: f32| 1.0 / k;
@@ -1015,75 +1045,79 @@ impl Lane for f32 {
     }
 }
 
-/// Eight f32 lanes as a plain array, every operation a loop over the lanes that the
-/// compiler turns into one 256-bit instruction under AVX (two 128-bit ones otherwise).
+/// `N` f32 lanes as a plain array, every operation a loop over the lanes that the compiler
+/// vectorises for the baseline target (two 128-bit instructions per eight lanes): the
+/// portable build of [`Tape::eval8`]. The AVX2 build uses [`avx::A8`] instead.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(32))]
-struct F8([f32; 8]);
+struct FW<const N: usize>([f32; N]);
 
-impl F8 {
+/// Eight lanes: one packet.
+type F8 = FW<8>;
+
+impl<const N: usize> FW<N> {
     #[inline(always)]
-    fn map(self, f: impl Fn(f32) -> f32) -> F8 {
-        let mut r = [0.0f32; 8];
+    fn map(self, f: impl Fn(f32) -> f32) -> Self {
+        let mut r = [0.0f32; N];
         for (l, r) in r.iter_mut().enumerate() {
             *r = f(self.0[l]);
         }
-        F8(r)
+        FW(r)
     }
     #[inline(always)]
-    fn zip(self, b: F8, f: impl Fn(f32, f32) -> f32) -> F8 {
-        let mut r = [0.0f32; 8];
+    fn zip(self, b: Self, f: impl Fn(f32, f32) -> f32) -> Self {
+        let mut r = [0.0f32; N];
         for (l, r) in r.iter_mut().enumerate() {
             *r = f(self.0[l], b.0[l]);
         }
-        F8(r)
+        FW(r)
     }
 }
 
-impl Add for F8 {
-    type Output = F8;
+impl<const N: usize> Add for FW<N> {
+    type Output = Self;
     #[inline(always)]
-    fn add(self, b: F8) -> F8 {
+    fn add(self, b: Self) -> Self {
         self.zip(b, |x, y| x + y)
     }
 }
 
-impl Sub for F8 {
-    type Output = F8;
+impl<const N: usize> Sub for FW<N> {
+    type Output = Self;
     #[inline(always)]
-    fn sub(self, b: F8) -> F8 {
+    fn sub(self, b: Self) -> Self {
         self.zip(b, |x, y| x - y)
     }
 }
 
-impl Mul for F8 {
-    type Output = F8;
+impl<const N: usize> Mul for FW<N> {
+    type Output = Self;
     #[inline(always)]
-    fn mul(self, b: F8) -> F8 {
+    fn mul(self, b: Self) -> Self {
         self.zip(b, |x, y| x * y)
     }
 }
 
-impl Div for F8 {
-    type Output = F8;
+impl<const N: usize> Div for FW<N> {
+    type Output = Self;
     #[inline(always)]
-    fn div(self, b: F8) -> F8 {
+    fn div(self, b: Self) -> Self {
         self.zip(b, |x, y| x / y)
     }
 }
 
-impl Neg for F8 {
-    type Output = F8;
+impl<const N: usize> Neg for FW<N> {
+    type Output = Self;
     #[inline(always)]
-    fn neg(self) -> F8 {
+    fn neg(self) -> Self {
         self.map(|x| -x)
     }
 }
 
-impl Lane for F8 {
+impl<const N: usize> Lane for FW<N> {
     #[inline(always)]
     fn splat(x: f32) -> Self {
-        F8([x; 8])
+        FW([x; N])
     }
     #[inline(always)]
     fn vsqrt(self) -> Self {
@@ -1107,11 +1141,123 @@ impl Lane for F8 {
     }
     #[inline(always)]
     fn select_lt(a: Self, b: Self, x: Self, y: Self) -> Self {
-        let mut r = [0.0f32; 8];
+        let mut r = [0.0f32; N];
         for (l, r) in r.iter_mut().enumerate() {
             *r = if a.0[l] < b.0[l] { x.0[l] } else { y.0[l] };
         }
-        F8(r)
+        FW(r)
+    }
+}
+
+/// Eight lanes in one AVX register, each operation one intrinsic, for the AVX2 build of
+/// [`Tape::eval8`] (`eval8_avx2`): the plain-array [`F8`] lets the compiler vectorise each
+/// operation on its own, and it did not for every one (the repetition cells' floor, clamp
+/// and select came out as a mix of 4-wide and scalar instructions, four times the cost of
+/// a box). Same IEEE operations lane by lane as `f32`: `min`/`max`/select are the ordered
+/// comparisons `a < b` / `a > b` (`minps(a, b)` is `a < b ? a : b`), `floor` rounds
+/// towards minus infinity, `abs` and negation touch the sign bit only, and there is no
+/// fused multiply-add, so results equal [`F8`]'s bit for bit (tested).
+#[cfg(target_arch = "x86_64")]
+mod avx {
+    use super::{F8, Lane};
+    use core::arch::x86_64::*;
+    use std::ops::{Add, Div, Mul, Neg, Sub};
+
+    /// Eight f32 lanes in a `__m256`. Only built and used inside functions compiled with
+    /// `#[target_feature(enable = "avx2,fma")]` that run after [`crate::simd::avx2`]
+    /// said yes: every method is `#[inline(always)]`, so its intrinsic lands in such a
+    /// function.
+    #[derive(Clone, Copy, Debug)]
+    #[repr(transparent)]
+    pub(super) struct A8(__m256);
+
+    /// The value registers of an [`F8`] scratch as [`A8`]s (same size and alignment).
+    #[inline(always)]
+    pub(super) fn cast(v: &mut [F8]) -> &mut [A8] {
+        const { assert!(size_of::<F8>() == size_of::<A8>() && align_of::<F8>() >= align_of::<A8>()) };
+        // SAFETY: `F8` is `repr(C, align(32))` over `[f32; 8]` and `A8` is a transparent
+        // `__m256`: the same 32 bytes, every bit pattern valid for both.
+        unsafe { std::slice::from_raw_parts_mut(v.as_mut_ptr().cast(), v.len()) }
+    }
+
+    /// The point registers of an [`F8`] scratch as [`A8`]s.
+    #[inline(always)]
+    pub(super) fn cast3(v: &mut [[F8; 3]]) -> &mut [[A8; 3]] {
+        // SAFETY: as in `cast`, three of them in a row.
+        unsafe { std::slice::from_raw_parts_mut(v.as_mut_ptr().cast(), v.len()) }
+    }
+
+    impl A8 {
+        #[inline(always)]
+        pub(super) fn load(x: &[f32; 8]) -> A8 {
+            // SAFETY: AVX is enabled where this is inlined (see the type); unaligned load.
+            A8(unsafe { _mm256_loadu_ps(x.as_ptr()) })
+        }
+        #[inline(always)]
+        pub(super) fn store(self) -> [f32; 8] {
+            let mut r = [0.0f32; 8];
+            // SAFETY: as above; unaligned store into the array.
+            unsafe { _mm256_storeu_ps(r.as_mut_ptr(), self.0) };
+            r
+        }
+    }
+
+    macro_rules! binary {
+        ($tr:ident, $f:ident, $op:ident) => {
+            impl $tr for A8 {
+                type Output = A8;
+                #[inline(always)]
+                fn $f(self, b: A8) -> A8 {
+                    // SAFETY: AVX is enabled where this is inlined (see the type).
+                    A8(unsafe { $op(self.0, b.0) })
+                }
+            }
+        };
+    }
+    binary!(Add, add, _mm256_add_ps);
+    binary!(Sub, sub, _mm256_sub_ps);
+    binary!(Mul, mul, _mm256_mul_ps);
+    binary!(Div, div, _mm256_div_ps);
+
+    impl Neg for A8 {
+        type Output = A8;
+        #[inline(always)]
+        fn neg(self) -> A8 {
+            // SAFETY: AVX is enabled where this is inlined (see the type).
+            A8(unsafe { _mm256_xor_ps(self.0, _mm256_set1_ps(-0.0)) })
+        }
+    }
+
+    // SAFETY (every block below): AVX is enabled where these are inlined (see the type).
+    impl Lane for A8 {
+        #[inline(always)]
+        fn splat(x: f32) -> Self {
+            A8(unsafe { _mm256_set1_ps(x) })
+        }
+        #[inline(always)]
+        fn vsqrt(self) -> Self {
+            A8(unsafe { _mm256_sqrt_ps(self.0) })
+        }
+        #[inline(always)]
+        fn vabs(self) -> Self {
+            A8(unsafe { _mm256_andnot_ps(_mm256_set1_ps(-0.0), self.0) })
+        }
+        #[inline(always)]
+        fn vfloor(self) -> Self {
+            A8(unsafe { _mm256_round_ps::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(self.0) })
+        }
+        #[inline(always)]
+        fn vmin(self, b: Self) -> Self {
+            A8(unsafe { _mm256_min_ps(self.0, b.0) })
+        }
+        #[inline(always)]
+        fn vmax(self, b: Self) -> Self {
+            A8(unsafe { _mm256_max_ps(self.0, b.0) })
+        }
+        #[inline(always)]
+        fn select_lt(a: Self, b: Self, x: Self, y: Self) -> Self {
+            A8(unsafe { _mm256_blendv_ps(y.0, x.0, _mm256_cmp_ps::<_CMP_LT_OQ>(a.0, b.0)) })
+        }
     }
 }
 
