@@ -11,9 +11,10 @@ use crate::geometry::RayStats;
 /// Sphere-tracing parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MarchParams {
-    /// Relative hit tolerance: a march stops when `|d| < e * max(t, 1e-4 * size)` with
-    /// `e = min(epsilon, tolerance_px * pixel_footprint)`, so the tolerance grows with
-    /// distance like a pixel footprint and never exceeds `tolerance_px` pixels (which
+    /// Relative hit tolerance: a march stops when `|d| < e * max(s + t, 1e-4 * size)` with
+    /// `e = min(epsilon, tolerance_px * pixel_footprint)` and `s` the ray's path length
+    /// before its origin ([`Segment::spread`], 0 for camera rays), so the tolerance grows
+    /// with distance like a pixel footprint and never exceeds `tolerance_px` pixels (which
     /// matters for a camera with a narrow field of view: a 1e-3 object seen from 1e3
     /// away); the floor only matters for rays that start next to a surface. Default 1e-4.
     pub epsilon: f64,
@@ -68,6 +69,9 @@ pub struct Segment {
     pub t0: f64,
     /// Last ray parameter marched (`>= t0` for a non-empty segment), scene units.
     pub t1: f64,
+    /// The ray's path length before its origin ([`crate::geometry::Ray::spread`]): the
+    /// hit tolerance at `t` is that of `spread + t`.
+    pub spread: f64,
 }
 
 /// Sphere traces the ray segment `seg` through the distance function `f` (exact or a
@@ -124,6 +128,8 @@ pub fn sphere_trace(
 pub struct MarchLane {
     /// Ray parameter to evaluate next.
     t: f64,
+    /// [`Segment::spread`].
+    spread: f64,
     /// Sign of the field at the first point (1 outside, -1 inside).
     sign: f64,
     prev_t: f64,
@@ -169,6 +175,7 @@ impl MarchLane {
         stats.marched_rays += 1;
         MarchLane {
             t: seg.t0,
+            spread: seg.spread,
             sign: 0.0,
             prev_t: seg.t0,
             prev_r: 0.0,
@@ -193,7 +200,7 @@ impl MarchLane {
     pub fn tolerance(&self, params: &MarchParams, size: f64) -> f64 {
         match self.phase {
             Phase::Probe { eps, .. } | Phase::Refine { eps, .. } => eps,
-            Phase::March => params.tolerance(self.t, size),
+            Phase::March => params.tolerance(self.spread + self.t, size),
         }
     }
 
@@ -266,7 +273,7 @@ impl MarchLane {
         self.iterations += 1;
         stats.march_steps += 1;
         let t = self.t;
-        let eps = params.tolerance(t, size);
+        let eps = params.tolerance(self.spread + t, size);
         if self.sign == 0.0 {
             self.sign = if raw < 0.0 { -1.0 } else { 1.0 };
         }
@@ -332,7 +339,10 @@ impl MarchLane {
         }
         stats.step_limit_hits += 1;
         let (t, r) = (self.r_t, self.r);
-        Some((t > 0.0 && r < params.pixel_footprint * t).then_some(MarchHit { t, residual: r }))
+        Some(
+            (t > 0.0 && r < params.pixel_footprint * (self.spread + t))
+                .then_some(MarchHit { t, residual: r }),
+        )
     }
 }
 
@@ -401,11 +411,38 @@ mod tests {
     use super::*;
 
     fn seg(origin: DVec3, dir: DVec3, t0: f64, t1: f64) -> Segment {
-        Segment { origin, dir, t0, t1 }
+        Segment { origin, dir, t0, t1, spread: 0.0 }
     }
 
     fn sphere(p: DVec3, _tol: f64) -> f64 {
         (p - DVec3::new(0.0, 0.0, 5.0)).length() - 1.0
+    }
+
+    /// A ray passing the sphere at a clearance between the tolerance of its own `t` and
+    /// that of `spread + t`: a camera ray passes, the same ray spawned at the end of a
+    /// long path (a shadow ray, whose pixel's footprint is that wide) touches it.
+    #[test]
+    fn spread_widens_the_tolerance() {
+        let params =
+            MarchParams { pixel_footprint: 1e-3, tolerance_px: 1.0, epsilon: 1.0, ..Default::default() };
+        let (size, spread) = (2.0, 100.0);
+        // At the closest approach, t = 5: tolerance 5e-3 without spread, 0.105 with.
+        let clearance = 0.05;
+        let origin = DVec3::new(1.0 + clearance, 0.0, 0.0);
+        let mut s = seg(origin, DVec3::Z, 0.0, 10.0);
+        assert_eq!(
+            MarchLane::new(&s, &mut RayStats::default()).tolerance(&params, size),
+            params.tolerance(0.0, size)
+        );
+        let mut stats = RayStats::default();
+        // Hits accepted on convergence (as for an unsigned field): the test is the tolerance.
+        assert!(sphere_trace(&sphere, &s, size, &params, false, &mut stats).is_none());
+        s.spread = spread;
+        let lane = MarchLane::new(&s, &mut stats);
+        assert_eq!(lane.tolerance(&params, size), params.tolerance(spread, size));
+        let hit = sphere_trace(&sphere, &s, size, &params, false, &mut stats)
+            .expect("a touch within the footprint");
+        assert!((hit.t - 5.0).abs() < 0.5, "{hit:?}");
     }
 
     #[test]

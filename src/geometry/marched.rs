@@ -180,7 +180,8 @@ impl<F: DistanceField> Marched<F> {
     fn segment(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Segment> {
         let (t0, t1) =
             if self.bounded { ray.clip_to_box(&self.bounds, t_min, t_max)? } else { (t_min, t_max) };
-        Some(Segment { origin: ray.origin.as_dvec3(), dir: ray.dir.as_dvec3(), t0: t0 as f64, t1: t1 as f64 })
+        let (origin, dir, spread) = (ray.origin.as_dvec3(), ray.dir.as_dvec3(), ray.spread as f64);
+        Some(Segment { origin, dir, t0: t0 as f64, t1: t1 as f64, spread })
     }
 
     /// The intervals of [`Self::segment`] for up to [`PACKET`] rays (ray `i` up to
@@ -241,7 +242,8 @@ impl<F: DistanceField> Marched<F> {
     ) {
         let refine = self.field.is_signed();
         let mut lanes: [Option<MarchLane>; PACKET] = [None; PACKET];
-        let mut segs = [Segment { origin: DVec3::ZERO, dir: DVec3::ZERO, t0: 0.0, t1: 0.0 }; PACKET];
+        let mut segs =
+            [Segment { origin: DVec3::ZERO, dir: DVec3::ZERO, t0: 0.0, t1: 0.0, spread: 0.0 }; PACKET];
         let mut first = None;
         let clipped = self.segments8(rays, t_min, t_max);
         for (i, ray) in rays.iter().enumerate().take(PACKET) {
@@ -249,7 +251,8 @@ impl<F: DistanceField> Marched<F> {
                 continue;
             }
             if let Some((t0, t1)) = clipped[i] {
-                let seg = Segment { origin: ray.origin.as_dvec3(), dir: ray.dir.as_dvec3(), t0, t1 };
+                let (origin, dir, spread) = (ray.origin.as_dvec3(), ray.dir.as_dvec3(), ray.spread as f64);
+                let seg = Segment { origin, dir, t0, t1, spread };
                 lanes[i] = Some(MarchLane::new(&seg, stats));
                 segs[i] = seg;
                 first.get_or_insert(i);
@@ -303,7 +306,7 @@ impl<F: DistanceField> Marched<F> {
     fn hit_point(&self, ray: &Ray, hit: MarchHit) -> (DVec3, f64, f64) {
         let MarchHit { t, residual } = hit;
         let p = ray.origin.as_dvec3() + ray.dir.as_dvec3() * t;
-        let eps = self.march.tolerance(t, self.size).max(residual);
+        let eps = self.march.tolerance(ray.spread as f64 + t, self.size).max(residual);
         (p, eps, self.field.normal_step(p, eps))
     }
 

@@ -26,13 +26,26 @@ pub struct Ray {
     pub origin: Vec3,
     /// Direction; unit length for world-space rays.
     pub dir: Vec3,
+    /// Length of the path from the camera to `origin` (scene units, >= 0): 0 for a camera
+    /// ray, the parent's `spread` plus its hit distance for a shadow, reflection or
+    /// refraction ray. A pixel's footprint at parameter `t` is that of `spread + t` from
+    /// the camera (the ray cone of a flat mirror), so a marcher's hit tolerance, which
+    /// scales with the footprint ([`march::MarchParams::tolerance`]), uses `spread + t`:
+    /// a shadow ray need not resolve its occluder more finely than the pixel it shades.
+    pub spread: f32,
 }
 
 impl Ray {
-    /// A ray from `origin` along `dir` (not normalised here).
+    /// A camera ray from `origin` along `dir` (not normalised here), `spread` 0.
     #[inline]
     pub fn new(origin: Vec3, dir: Vec3) -> Self {
-        Ray { origin, dir }
+        Ray { origin, dir, spread: 0.0 }
+    }
+
+    /// A ray spawned at the end of a path of length `spread` (see [`Ray::spread`]).
+    #[inline]
+    pub fn spawned(origin: Vec3, dir: Vec3, spread: f32) -> Self {
+        Ray { origin, dir, spread }
     }
 
     /// The point at parameter `t`.

@@ -104,7 +104,7 @@ impl<'a> Tracer<'a> {
                 let Some(f) = frame else { continue };
                 let Some((to_light, dist, ..)) = self.light_towards(light, f.above) else { continue };
                 if f.n.dot(to_light) > 0.0 {
-                    (shadow[m], reach[m], lane_of[m]) = (Ray::new(f.above, to_light), dist, i);
+                    (shadow[m], reach[m], lane_of[m]) = (Ray::spawned(f.above, to_light, f.spread), dist, i);
                     m += 1;
                 }
             }
@@ -157,7 +157,7 @@ impl<'a> Tracer<'a> {
         stats: &mut RayStats,
     ) -> Vec3 {
         let m: &Material = &self.scene.materials[hit.material as usize];
-        let SurfaceFrame { leaving, face, n, offset, above } = surface_frame(ray, hit);
+        let SurfaceFrame { leaving, face, n, offset, above, spread } = surface_frame(ray, hit);
         let view = -ray.dir;
 
         let mut local = m.ka * self.ambient * m.color;
@@ -171,7 +171,7 @@ impl<'a> Tracer<'a> {
             stats.shadow_rays += 1;
             let blocked = match occluded {
                 Some(o) if l < PACKET_LIGHTS => o[l],
-                _ => self.geometry.any_hit(&Ray::new(above, to_light), 0.0, dist, stats),
+                _ => self.geometry.any_hit(&Ray::spawned(above, to_light, spread), 0.0, dist, stats),
             };
             if blocked {
                 continue;
@@ -199,7 +199,7 @@ impl<'a> Tracer<'a> {
             if w < MIN_CONTRIBUTION {
                 Vec3::ZERO
             } else {
-                self.trace_rec(&Ray::new(above, refl_dir.normalize()), depth - 1, w, stats)
+                self.trace_rec(&Ray::spawned(above, refl_dir.normalize(), spread), depth - 1, w, stats)
             }
         };
         let (r, tr) = (m.reflectivity, m.transparency);
@@ -216,7 +216,7 @@ impl<'a> Tracer<'a> {
             match refract(ray.dir, n, eta) {
                 Some(dir) => {
                     let below = hit.point - face * offset;
-                    self.trace_rec(&Ray::new(below, dir), depth - 1, w, stats)
+                    self.trace_rec(&Ray::spawned(below, dir, spread), depth - 1, w, stats)
                 }
                 // Total internal reflection: all of it is reflected.
                 None => reflected(w, stats),
@@ -241,6 +241,8 @@ struct SurfaceFrame {
     offset: f32,
     /// The hit point moved `offset` along `face`: where shadow and reflection rays start.
     above: Vec3,
+    /// The path length from the camera to the hit: the spawned rays' [`Ray::spread`].
+    spread: f32,
 }
 
 /// The [`SurfaceFrame`] of `hit` seen along `ray`.
@@ -251,7 +253,7 @@ fn surface_frame(ray: &Ray, hit: &Hit) -> SurfaceFrame {
     let n = if leaving { -hit.shading_normal } else { hit.shading_normal };
     let n = if n.dot(face) > 0.0 { n } else { face };
     let offset = spawn_offset(hit);
-    SurfaceFrame { leaving, face, n, offset, above: hit.point + face * offset }
+    SurfaceFrame { leaving, face, n, offset, above: hit.point + face * offset, spread: ray.spread + hit.t }
 }
 
 /// Refracts unit `d` through a surface with unit normal `n` facing against `d`, with

@@ -117,7 +117,9 @@ impl Transform {
         if self.identity {
             *ray
         } else {
-            Ray::new(self.to_local.transform_point3(ray.origin), self.to_local.transform_vector3(ray.dir))
+            let (origin, dir) =
+                (self.to_local.transform_point3(ray.origin), self.to_local.transform_vector3(ray.dir));
+            Ray::spawned(origin, dir, ray.spread)
         }
     }
 

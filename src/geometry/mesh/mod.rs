@@ -255,7 +255,7 @@ impl MeshGeometry {
         t_max: f32,
         stats: &mut RayStats,
     ) -> Option<Hit> {
-        self.closest_hit_with::<WideBoxRayAvx2>(&Ray { origin, dir }, t_min, t_max, stats)
+        self.closest_hit_with::<WideBoxRayAvx2>(&Ray::new(origin, dir), t_min, t_max, stats)
     }
 
     /// [`Geometry::closest_hit`] with the portable box test.

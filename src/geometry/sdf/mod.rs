@@ -145,7 +145,11 @@ pub fn cell_gaps(period: Vec3, count: Option<UVec3>, child: &Object) -> [Option<
     let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
     std::array::from_fn(|axis| {
         let s = period[axis] as f64;
-        let gap = (0.5 * s - hi[axis] as f64).min(lo[axis] as f64 + 0.5 * s);
+        // The bounds are f32, each end within a rounding of the child's true extent
+        // (translation plus half size, rounded once): less that, so that the face bound
+        // never exceeds the distance to a neighbouring copy.
+        let rounding = 4.0 * f32::EPSILON as f64 * (0.5 * s + (hi[axis].abs()).max(lo[axis].abs()) as f64);
+        let gap = (0.5 * s - hi[axis] as f64).min(lo[axis] as f64 + 0.5 * s) - rounding;
         (s > 0.0 && count[axis] > 1 && gap.is_finite() && gap > 1e-6 * s).then_some(gap)
     })
 }
@@ -180,6 +184,8 @@ impl SdfTree {
     /// neighbours' value is and only lowers positive values, and sharp CSG depends only on
     /// its operands' signs, so the surface is the same; away from it the value is a bound
     /// a march may step by, but not what a grid or a mesh extraction should interpolate.
+    /// For the same reason a repetition of a sharp union is distributed over the union's
+    /// children where that evaluates fewer primitives ([`distributed`]).
     pub fn for_marching(object: &Object) -> Option<Self> {
         Self::compiled(object, true)
     }
