@@ -216,6 +216,7 @@ proptest! {
     /// rigid transforms, unions and repetitions only), at most the same value outside: a
     /// bound a march may step by. (Where a copy's value is only a bound, the sampling tree
     /// can go below the true distance of a neighbour copy, and the face bound above it.)
+    /// Inside, the marching tree may be the deeper one (see the assertion).
     #[test]
     fn marching_tree_bounds_the_sampling_tree((o, unit) in case()) {
         let (sampling, marching) = (SdfTree::new(&o).unwrap(), SdfTree::for_marching(&o).unwrap());
@@ -225,7 +226,9 @@ proptest! {
             let w = tape.origin + p.as_dvec3();
             let (a, m) = (sampling.distance(w), marching.distance(w));
             let slack = 1e-9 * (1.0 + w.abs().max_element());
-            prop_assert!(!exact || m.abs() <= a.abs() + slack, "marching {m} above sampling {a} at {w}");
+            // Outside only: inside, a repetition of overlapping boxes merged into one
+            // stretched box (`merged_box`) is its exact depth, deeper than the copies' minimum.
+            prop_assert!(!exact || a <= 0.0 || m <= a + slack, "marching {m} above sampling {a} at {w}");
             prop_assert!(a * m >= 0.0 || a.abs() <= slack, "marching {m} and sampling {a} differ in sign at {w}");
         }
     }
