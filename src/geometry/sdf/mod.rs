@@ -963,6 +963,20 @@ mod tests {
         assert!(su.distance(DVec3::new(0.75, 0.75, 0.0)) < u.distance(DVec3::new(0.75, 0.75, 0.0)));
     }
 
+    /// At the points of a 24^3 lattice over `[-r, r]^3`: the point, the sampling tree's
+    /// value and the marching tree's.
+    fn sampling_and_marching(o: &Object, r: f64) -> Vec<(DVec3, f64, f64)> {
+        let (sampling, marching) = (SdfTree::new(o).unwrap(), SdfTree::for_marching(o).unwrap());
+        let n = 24;
+        let c = |k: usize| -r + 2.0 * r * (k % n) as f64 / (n - 1) as f64;
+        (0..n * n * n)
+            .map(|i| {
+                let p = DVec3::new(c(i), c(i / n), c(i / (n * n)));
+                (p, sampling.distance(p), marching.distance(p))
+            })
+            .collect()
+    }
+
     /// A Menger level: three bars that reach past their cell along their length only.
     fn crosses(transform: TransformDesc) -> Object {
         let bar = |h: Vec3| obj(ObjectKind::Primitive(Primitive::Box { half: h }));
@@ -987,12 +1001,7 @@ mod tests {
             assert_eq!(march_cost(&o), 24.0);
             let d = distributed(&o).expect("distributed");
             assert_eq!(march_cost(&d), 6.0);
-            let (sampling, marching) = (SdfTree::new(&o).unwrap(), SdfTree::for_marching(&o).unwrap());
-            let n = 24;
-            for i in 0..n * n * n {
-                let c = |k: usize| -1.3 + 2.6 * (k % n) as f64 / (n - 1) as f64;
-                let p = DVec3::new(c(i), c(i / n), c(i / (n * n)));
-                let (a, m) = (sampling.distance(p), marching.distance(p));
+            for (p, a, m) in sampling_and_marching(&o, 1.3) {
                 // The same surface: the same sign, and the marching value a bound of the
                 // distance to the copies (equal to it near the surface).
                 assert!(a * m > 0.0 || a.abs() < 1e-12, "{a} vs {m} at {p}");
@@ -1035,12 +1044,7 @@ mod tests {
         assert!(
             matches!(child.kind, ObjectKind::Primitive(Primitive::Box { half }) if (half.x - 1.1).abs() < 1e-6)
         );
-        let (sampling, marching) = (SdfTree::new(&o).unwrap(), SdfTree::for_marching(&o).unwrap());
-        let n = 24;
-        for i in 0..n * n * n {
-            let c = |k: usize| -1.5 + 3.0 * (k % n) as f64 / (n - 1) as f64;
-            let p = DVec3::new(c(i), c(i / n), c(i / (n * n)));
-            let (a, m) = (sampling.distance(p), marching.distance(p));
+        for (p, a, m) in sampling_and_marching(&o, 1.5) {
             assert!(a * m > 0.0 || a.abs() < 1e-6, "{a} vs {m} at {p}");
             // Outside, the sampling tree is the exact distance to the copies; the marching
             // one a bound of it (the face bound along y, gap 0.1), equal near the surface.
