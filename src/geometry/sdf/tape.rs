@@ -510,8 +510,8 @@ impl TapeScratch {
         TapeScratch {
             vals: vec![0.0; tape.vals],
             pts: vec![[0.0; 3]; tape.points],
-            vals8: vec![FW([0.0; 8]); tape.vals],
-            pts8: vec![[FW([0.0; 8]); 3]; tape.points],
+            vals8: vec![F8([0.0; 8]); tape.vals],
+            pts8: vec![[F8([0.0; 8]); 3]; tape.points],
         }
     }
 
@@ -523,8 +523,8 @@ impl TapeScratch {
             *self = TapeScratch {
                 vals: vec![0.0; vals],
                 pts: vec![[0.0; 3]; points],
-                vals8: vec![FW([0.0; 8]); vals],
-                pts8: vec![[FW([0.0; 8]); 3]; points],
+                vals8: vec![F8([0.0; 8]); vals],
+                pts8: vec![[F8([0.0; 8]); 3]; points],
             };
         }
     }
@@ -687,7 +687,7 @@ impl Tape {
         zs: &[f32; 8],
         scratch: &mut TapeScratch,
     ) -> [f32; 8] {
-        run_ops!(ops, &self.triangles, &mut scratch.vals8, &mut scratch.pts8, [FW(*xs), FW(*ys), FW(*zs)]).0
+        run_ops!(ops, &self.triangles, &mut scratch.vals8, &mut scratch.pts8, [F8(*xs), F8(*ys), F8(*zs)]).0
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -1045,79 +1045,76 @@ impl Lane for f32 {
     }
 }
 
-/// `N` f32 lanes as a plain array, every operation a loop over the lanes that the compiler
-/// vectorises for the baseline target (two 128-bit instructions per eight lanes): the
-/// portable build of [`Tape::eval8`]. The AVX2 build uses [`avx::A8`] instead.
+/// Eight f32 lanes as a plain array, every operation a loop over the lanes that the
+/// compiler vectorises for the baseline target (two 128-bit instructions): the portable
+/// build of [`Tape::eval8`]. The AVX2 build uses [`avx::A8`] instead.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(32))]
-struct FW<const N: usize>([f32; N]);
+struct F8([f32; 8]);
 
-/// Eight lanes: one packet.
-type F8 = FW<8>;
-
-impl<const N: usize> FW<N> {
+impl F8 {
     #[inline(always)]
-    fn map(self, f: impl Fn(f32) -> f32) -> Self {
-        let mut r = [0.0f32; N];
+    fn map(self, f: impl Fn(f32) -> f32) -> F8 {
+        let mut r = [0.0f32; 8];
         for (l, r) in r.iter_mut().enumerate() {
             *r = f(self.0[l]);
         }
-        FW(r)
+        F8(r)
     }
     #[inline(always)]
-    fn zip(self, b: Self, f: impl Fn(f32, f32) -> f32) -> Self {
-        let mut r = [0.0f32; N];
+    fn zip(self, b: F8, f: impl Fn(f32, f32) -> f32) -> F8 {
+        let mut r = [0.0f32; 8];
         for (l, r) in r.iter_mut().enumerate() {
             *r = f(self.0[l], b.0[l]);
         }
-        FW(r)
+        F8(r)
     }
 }
 
-impl<const N: usize> Add for FW<N> {
-    type Output = Self;
+impl Add for F8 {
+    type Output = F8;
     #[inline(always)]
-    fn add(self, b: Self) -> Self {
+    fn add(self, b: F8) -> F8 {
         self.zip(b, |x, y| x + y)
     }
 }
 
-impl<const N: usize> Sub for FW<N> {
-    type Output = Self;
+impl Sub for F8 {
+    type Output = F8;
     #[inline(always)]
-    fn sub(self, b: Self) -> Self {
+    fn sub(self, b: F8) -> F8 {
         self.zip(b, |x, y| x - y)
     }
 }
 
-impl<const N: usize> Mul for FW<N> {
-    type Output = Self;
+impl Mul for F8 {
+    type Output = F8;
     #[inline(always)]
-    fn mul(self, b: Self) -> Self {
+    fn mul(self, b: F8) -> F8 {
         self.zip(b, |x, y| x * y)
     }
 }
 
-impl<const N: usize> Div for FW<N> {
-    type Output = Self;
+impl Div for F8 {
+    type Output = F8;
     #[inline(always)]
-    fn div(self, b: Self) -> Self {
+    fn div(self, b: F8) -> F8 {
         self.zip(b, |x, y| x / y)
     }
 }
 
-impl<const N: usize> Neg for FW<N> {
-    type Output = Self;
+impl Neg for F8 {
+    type Output = F8;
     #[inline(always)]
-    fn neg(self) -> Self {
+    fn neg(self) -> F8 {
         self.map(|x| -x)
     }
 }
 
-impl<const N: usize> Lane for FW<N> {
+impl Lane for F8 {
     #[inline(always)]
     fn splat(x: f32) -> Self {
-        FW([x; N])
+        F8([x; 8])
     }
     #[inline(always)]
     fn vsqrt(self) -> Self {
@@ -1141,11 +1138,11 @@ impl<const N: usize> Lane for FW<N> {
     }
     #[inline(always)]
     fn select_lt(a: Self, b: Self, x: Self, y: Self) -> Self {
-        let mut r = [0.0f32; N];
+        let mut r = [0.0f32; 8];
         for (l, r) in r.iter_mut().enumerate() {
             *r = if a.0[l] < b.0[l] { x.0[l] } else { y.0[l] };
         }
-        FW(r)
+        F8(r)
     }
 }
 
