@@ -6,7 +6,7 @@
 
 use glam::DVec3;
 
-use crate::geometry::RayStats;
+use crate::geometry::{Ray, RayStats};
 
 /// Sphere-tracing parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -72,6 +72,14 @@ pub struct Segment {
     /// The ray's path length before its origin ([`crate::geometry::Ray::spread`]): the
     /// hit tolerance at `t` is that of `spread + t`.
     pub spread: f64,
+}
+
+impl Segment {
+    /// `ray` (origin, direction and [`Ray::spread`] in double precision) from `t0` to `t1`.
+    #[inline]
+    pub fn along(ray: &Ray, t0: f64, t1: f64) -> Self {
+        Segment { origin: ray.origin.as_dvec3(), dir: ray.dir.as_dvec3(), t0, t1, spread: ray.spread as f64 }
+    }
 }
 
 /// Sphere traces the ray segment `seg` through the distance function `f` (exact or a

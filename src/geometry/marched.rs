@@ -180,8 +180,7 @@ impl<F: DistanceField> Marched<F> {
     fn segment(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Segment> {
         let (t0, t1) =
             if self.bounded { ray.clip_to_box(&self.bounds, t_min, t_max)? } else { (t_min, t_max) };
-        let (origin, dir, spread) = (ray.origin.as_dvec3(), ray.dir.as_dvec3(), ray.spread as f64);
-        Some(Segment { origin, dir, t0: t0 as f64, t1: t1 as f64, spread })
+        Some(Segment::along(ray, t0 as f64, t1 as f64))
     }
 
     /// The intervals of [`Self::segment`] for up to [`PACKET`] rays (ray `i` up to
@@ -251,8 +250,7 @@ impl<F: DistanceField> Marched<F> {
                 continue;
             }
             if let Some((t0, t1)) = clipped[i] {
-                let (origin, dir, spread) = (ray.origin.as_dvec3(), ray.dir.as_dvec3(), ray.spread as f64);
-                let seg = Segment { origin, dir, t0, t1, spread };
+                let seg = Segment::along(ray, t0, t1);
                 lanes[i] = Some(MarchLane::new(&seg, stats));
                 segs[i] = seg;
                 first.get_or_insert(i);

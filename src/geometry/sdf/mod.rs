@@ -357,7 +357,7 @@ fn merged_box(object: &Object) -> Option<Object> {
     } else {
         ObjectKind::Csg { op: CsgOp::Union, children: vec![bar] }
     };
-    Some(Object { kind, ..object.clone() })
+    Some(Object { kind, transform: object.transform, material: object.material, label: object.label.clone() })
 }
 
 impl SdfNode {
