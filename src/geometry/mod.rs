@@ -91,10 +91,11 @@ impl Ray {
     }
 }
 
-/// Rays per packet of [`Geometry::closest_hits`]: the width of an 8-wide f32 evaluation.
+/// Rays per packet: the width of an 8-wide f32 evaluation, the lanes a marched field runs
+/// side by side in [`Geometry::closest_hits`].
 pub const PACKET: usize = 8;
 
-/// [`Geometry::closest_hits`] as a loop of [`Geometry::closest_hit`] over the packet's rays:
+/// [`Geometry::closest_hits`] as a loop of [`Geometry::closest_hit`] over the batch's rays:
 /// the trait's default, and what an aggregate falls back to.
 pub fn closest_hits_one_by_one<G: Geometry + ?Sized>(
     g: &G,
@@ -112,7 +113,7 @@ pub fn closest_hits_one_by_one<G: Geometry + ?Sized>(
     }
 }
 
-/// [`Geometry::any_hits`] as a loop of [`Geometry::any_hit`] over the packet's rays not
+/// [`Geometry::any_hits`] as a loop of [`Geometry::any_hit`] over the batch's rays not
 /// yet occluded: the trait's default, and what an aggregate falls back to.
 pub fn any_hits_one_by_one<G: Geometry + ?Sized>(
     g: &G,
@@ -192,13 +193,14 @@ pub trait Geometry: Send + Sync {
     /// The closest hit with `t` in `[t_min, t_max]`, if any.
     fn closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit>;
 
-    /// The closest hits of a packet of up to [`PACKET`] rays (coherent primary rays):
-    /// for each lane `i`, a hit with `t` in `[t_min, t_max[i]]` nearer than any found so
-    /// far replaces `hits[i]` and lowers `t_max[i]` to its `t`, so calls over several
-    /// geometries compose into the nearest hit. Every lane's result is the one
-    /// [`Self::closest_hit`] gives for that ray alone (the contract suite checks it); the
-    /// default is exactly that loop, and marched fields override it to evaluate their
-    /// distance for eight points at once. `rays`, `t_max` and `hits` have the same length.
+    /// The closest hits of a batch of rays (any number; the tracer hands over a tile's
+    /// primary rays, packets of [`PACKET`] neighbours one after the other): for each ray
+    /// `i`, a hit with `t` in `[t_min, t_max[i]]` nearer than any found so far replaces
+    /// `hits[i]` and lowers `t_max[i]` to its `t`, so calls over several geometries compose
+    /// into the nearest hit. Every ray's result is the one [`Self::closest_hit`] gives for
+    /// that ray alone (the contract suite checks it); the default is exactly that loop, and
+    /// marched fields override it to evaluate their distance for eight points at once.
+    /// `rays`, `t_max` and `hits` have the same length.
     fn closest_hits(
         &self,
         rays: &[Ray],
@@ -222,12 +224,12 @@ pub trait Geometry: Send + Sync {
         self.closest_hit(ray, t_min, t_max, stats).is_some()
     }
 
-    /// [`Self::any_hit`] for a packet of up to [`PACKET`] rays (the shadow rays of a
-    /// primary packet towards one light): each lane not yet `occluded` becomes occluded
-    /// when [`Self::any_hit`] would say so for that ray alone, so calls over several
-    /// geometries compose. The default is that loop; marched fields override it to
-    /// evaluate their distance for eight points at once. `rays`, `t_max` and `occluded`
-    /// have the same length.
+    /// [`Self::any_hit`] for a batch of rays (any number: the shadow rays of a tile's
+    /// primary hits towards one light): each ray not yet `occluded` becomes occluded when
+    /// [`Self::any_hit`] would say so for that ray alone, so calls over several geometries
+    /// compose. The default is that loop; marched fields override it to evaluate their
+    /// distance for eight points at once. `rays`, `t_max` and `occluded` have the same
+    /// length.
     fn any_hits(&self, rays: &[Ray], t_min: f32, t_max: &[f32], occluded: &mut [bool], stats: &mut RayStats) {
         any_hits_one_by_one(self, rays, t_min, t_max, occluded, stats);
     }

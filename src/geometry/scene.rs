@@ -67,6 +67,26 @@ impl SceneGeometry {
         }
         Some((candidates, count))
     }
+    /// The closest hit among the bounded objects (front to back through the BVH).
+    fn bounded_closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
+        let mut best = None;
+        bvh2::traverse(&self.bvh, ray, t_min, t_max, stats, |prim, t_max, stats| {
+            Ok(self.leaf(prim).closest_hit(ray, t_min, t_max, stats).map(|h| {
+                let t = h.t;
+                best = Some(h);
+                t
+            }))
+        });
+        best
+    }
+
+    /// Whether any bounded object is hit (through the BVH, stopping at the first).
+    fn bounded_any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
+        bvh2::traverse_any(&self.bvh, ray, t_min, t_max, stats, |prim, t_max, stats| {
+            self.leaf(prim).any_hit(ray, t_min, t_max, stats)
+        })
+    }
+
     /// Builds the top-level BVH over `objects`.
     pub fn new(objects: Vec<Box<dyn Geometry>>) -> Self {
         let mut boxes = Vec::new();
@@ -163,27 +183,21 @@ impl Geometry for SceneGeometry {
                 best = Some(h);
             }
         }
-        bvh2::traverse(&self.bvh, ray, t_min, t_best, stats, |prim, t_max, stats| {
-            let obj = self.leaf(prim);
-            Ok(obj.closest_hit(ray, t_min, t_max, stats).map(|h| {
-                let t = h.t;
-                best = Some(h);
-                t
-            }))
-        });
-        best
+        self.bounded_closest_hit(ray, t_min, t_best, stats).or(best)
     }
 
     fn prefers_packets(&self) -> bool {
         self.packets
     }
 
-    /// Packets go ray by ray (front to back through the top-level BVH, as
-    /// [`Geometry::closest_hit`]) unless an object prefers packets. Then the BVH leaves
-    /// (objects or instances) that any ray of the packet reaches (up to
-    /// [`PACKET_CANDIDATES`]) and the unbounded objects each take the whole packet, nearest
-    /// hits composing through `t_max`; a scene with a single bounded leaf hands it the
-    /// packet without traversing the BVH (which could only test the leaf's own bounds).
+    /// Batches go ray by ray (front to back through the top-level BVH, as
+    /// [`Geometry::closest_hit`]) unless an object prefers packets. Then the unbounded
+    /// objects take the whole batch, and so does the bounded leaf of a scene with just one
+    /// (without a trip through the BVH, which could only test the leaf's own bounds).
+    /// Several bounded leaves take the batch in packets of [`PACKET`] consecutive rays:
+    /// each leaf (object or instance) that any ray of a packet reaches takes the whole
+    /// packet (up to [`PACKET_CANDIDATES`] leaves, else the packet goes ray by ray through
+    /// the BVH). Nearest hits compose through `t_max`.
     fn closest_hits(
         &self,
         rays: &[Ray],
@@ -192,66 +206,76 @@ impl Geometry for SceneGeometry {
         hits: &mut [Option<Hit>],
         stats: &mut RayStats,
     ) {
-        if rays.len() > PACKET || !self.prefers_packets() {
+        if !self.prefers_packets() {
             return closest_hits_one_by_one(self, rays, t_min, t_max, hits, stats);
         }
-        if self.bounded.len() == 1 {
-            // One bounded leaf: it takes the whole packet without a trip through the BVH
-            // (whose one box is the leaf's own bounds, which it clips each ray to anyway).
-            for &i in &self.unbounded {
-                self.objects[i as usize].closest_hits(rays, t_min, t_max, hits, stats);
-            }
-            return self.leaf(0).closest_hits(rays, t_min, t_max, hits, stats);
-        }
-        let Some((candidates, count)) =
-            self.packet_leaves(rays.iter().zip(t_max.iter().copied()), t_min, stats)
-        else {
-            return closest_hits_one_by_one(self, rays, t_min, t_max, hits, stats);
-        };
         for &i in &self.unbounded {
             self.objects[i as usize].closest_hits(rays, t_min, t_max, hits, stats);
         }
-        for &prim in &candidates[..count] {
-            self.leaf(prim).closest_hits(rays, t_min, t_max, hits, stats);
+        match self.bounded.len() {
+            0 => {}
+            1 => self.leaf(0).closest_hits(rays, t_min, t_max, hits, stats),
+            _ => {
+                let packets = rays.chunks(PACKET).zip(t_max.chunks_mut(PACKET)).zip(hits.chunks_mut(PACKET));
+                for ((rays, t_max), hits) in packets {
+                    let reach = rays.iter().zip(t_max.iter().copied());
+                    let Some((candidates, count)) = self.packet_leaves(reach, t_min, stats) else {
+                        for ((ray, t_max), hit) in rays.iter().zip(t_max.iter_mut()).zip(hits.iter_mut()) {
+                            if let Some(h) = self.bounded_closest_hit(ray, t_min, *t_max, stats) {
+                                (*t_max, *hit) = (h.t, Some(h));
+                            }
+                        }
+                        continue;
+                    };
+                    for &prim in &candidates[..count] {
+                        self.leaf(prim).closest_hits(rays, t_min, t_max, hits, stats);
+                    }
+                }
+            }
         }
     }
 
-    /// As [`Self::closest_hits`]: the bounded objects any live ray's box reaches (up to
-    /// [`PACKET_CANDIDATES`], else ray by ray), each asked for the whole packet.
+    /// As [`Self::closest_hits`], for the rays not yet occluded; a leaf is skipped once
+    /// every ray of its packet is.
     fn any_hits(&self, rays: &[Ray], t_min: f32, t_max: &[f32], occluded: &mut [bool], stats: &mut RayStats) {
-        if rays.len() > PACKET || !self.prefers_packets() {
+        if !self.prefers_packets() {
             return any_hits_one_by_one(self, rays, t_min, t_max, occluded, stats);
         }
         for &i in &self.unbounded {
             self.objects[i as usize].any_hits(rays, t_min, t_max, occluded, stats);
         }
-        if self.bounded.len() == 1 {
-            // One bounded leaf: the whole packet, as in `closest_hits`.
-            if !occluded.iter().all(|&o| o) {
-                self.leaf(0).any_hits(rays, t_min, t_max, occluded, stats);
+        match self.bounded.len() {
+            0 => {}
+            1 => {
+                if !occluded.iter().all(|&o| o) {
+                    self.leaf(0).any_hits(rays, t_min, t_max, occluded, stats);
+                }
             }
-            return;
-        }
-        let live =
-            rays.iter().zip(t_max.iter().copied()).zip(occluded.iter()).filter(|(_, o)| !**o).map(|(r, _)| r);
-        let Some((candidates, count)) = self.packet_leaves(live, t_min, stats) else {
-            return any_hits_one_by_one(self, rays, t_min, t_max, occluded, stats);
-        };
-        for &prim in &candidates[..count] {
-            if occluded.iter().all(|&o| o) {
-                break;
+            _ => {
+                let packets = rays.chunks(PACKET).zip(t_max.chunks(PACKET)).zip(occluded.chunks_mut(PACKET));
+                for ((rays, t_max), occluded) in packets {
+                    let live = rays.iter().zip(t_max.iter().copied()).zip(occluded.iter());
+                    let live = live.filter(|(_, o)| !**o).map(|(r, _)| r);
+                    let Some((candidates, count)) = self.packet_leaves(live, t_min, stats) else {
+                        for ((ray, &t_max), occluded) in rays.iter().zip(t_max).zip(occluded.iter_mut()) {
+                            *occluded = *occluded || self.bounded_any_hit(ray, t_min, t_max, stats);
+                        }
+                        continue;
+                    };
+                    for &prim in &candidates[..count] {
+                        if occluded.iter().all(|&o| o) {
+                            break;
+                        }
+                        self.leaf(prim).any_hits(rays, t_min, t_max, occluded, stats);
+                    }
+                }
             }
-            self.leaf(prim).any_hits(rays, t_min, t_max, occluded, stats);
         }
     }
 
     fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
-        if self.unbounded.iter().any(|&i| self.objects[i as usize].any_hit(ray, t_min, t_max, stats)) {
-            return true;
-        }
-        bvh2::traverse_any(&self.bvh, ray, t_min, t_max, stats, |prim, t_max, stats| {
-            self.leaf(prim).any_hit(ray, t_min, t_max, stats)
-        })
+        self.unbounded.iter().any(|&i| self.objects[i as usize].any_hit(ray, t_min, t_max, stats))
+            || self.bounded_any_hit(ray, t_min, t_max, stats)
     }
 
     /// Every object's bytes (shared data once) and the top-level structure's.

@@ -1,8 +1,9 @@
 //! Frame rendering: image tiles traced in parallel with rayon, deterministic output,
 //! frame statistics (time, rays per second, steps and nodes per ray), and PNG writing
 //! through a temporary file so a failed write never leaves a partial image.
-//! Primary rays go to the tracer in packets of eight (4x2 pixels), which marched geometry
-//! marches together; everything else traces them one by one.
+//! A tile's primary rays go to the tracer as one batch, in packets of eight (4x2 pixels)
+//! one after the other, which marched geometry marches eight at a time; everything else
+//! traces them one by one.
 
 pub mod tracer;
 
@@ -14,13 +15,14 @@ use image::RgbImage;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::geometry::{Geometry, PACKET, RayStats};
-use crate::render::tracer::Tracer;
+use crate::geometry::{Geometry, PACKET, Ray, RayStats};
+use crate::render::tracer::{BATCH, Tracer};
 use crate::scene::Scene;
 use crate::scene::camera::RayGenerator;
 
-/// Tile edge, pixels.
+/// Tile edge, pixels: a tile's primary rays are one batch of the tracer.
 const TILE: u32 = 16;
+const _: () = assert!((TILE * TILE) as usize <= BATCH);
 
 /// Width and height of a packet of primary rays, pixels (`PACKET_W * PACKET_H = PACKET`):
 /// a 4x2 block keeps the eight rays closer together than a row of eight.
@@ -82,29 +84,30 @@ pub fn render(scene: &Scene, geometry: &dyn Geometry) -> Frame {
             // The image-plane coordinates of the tile's columns and rows, once per tile.
             let us: [f32; TILE as usize] = std::array::from_fn(|x| rays.u(x0 + (x as u32).min(tw - 1)));
             let vs: [f32; TILE as usize] = std::array::from_fn(|y| rays.v(y0 + (y as u32).min(th - 1)));
-            // Primary rays in packets of PACKET_W x PACKET_H pixels (clipped at the tile's
-            // edge), which marched geometry traces together.
-            let mut colors = [Vec3::ZERO; PACKET];
+            // The tile's primary rays in packets of PACKET_W x PACKET_H pixels (clipped at
+            // the tile's edge), one packet after the other, traced as one batch: marched
+            // geometry marches them eight at a time.
+            let mut batch = [Ray::new(Vec3::ZERO, Vec3::Z); BATCH];
+            let mut pixel = [0u32; BATCH];
+            let mut n = 0;
             for py in (0..th).step_by(PACKET_H as usize) {
                 for pxx in (0..tw).step_by(PACKET_W as usize) {
                     let (mut u, mut v) = ([us[pxx as usize]; PACKET], [vs[py as usize]; PACKET]);
-                    let mut n = 0;
+                    let mut k = 0;
                     for y in py..(py + PACKET_H).min(th) {
                         for x in pxx..(pxx + PACKET_W).min(tw) {
-                            (u[n], v[n]) = (us[x as usize], vs[y as usize]);
-                            n += 1;
+                            (u[k], v[k], pixel[n + k]) = (us[x as usize], vs[y as usize], y * tw + x);
+                            k += 1;
                         }
                     }
-                    let rays_buf = rays.rays_uv8(&u, &v);
-                    tracer.trace_packet(&rays_buf[..n], &mut colors[..n], &mut stats);
-                    let mut i = 0;
-                    for y in py..(py + PACKET_H).min(th) {
-                        for x in pxx..(pxx + PACKET_W).min(tw) {
-                            px[(y * tw + x) as usize] = to_rgb8(colors[i]);
-                            i += 1;
-                        }
-                    }
+                    batch[n..n + k].copy_from_slice(&rays.rays_uv8(&u, &v)[..k]);
+                    n += k;
                 }
+            }
+            let mut colors = [Vec3::ZERO; BATCH];
+            tracer.trace_batch(&batch[..n], &mut colors[..n], &mut stats);
+            for (&p, &c) in pixel[..n].iter().zip(&colors[..n]) {
+                px[p as usize] = to_rgb8(c);
             }
             (tile, px, stats)
         })

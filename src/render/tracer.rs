@@ -5,15 +5,18 @@
 
 use glam::Vec3;
 
-use crate::geometry::{Geometry, Hit, PACKET, Ray, RayStats, max_abs};
+use crate::geometry::{Geometry, Hit, Ray, RayStats, max_abs};
 use crate::scene::{Light, Material, Scene};
 
 /// Contributions weighing less than this (a fraction of the pixel) are not traced.
 pub const MIN_CONTRIBUTION: f32 = 1.0 / 512.0;
 
-/// Lights whose shadow rays [`Tracer::trace_packet`] traces as packets; the shadow rays of
+/// Lights whose shadow rays [`Tracer::trace_batch`] traces as batches; the shadow rays of
 /// any further lights are traced one by one.
 pub const PACKET_LIGHTS: usize = 8;
+
+/// The most primary rays [`Tracer::trace_batch`] takes at once: a 16 x 16 pixel tile.
+pub const BATCH: usize = 256;
 
 /// Traces rays through one scene and geometry.
 pub struct Tracer<'a> {
@@ -21,7 +24,7 @@ pub struct Tracer<'a> {
     geometry: &'a dyn Geometry,
     ambient: f32,
     /// Whether any of the first [`PACKET_LIGHTS`] lights casts shadow rays (any but the
-    /// ambient light): else [`Tracer::trace_packet`] traces none.
+    /// ambient light): else [`Tracer::trace_batch`] traces none.
     casts_shadows: bool,
 }
 
@@ -50,25 +53,26 @@ impl<'a> Tracer<'a> {
         self.trace_rec(ray, self.scene.settings.max_depth, 1.0, stats)
     }
 
-    /// The colours seen along a packet of up to [`PACKET`] primary rays: their closest hits
-    /// found together ([`Geometry::closest_hits`]), then the shadow rays of those hits
-    /// towards each of the first [`PACKET_LIGHTS`] lights together
-    /// ([`Geometry::any_hits`]), then each hit shaded as [`Self::trace`] does (further
-    /// shadow rays and secondary rays one by one). `out[i]` is exactly `trace(&rays[i])`.
-    pub fn trace_packet(&self, rays: &[Ray], out: &mut [Vec3], stats: &mut RayStats) {
-        debug_assert!(rays.len() <= PACKET && out.len() == rays.len());
-        let n = rays.len().min(PACKET);
-        let mut t_max = [self.scene.settings.max_distance; PACKET];
-        let mut hits: [Option<Hit>; PACKET] = [None; PACKET];
+    /// The colours seen along a batch of up to [`BATCH`] primary rays (a tile's, packets
+    /// of neighbours one after the other): their closest hits found together
+    /// ([`Geometry::closest_hits`]), then the shadow rays of those hits towards each of the
+    /// first [`PACKET_LIGHTS`] lights together ([`Geometry::any_hits`]), then each hit
+    /// shaded as [`Self::trace`] does (further shadow rays and secondary rays one by one).
+    /// `out[i]` is exactly `trace(&rays[i])`.
+    pub fn trace_batch(&self, rays: &[Ray], out: &mut [Vec3], stats: &mut RayStats) {
+        debug_assert!(rays.len() <= BATCH && out.len() == rays.len());
+        let n = rays.len().min(BATCH);
+        let mut t_max = [self.scene.settings.max_distance; BATCH];
+        let mut hits: [Option<Hit>; BATCH] = [None; BATCH];
         stats.rays += n as u64;
         self.geometry.closest_hits(&rays[..n], 0.0, &mut t_max[..n], &mut hits[..n], stats);
         // occluded[i][l]: whether hit i's shadow ray towards light l is blocked (only read
         // where that ray exists, i.e. where the light is in front of the surface).
-        let mut occluded = [[false; PACKET_LIGHTS]; PACKET];
+        let mut occluded = [[false; PACKET_LIGHTS]; BATCH];
         // Shadow rays only towards lights that cast them, and only from hits.
         let shadows = self.casts_shadows && hits[..n].iter().any(Option::is_some);
         if shadows {
-            self.packet_shadows(rays, &hits, &mut occluded, stats);
+            self.batch_shadows(&rays[..n], &hits[..n], &mut occluded, stats);
         }
         let depth = self.scene.settings.max_depth;
         for i in 0..n {
@@ -79,26 +83,26 @@ impl<'a> Tracer<'a> {
         }
     }
 
-    /// The shadow rays of a packet's hits towards each of the first [`PACKET_LIGHTS`] lights
+    /// The shadow rays of a batch's hits towards each of the first [`PACKET_LIGHTS`] lights
     /// that cast shadows, traced together per light ([`Geometry::any_hits`]): sets
     /// `occluded[i][l]` where hit `i`'s ray towards light `l` is blocked.
-    fn packet_shadows(
+    fn batch_shadows(
         &self,
         rays: &[Ray],
-        hits: &[Option<Hit>; PACKET],
-        occluded: &mut [[bool; PACKET_LIGHTS]; PACKET],
+        hits: &[Option<Hit>],
+        occluded: &mut [[bool; PACKET_LIGHTS]; BATCH],
         stats: &mut RayStats,
     ) {
-        let n = rays.len().min(PACKET);
-        let frames: [Option<SurfaceFrame>; PACKET] =
+        let n = rays.len().min(BATCH);
+        let frames: [Option<SurfaceFrame>; BATCH] =
             std::array::from_fn(|i| hits.get(i).and_then(|h| h.as_ref()).map(|h| surface_frame(&rays[i], h)));
         for (l, light) in self.scene.lights.iter().take(PACKET_LIGHTS).enumerate() {
             if matches!(light, Light::Ambient { .. }) {
                 continue;
             }
-            let mut shadow = [Ray::new(Vec3::ZERO, Vec3::Z); PACKET];
-            let mut reach = [0.0f32; PACKET];
-            let mut lane_of = [0usize; PACKET];
+            let mut shadow = [Ray::new(Vec3::ZERO, Vec3::Z); BATCH];
+            let mut reach = [0.0f32; BATCH];
+            let mut lane_of = [0usize; BATCH];
             let mut m = 0;
             for (i, frame) in frames.iter().enumerate().take(n) {
                 let Some(f) = frame else { continue };
@@ -111,7 +115,7 @@ impl<'a> Tracer<'a> {
             if m == 0 {
                 continue;
             }
-            let mut blocked = [false; PACKET];
+            let mut blocked = [false; BATCH];
             self.geometry.any_hits(&shadow[..m], 0.0, &reach[..m], &mut blocked[..m], stats);
             for j in 0..m {
                 occluded[lane_of[j]][l] = blocked[j];
@@ -145,7 +149,7 @@ impl<'a> Tracer<'a> {
     }
 
     /// The colour of `hit` seen along `ray`. `occluded`, where the shadow rays of the
-    /// first [`PACKET_LIGHTS`] lights were traced already ([`Self::trace_packet`]), says
+    /// first [`PACKET_LIGHTS`] lights were traced already ([`Self::trace_batch`]), says
     /// which were blocked; other shadow rays are traced here.
     fn shade(
         &self,

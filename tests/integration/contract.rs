@@ -18,9 +18,10 @@
 //!   point computed in an object's frame and transformed back);
 //! - an interval ending before a hit or starting after it never returns that hit;
 //! - `bytes_used()` is positive and the same before and after tracing;
-//! - packets: `closest_hits` over up to 8 of these rays gives every lane exactly the hit
-//!   `closest_hit` gives for that ray alone (marched fields march packets with 8-wide
-//!   evaluations, the aggregate gathers the objects a packet reaches).
+//! - batches: `closest_hits` over 1 to 300 of these rays gives every ray exactly the hit
+//!   `closest_hit` gives for that ray alone, and `any_hits` the answer of `any_hit`
+//!   (marched fields march batches eight rays at a time, refilling lanes as marches end;
+//!   the aggregate gathers the objects a packet reaches).
 //!
 //! For the aggregate, its closest hit is also the nearest of its objects' closest hits.
 
@@ -429,17 +430,23 @@ fn check_geometry(what: &str, g: &dyn Geometry, marched: bool, centre: Vec3, siz
     hits
 }
 
-/// `closest_hits` on packets of up to 8 consecutive rays (sharing `t_min`) agrees lane by
-/// lane, exactly, with `closest_hit`; a packet's lanes may start with hits already found
-/// (a `t_max` lowered by another geometry), which a farther hit must not replace.
+/// Sizes of the batches [`check_packets`] hands over, in turn: a packet, a lone ray,
+/// batches that end part-way through a packet, and one longer than the tracer's tile.
+const BATCH_SIZES: [usize; 6] = [8, 1, 23, 64, 5, 300];
+
+/// `closest_hits` on batches of consecutive rays (sharing `t_min`, sizes
+/// [`BATCH_SIZES`]) agrees ray by ray, exactly, with `closest_hit`; a batch's rays may
+/// start with hits already found (a `t_max` lowered by another geometry), which a farther
+/// hit must not replace.
 fn check_packets(what: &str, g: &dyn Geometry, queue: &[(Ray, f32, f32)]) {
     let mut stats = RayStats::default();
     let mut start = 0;
     let mut packets = 0;
     while start < queue.len() {
         let t_min = queue[start].1;
+        let size = BATCH_SIZES[packets % BATCH_SIZES.len()];
         let mut end = start + 1;
-        while end < queue.len() && end - start < 8 && queue[end].1 == t_min {
+        while end < queue.len() && end - start < size && queue[end].1 == t_min {
             end += 1;
         }
         let chunk = &queue[start..end];
@@ -448,7 +455,7 @@ fn check_packets(what: &str, g: &dyn Geometry, queue: &[(Ray, f32, f32)]) {
         let expect: Vec<Option<Hit>> =
             chunk.iter().map(|c| g.closest_hit(&c.0, c.1, c.2, &mut stats)).collect();
         let mut hits = vec![None; chunk.len()];
-        // Every third packet: lane 0 already holds a nearer hit from elsewhere.
+        // Every third batch: its first ray already holds a nearer hit from elsewhere.
         let sentinel = (packets % 3 == 2).then(|| expect[0].map(|h| Hit { t: h.t * 0.5, ..h })).flatten();
         if let Some(h) = sentinel {
             t_max[0] = h.t;
@@ -458,15 +465,18 @@ fn check_packets(what: &str, g: &dyn Geometry, queue: &[(Ray, f32, f32)]) {
         for (i, (got, want)) in hits.iter().zip(&expect).enumerate() {
             let want = if i == 0 && sentinel.is_some() { &sentinel } else { want };
             assert_eq!(
-                got, want,
-                "{what}: packet lane {i} of ray {:?} dir {:?}",
-                rays[i].origin, rays[i].dir
+                got,
+                want,
+                "{what}: batch ray {i} of {} at {:?} dir {:?}",
+                rays.len(),
+                rays[i].origin,
+                rays[i].dir
             );
             if let Some(h) = got {
-                assert_eq!(t_max[i], h.t, "{what}: packet lane {i}: t_max not lowered to the hit");
+                assert_eq!(t_max[i], h.t, "{what}: batch ray {i}: t_max not lowered to the hit");
             }
         }
-        // The same packet as shadow rays: any_hits equals any_hit lane by lane, and a lane
+        // The same batch as shadow rays: any_hits equals any_hit ray by ray, and a ray
         // already occluded (every fourth) stays so and is not traced.
         let reach: Vec<f32> = chunk.iter().map(|c| c.2).collect();
         let want: Vec<bool> = chunk.iter().map(|c| g.any_hit(&c.0, c.1, c.2, &mut stats)).collect();
@@ -474,12 +484,7 @@ fn check_packets(what: &str, g: &dyn Geometry, queue: &[(Ray, f32, f32)]) {
         let before = occluded.clone();
         g.any_hits(&rays, t_min, &reach, &mut occluded, &mut stats);
         for i in 0..chunk.len() {
-            assert_eq!(
-                occluded[i],
-                want[i] || before[i],
-                "{what}: shadow packet lane {i} of ray {:?}",
-                rays[i]
-            );
+            assert_eq!(occluded[i], want[i] || before[i], "{what}: shadow batch ray {i} of {:?}", rays[i]);
         }
         packets += 1;
         start = end;

@@ -12,9 +12,11 @@ pub mod prune;
 pub mod tape;
 
 use crate::geometry::march::MarchParams;
-use crate::geometry::marched::{DistanceField, Marched};
+use crate::geometry::marched::{DistanceField, Marched, WIDE, distance32_by_packets, ray_points32};
 use crate::geometry::scene::SceneGeometry;
-use crate::geometry::{Census, Geometry, Hit, Ray, RayStats, distance_by_projection, f32_error, max_abs};
+use crate::geometry::{
+    Census, Geometry, Hit, PACKET, Ray, RayStats, distance_by_projection, f32_error, max_abs,
+};
 use crate::scene::shape::grow;
 use glam::{DVec2, DVec3, UVec3, Vec3};
 
@@ -646,6 +648,33 @@ impl SdfField {
         })
     }
 
+    /// The tape at 32 world points (four packets of eight): one 32-lane evaluation
+    /// ([`tape::Tape::eval32_ops`]) where all of them fall in one region (or there are no
+    /// regions), else each packet as [`SdfField::eval_tape8`] does it; every lane gets
+    /// what [`SdfField::eval_tape`] gives at its point alone.
+    #[inline]
+    fn eval_tape32(&self, tape: &tape::Tape, points: &[DVec3; WIDE]) -> [f32; WIDE] {
+        let rel: [Vec3; WIDE] = std::array::from_fn(|i| tape.relative(points[i]));
+        let cell = self.region(rel[0]);
+        if self.regions.is_some() && rel.iter().any(|&r| self.region(r) != cell) {
+            let mut out = [0.0; WIDE];
+            for (g, packet) in points.chunks_exact(PACKET).enumerate() {
+                out[g * PACKET..(g + 1) * PACKET].copy_from_slice(&self.eval_tape8(tape, packet));
+            }
+            return out;
+        }
+        let lanes = |a: usize| -> [[f32; 8]; 4] {
+            std::array::from_fn(|g| std::array::from_fn(|l| rel[8 * g + l][a]))
+        };
+        let (xs, ys, zs) = (lanes(0), lanes(1), lanes(2));
+        let d = SCRATCH.with(|s| {
+            let mut s = s.borrow_mut();
+            s.fit(tape);
+            tape.eval32_ops(self.ops_in(tape, cell), &xs, &ys, &zs, &mut s)
+        });
+        std::array::from_fn(|i| d[i / 8][i % 8])
+    }
+
     /// The tape's distance at world point `p` (f32, widened), running the shortened tape
     /// of its region. With AVX2 this is one lane of an 8-wide evaluation: the same value
     /// bit for bit (see [`tape`]), and faster than the scalar interpreter, whose chains of
@@ -809,6 +838,13 @@ impl DistanceField for SdfField {
         self.tape.is_some()
     }
 
+    /// Not where the tape is pruned by region: lanes refilled as marches end march at
+    /// different depths, so a packet falls in more regions, each evaluated on its own
+    /// (measured: a smooth union of 64 spheres took 13% more instructions per frame).
+    fn refills_lanes(&self) -> bool {
+        self.regions.is_none()
+    }
+
     fn distance8_within(&self, points: &[DVec3; 8], tolerances: &[f64; 8]) -> [f64; 8] {
         let Some(tape) = self.tape.as_ref() else {
             return points.map(|p| self.tree.distance(p));
@@ -816,6 +852,24 @@ impl DistanceField for SdfField {
         // Each lane decides as `distance_within` at its point alone; the tape's lanes equal
         // its scalar values bit for bit.
         let d = self.eval_tape8(tape, points);
+        std::array::from_fn(|i| self.choose(points[i], tolerances[i], |_| d[i] as f64))
+    }
+
+    /// All four packets in one 32-lane tape evaluation ([`SdfField::eval_tape32`]); each
+    /// lane decides as `distance_within` at its point alone.
+    fn distance32_rays(
+        &self,
+        origin: &[[f64; WIDE]; 3],
+        dir: &[[f64; WIDE]; 3],
+        t: &[f64; WIDE],
+        tolerances: &[f64; WIDE],
+        packets: u32,
+    ) -> [f64; WIDE] {
+        let Some(tape) = self.tape.as_ref().filter(|_| packets == 0b1111) else {
+            return distance32_by_packets(self, origin, dir, t, tolerances, packets);
+        };
+        let points = ray_points32(origin, dir, t);
+        let d = self.eval_tape32(tape, &points);
         std::array::from_fn(|i| self.choose(points[i], tolerances[i], |_| d[i] as f64))
     }
 

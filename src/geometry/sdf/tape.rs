@@ -502,6 +502,9 @@ pub struct TapeScratch {
     pts: Vec<[f32; 3]>,
     vals8: Vec<F8>,
     pts8: Vec<[F8; 3]>,
+    /// Four packets' registers for [`Tape::eval32_ops`].
+    vals32: Vec<[F8; 4]>,
+    pts32: Vec<[[F8; 4]; 3]>,
 }
 
 impl TapeScratch {
@@ -512,6 +515,8 @@ impl TapeScratch {
             pts: vec![[0.0; 3]; tape.points],
             vals8: vec![F8([0.0; 8]); tape.vals],
             pts8: vec![[F8([0.0; 8]); 3]; tape.points],
+            vals32: vec![[F8([0.0; 8]); 4]; tape.vals],
+            pts32: vec![[[F8([0.0; 8]); 4]; 3]; tape.points],
         }
     }
 
@@ -525,6 +530,8 @@ impl TapeScratch {
                 pts: vec![[0.0; 3]; points],
                 vals8: vec![F8([0.0; 8]); vals],
                 pts8: vec![[F8([0.0; 8]); 3]; points],
+                vals32: vec![[F8([0.0; 8]); 4]; vals],
+                pts32: vec![[[F8([0.0; 8]); 4]; 3]; points],
             };
         }
     }
@@ -667,6 +674,27 @@ impl Tape {
         self.eval8_portable_ops(ops, xs, ys, zs, scratch)
     }
 
+    /// [`Tape::eval8_ops`] for four packets of eight points at once (`xs[g][l]` is lane `l`
+    /// of packet `g`): each operation is dispatched once for all 32 lanes, which with AVX2
+    /// run as four independent 8-wide chains. Packet `g` of the result equals
+    /// `eval8_ops` on packet `g` bit for bit (the same operations lane by lane).
+    #[inline]
+    pub fn eval32_ops(
+        &self,
+        ops: Ops,
+        xs: &[[f32; 8]; 4],
+        ys: &[[f32; 8]; 4],
+        zs: &[[f32; 8]; 4],
+        scratch: &mut TapeScratch,
+    ) -> [[f32; 8]; 4] {
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx2() {
+            // SAFETY: the CPU has AVX2 and FMA (checked just above).
+            return unsafe { self.eval32_avx2(ops, xs, ys, zs, scratch) };
+        }
+        std::array::from_fn(|g| self.eval8_portable_ops(ops, &xs[g], &ys[g], &zs[g], scratch))
+    }
+
     /// The portable build of [`Tape::eval8`] (eight-lane arrays the compiler vectorises for
     /// the baseline target); same results.
     pub fn eval8_portable(
@@ -703,6 +731,21 @@ impl Tape {
         use avx::{A8, cast, cast3};
         let p = [A8::load(xs), A8::load(ys), A8::load(zs)];
         run_ops!(ops, &self.triangles, cast(&mut scratch.vals8), cast3(&mut scratch.pts8), p).store()
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn eval32_avx2(
+        &self,
+        ops: Ops,
+        xs: &[[f32; 8]; 4],
+        ys: &[[f32; 8]; 4],
+        zs: &[[f32; 8]; 4],
+        scratch: &mut TapeScratch,
+    ) -> [[f32; 8]; 4] {
+        use avx::{A8x4, cast4, cast4x3};
+        let p = [A8x4::load(xs), A8x4::load(ys), A8x4::load(zs)];
+        run_ops!(ops, &self.triangles, cast4(&mut scratch.vals32), cast4x3(&mut scratch.pts32), p).store()
     }
 }
 
@@ -1256,6 +1299,110 @@ mod avx {
             A8(unsafe { _mm256_blendv_ps(y.0, x.0, _mm256_cmp_ps::<_CMP_LT_OQ>(a.0, b.0)) })
         }
     }
+
+    /// Four [`A8`]s run alike: four packets of a tape evaluation with one dispatch per
+    /// operation ([`super::Tape::eval32_ops`]). Each packet's lanes get exactly the
+    /// operations of an [`A8`] evaluation.
+    #[derive(Clone, Copy, Debug)]
+    #[repr(transparent)]
+    pub(super) struct A8x4([A8; 4]);
+
+    /// The value registers of a four-packet [`F8`] scratch as [`A8x4`]s.
+    #[inline(always)]
+    pub(super) fn cast4(v: &mut [[F8; 4]]) -> &mut [A8x4] {
+        const { assert!(size_of::<[F8; 4]>() == size_of::<A8x4>() && align_of::<F8>() >= align_of::<A8x4>()) };
+        // SAFETY: as in `cast`, four of them in a row.
+        unsafe { std::slice::from_raw_parts_mut(v.as_mut_ptr().cast(), v.len()) }
+    }
+
+    /// The point registers of a four-packet [`F8`] scratch as [`A8x4`]s.
+    #[inline(always)]
+    pub(super) fn cast4x3(v: &mut [[[F8; 4]; 3]]) -> &mut [[A8x4; 3]] {
+        // SAFETY: as in `cast`, twelve of them in a row.
+        unsafe { std::slice::from_raw_parts_mut(v.as_mut_ptr().cast(), v.len()) }
+    }
+
+    impl A8x4 {
+        #[inline(always)]
+        pub(super) fn load(x: &[[f32; 8]; 4]) -> A8x4 {
+            A8x4([A8::load(&x[0]), A8::load(&x[1]), A8::load(&x[2]), A8::load(&x[3])])
+        }
+        #[inline(always)]
+        pub(super) fn store(self) -> [[f32; 8]; 4] {
+            [self.0[0].store(), self.0[1].store(), self.0[2].store(), self.0[3].store()]
+        }
+    }
+
+    /// `$f` of [`A8`] on each packet, written out (a closure would be compiled without
+    /// AVX, and its intrinsics called rather than inlined).
+    macro_rules! each {
+        ($f:expr, $a:expr) => {
+            A8x4([$f($a.0[0]), $f($a.0[1]), $f($a.0[2]), $f($a.0[3])])
+        };
+        ($f:expr, $a:expr, $b:expr) => {
+            A8x4([$f($a.0[0], $b.0[0]), $f($a.0[1], $b.0[1]), $f($a.0[2], $b.0[2]), $f($a.0[3], $b.0[3])])
+        };
+    }
+
+    macro_rules! binary4 {
+        ($tr:ident, $f:ident) => {
+            impl $tr for A8x4 {
+                type Output = A8x4;
+                #[inline(always)]
+                fn $f(self, b: A8x4) -> A8x4 {
+                    each!(<A8 as $tr>::$f, self, b)
+                }
+            }
+        };
+    }
+    binary4!(Add, add);
+    binary4!(Sub, sub);
+    binary4!(Mul, mul);
+    binary4!(Div, div);
+
+    impl Neg for A8x4 {
+        type Output = A8x4;
+        #[inline(always)]
+        fn neg(self) -> A8x4 {
+            each!(<A8 as Neg>::neg, self)
+        }
+    }
+
+    impl Lane for A8x4 {
+        #[inline(always)]
+        fn splat(x: f32) -> Self {
+            A8x4([A8::splat(x); 4])
+        }
+        #[inline(always)]
+        fn vsqrt(self) -> Self {
+            each!(A8::vsqrt, self)
+        }
+        #[inline(always)]
+        fn vabs(self) -> Self {
+            each!(A8::vabs, self)
+        }
+        #[inline(always)]
+        fn vfloor(self) -> Self {
+            each!(A8::vfloor, self)
+        }
+        #[inline(always)]
+        fn vmin(self, b: Self) -> Self {
+            each!(A8::vmin, self, b)
+        }
+        #[inline(always)]
+        fn vmax(self, b: Self) -> Self {
+            each!(A8::vmax, self, b)
+        }
+        #[inline(always)]
+        fn select_lt(a: Self, b: Self, x: Self, y: Self) -> Self {
+            A8x4([
+                A8::select_lt(a.0[0], b.0[0], x.0[0], y.0[0]),
+                A8::select_lt(a.0[1], b.0[1], x.0[1], y.0[1]),
+                A8::select_lt(a.0[2], b.0[2], x.0[2], y.0[2]),
+                A8::select_lt(a.0[3], b.0[3], x.0[3], y.0[3]),
+            ])
+        }
+    }
 }
 
 type P<L> = [L; 3];
@@ -1308,6 +1455,13 @@ fn segment2<L: Lane>(v: [f32; 3], w: P<L>, inv_vv: f32) -> L {
     dot(d, d)
 }
 
+/// Row `r` of an affine map applied to `q`. A function rather than a closure in [`run`]:
+/// a closure is compiled on its own, without the AVX2 of the function it is inlined into.
+#[inline(always)]
+fn affine_row<L: Lane>(r: [f32; 4], q: P<L>) -> L {
+    L::splat(r[0]) * q[0] + L::splat(r[1]) * q[1] + L::splat(r[2]) * q[2] + L::splat(r[3])
+}
+
 /// Runs the tape over lanes `L`: the input point in point register 0, the result in value
 /// register 0.
 #[inline(always)]
@@ -1327,10 +1481,7 @@ fn run<'a, L: Lane>(
             }
             Op::Affine { src, dst, m } => {
                 let q = pts[src as usize];
-                let row = |r: [f32; 4]| {
-                    L::splat(r[0]) * q[0] + L::splat(r[1]) * q[1] + L::splat(r[2]) * q[2] + L::splat(r[3])
-                };
-                pts[dst as usize] = [row(m[0]), row(m[1]), row(m[2])];
+                pts[dst as usize] = [affine_row(m[0], q), affine_row(m[1], q), affine_row(m[2], q)];
             }
             Op::Sphere { p, t, out, radius, scale } => {
                 let q = pts[p as usize];
@@ -1604,6 +1755,13 @@ mod tests {
             let zs = std::array::from_fn(|l| chunk[l].z);
             let wide = tape.eval8(&xs, &ys, &zs, &mut scratch);
             let portable = tape.eval8_portable(&xs, &ys, &zs, &mut scratch);
+            // The same packet as each of four in a 32-lane evaluation, beside other points.
+            let shift = |a: &[f32; 8], g: usize| a.map(|x| x * (1.0 - 0.1 * g as f32));
+            let four = |a: &[f32; 8]| std::array::from_fn(|g| if g == 2 { *a } else { shift(a, g) });
+            let wider =
+                tape.eval32_ops(Ops::All(tape.ops()), &four(&xs), &four(&ys), &four(&zs), &mut scratch);
+            let bits = |a: [f32; 8]| a.map(f32::to_bits);
+            assert_eq!(bits(wider[2]), bits(wide), "packet 2 of 4");
             for (l, &p) in chunk.iter().enumerate() {
                 let d = tape.eval(p, &mut scratch);
                 assert_eq!(d.to_bits(), wide[l].to_bits(), "lane {l} at {p}");
