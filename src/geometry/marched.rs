@@ -38,9 +38,16 @@ pub fn ray_points8(origin: &[[f64; 8]; 3], dir: &[[f64; 8]; 3], t: &[f64; 8]) ->
 /// [`DistanceField::distance32_rays`].
 pub const WIDE: usize = 4 * PACKET;
 
+/// Rays by component for [`DistanceField::distance32_rays`]: `[a][l]` is component `a`
+/// of lane `l` (lane `l % 8` of packet `l / 8`).
+pub type Rays32 = [[f64; WIDE]; 3];
+
+/// One number per lane for [`DistanceField::distance32_rays`].
+pub type Lanes32 = [f64; WIDE];
+
 /// [`ray_points8`] for [`WIDE`] rays.
 #[inline]
-pub fn ray_points32(origin: &[[f64; WIDE]; 3], dir: &[[f64; WIDE]; 3], t: &[f64; WIDE]) -> [DVec3; WIDE] {
+pub fn ray_points32(origin: &Rays32, dir: &Rays32, t: &Lanes32) -> [DVec3; WIDE] {
     std::array::from_fn(|l| {
         DVec3::new(origin[0][l], origin[1][l], origin[2][l])
             + DVec3::new(dir[0][l], dir[1][l], dir[2][l]) * t[l]
@@ -49,23 +56,24 @@ pub fn ray_points32(origin: &[[f64; WIDE]; 3], dir: &[[f64; WIDE]; 3], t: &[f64;
 
 /// [`DistanceField::distance32_rays`] packet by packet: [`DistanceField::distance8_rays`]
 /// for each packet `g` with bit `g` of `packets` set (the others' values are 0, unused).
-pub fn distance32_by_packets<F: DistanceField + ?Sized>(
+pub fn distance32_by_packets<F>(
     field: &F,
-    origin: &[[f64; WIDE]; 3],
-    dir: &[[f64; WIDE]; 3],
-    t: &[f64; WIDE],
-    tolerances: &[f64; WIDE],
+    o: &Rays32,
+    d: &Rays32,
+    t: &Lanes32,
+    tol: &Lanes32,
     packets: u32,
-) -> [f64; WIDE] {
+) -> Lanes32
+where
+    F: DistanceField + ?Sized,
+{
     let mut out = [0.0; WIDE];
     for g in 0..WIDE / PACKET {
         if packets & (1 << g) == 0 {
             continue;
         }
         let part = |a: &[f64; WIDE]| -> [f64; PACKET] { std::array::from_fn(|l| a[PACKET * g + l]) };
-        let o = [part(&origin[0]), part(&origin[1]), part(&origin[2])];
-        let d = [part(&dir[0]), part(&dir[1]), part(&dir[2])];
-        let v = field.distance8_rays(&o, &d, &part(t), &part(tolerances));
+        let v = field.distance8_rays(&o.each_ref().map(part), &d.each_ref().map(part), &part(t), &part(tol));
         out[PACKET * g..PACKET * (g + 1)].copy_from_slice(&v);
     }
     out
@@ -124,20 +132,13 @@ pub trait DistanceField: Send + Sync {
     }
 
     /// [`Self::distance8_rays`] for four packets at once (lane `8 g + l` is lane `l` of
-    /// packet `g`), for the packets `g` whose bit is set in `packets`; the other packets'
-    /// values are not used. A field that evaluates 32 lanes faster than four packets of
+    /// packet `g`: rays `o`, `d` at `t` to within `tol`), for the packets `g` whose bit is
+    /// set in `packets`; the other packets' values are not used. A field that evaluates 32 lanes faster than four packets of
     /// eight overrides it; the default evaluates each packet asked for
     /// ([`distance32_by_packets`]).
     #[inline]
-    fn distance32_rays(
-        &self,
-        origin: &[[f64; WIDE]; 3],
-        dir: &[[f64; WIDE]; 3],
-        t: &[f64; WIDE],
-        tolerances: &[f64; WIDE],
-        packets: u32,
-    ) -> [f64; WIDE] {
-        distance32_by_packets(self, origin, dir, t, tolerances, packets)
+    fn distance32_rays(&self, o: &Rays32, d: &Rays32, t: &Lanes32, tol: &Lanes32, packets: u32) -> Lanes32 {
+        distance32_by_packets(self, o, d, t, tol, packets)
     }
 
     /// Whether a packet lane whose march ends takes the next ray of the batch at once
@@ -288,7 +289,8 @@ impl<F: DistanceField> Marched<F> {
         (hit.t >= t_min as f64 && hit.t <= t_max as f64).then_some(hit)
     }
 
-    /// Marches the rays `rays[i]` with `live(i)` over `[t_min, reach(i)]` side by side, one
+    /// Marches the rays `rays[i]` over `[t_min, reach(i)]` (none where `reach(i)` is
+    /// `None`) side by side, one
     /// field evaluation per step for all lanes. A field that refills lanes
     /// ([`DistanceField::refills_lanes`]) marches [`WIDE`] lanes, four packets evaluated
     /// together ([`DistanceField::distance32_rays`]), and a lane whose march ends takes the
@@ -297,14 +299,13 @@ impl<F: DistanceField> Marched<F> {
     /// last lane is done before it takes the next rays. Each lane takes the steps of its
     /// own scalar march ([`MarchLane`]), so it converges where [`Marched::march`] does for
     /// that ray alone, and `on_hit(i, hit, stats)` is called for each ray whose march
-    /// converges within `[t_min, reach(i)]`, in the order the marches end. `live` and
-    /// `reach` of ray `i` are read before its march starts.
+    /// converges within `[t_min, reach(i)]`, in the order the marches end. `reach(i)` is read
+    /// before ray `i`'s march starts.
     fn march_batch(
         &self,
         rays: &[Ray],
         t_min: f32,
-        reach: impl Fn(usize) -> f32,
-        live: impl Fn(usize) -> bool,
+        reach: impl Fn(usize) -> Option<f32>,
         stats: &mut RayStats,
         on_hit: impl FnMut(usize, MarchHit, &mut RayStats),
     ) {
@@ -313,10 +314,10 @@ impl<F: DistanceField> Marched<F> {
         if self.field.refills_lanes() && rays.len() > PACKET {
             let eval =
                 |o: &_, d: &_, t: &_, tol: &_, packets| self.field.distance32_rays(o, d, t, tol, packets);
-            self.march_lanes::<WIDE>(rays, t_min, reach, live, stats, on_hit, true, eval);
+            self.march_lanes::<WIDE>(rays, t_min, reach, stats, on_hit, true, eval);
         } else {
             let eval = |o: &_, d: &_, t: &_, tol: &_, _| self.field.distance8_rays(o, d, t, tol);
-            self.march_lanes::<PACKET>(rays, t_min, reach, live, stats, on_hit, false, eval);
+            self.march_lanes::<PACKET>(rays, t_min, reach, stats, on_hit, false, eval);
         }
     }
 
@@ -329,8 +330,7 @@ impl<F: DistanceField> Marched<F> {
         &self,
         rays: &[Ray],
         t_min: f32,
-        reach: impl Fn(usize) -> f32,
-        live: impl Fn(usize) -> bool,
+        reach: impl Fn(usize) -> Option<f32>,
         stats: &mut RayStats,
         mut on_hit: impl FnMut(usize, MarchHit, &mut RayStats),
         refill: bool,
@@ -350,7 +350,7 @@ impl<F: DistanceField> Marched<F> {
         let mut t = [0.0; W];
         let mut tolerances = [f64::INFINITY; W];
         // The rays are clipped to the bounds eight at a time ([`Marched::segments8`]) as the
-        // lanes reach them: `ready` has bit `k` set where ray `chunk + k` is live, has a
+        // lanes reach them: `ready` has bit `k` set where ray `chunk + k` is asked for, has a
         // segment and waits for a lane; `next` is the first ray not clipped yet. `idle`
         // has bit `l` set where lane `l` (of the `all` in use) marches nothing.
         let all: u32 = if refill { u32::MAX >> (32 - W) } else { (1 << PACKET) - 1 };
@@ -364,10 +364,12 @@ impl<F: DistanceField> Marched<F> {
                             break;
                         }
                         let end = (next + PACKET).min(rays.len());
-                        ends = std::array::from_fn(|k| if next + k < end { reach(next + k) } else { 0.0 });
+                        let asked: [Option<f32>; PACKET] =
+                            std::array::from_fn(|k| if next + k < end { reach(next + k) } else { None });
+                        ends = asked.map(|e| e.unwrap_or(0.0));
                         clipped = self.segments8(&rays[next..end], t_min, &ends);
-                        for (k, c) in clipped.iter().enumerate().take(end - next) {
-                            if c.is_some() && live(next + k) {
+                        for (k, c) in clipped.iter().enumerate() {
+                            if c.is_some() && asked[k].is_some() {
                                 ready |= 1 << k;
                             }
                         }
@@ -522,8 +524,7 @@ impl<F: DistanceField> Geometry for Marched<F> {
             let (a, b) = self.hit2((&rays[j], first), (&rays[i], mh), stats);
             (hits[j], hits[i]) = (Some(a), Some(b));
         };
-        let reach = |i: usize| t_max[i];
-        self.march_batch(rays, t_min, reach, |_| true, stats, &mut record);
+        self.march_batch(rays, t_min, |i| Some(t_max[i]), stats, &mut record);
         if let Some((j, mh)) = pending {
             hits[j] = Some(self.hit(&rays[j], mh, stats));
         }
@@ -543,14 +544,8 @@ impl<F: DistanceField> Geometry for Marched<F> {
         // Read when a lane takes a ray, set when its march converges: cells, so that both
         // closures can hold them.
         let occluded = std::cell::Cell::from_mut(occluded).as_slice_of_cells();
-        self.march_batch(
-            rays,
-            t_min,
-            |i| t_max[i],
-            |i| !occluded[i].get(),
-            stats,
-            |i, _, _| occluded[i].set(true),
-        );
+        let reach = |i: usize| (!occluded[i].get()).then_some(t_max[i]);
+        self.march_batch(rays, t_min, reach, stats, |i, _, _| occluded[i].set(true));
     }
 
     fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {

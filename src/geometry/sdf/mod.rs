@@ -12,7 +12,9 @@ pub mod prune;
 pub mod tape;
 
 use crate::geometry::march::MarchParams;
-use crate::geometry::marched::{DistanceField, Marched, WIDE, distance32_by_packets, ray_points32};
+use crate::geometry::marched::{
+    DistanceField, Lanes32, Marched, Rays32, WIDE, distance32_by_packets, ray_points32,
+};
 use crate::geometry::scene::SceneGeometry;
 use crate::geometry::{
     Census, Geometry, Hit, PACKET, Ray, RayStats, distance_by_projection, f32_error, max_abs,
@@ -857,20 +859,13 @@ impl DistanceField for SdfField {
 
     /// All four packets in one 32-lane tape evaluation ([`SdfField::eval_tape32`]); each
     /// lane decides as `distance_within` at its point alone.
-    fn distance32_rays(
-        &self,
-        origin: &[[f64; WIDE]; 3],
-        dir: &[[f64; WIDE]; 3],
-        t: &[f64; WIDE],
-        tolerances: &[f64; WIDE],
-        packets: u32,
-    ) -> [f64; WIDE] {
+    fn distance32_rays(&self, o: &Rays32, d: &Rays32, t: &Lanes32, tol: &Lanes32, packets: u32) -> Lanes32 {
         let Some(tape) = self.tape.as_ref().filter(|_| packets == 0b1111) else {
-            return distance32_by_packets(self, origin, dir, t, tolerances, packets);
+            return distance32_by_packets(self, o, d, t, tol, packets);
         };
-        let points = ray_points32(origin, dir, t);
-        let d = self.eval_tape32(tape, &points);
-        std::array::from_fn(|i| self.choose(points[i], tolerances[i], |_| d[i] as f64))
+        let points = ray_points32(o, d, t);
+        let v = self.eval_tape32(tape, &points);
+        std::array::from_fn(|i| self.choose(points[i], tol[i], |_| v[i] as f64))
     }
 
     fn distance4_within(&self, points: &[DVec3; 4], tolerance: f64) -> [f64; 4] {

@@ -435,6 +435,10 @@ pub enum Ops<'a> {
     },
 }
 
+/// One coordinate (or value) of four packets of eight points, for [`Tape::eval32_ops`]:
+/// `[g][l]` is lane `l` of packet `g`.
+pub type X32 = [[f32; 8]; 4];
+
 /// Runs `$ops` ([`Ops`]) through [`run`] with the rest of the arguments.
 macro_rules! run_ops {
     ($ops:expr, $($rest:expr),*) => {
@@ -679,14 +683,7 @@ impl Tape {
     /// run as four independent 8-wide chains. Packet `g` of the result equals
     /// `eval8_ops` on packet `g` bit for bit (the same operations lane by lane).
     #[inline]
-    pub fn eval32_ops(
-        &self,
-        ops: Ops,
-        xs: &[[f32; 8]; 4],
-        ys: &[[f32; 8]; 4],
-        zs: &[[f32; 8]; 4],
-        scratch: &mut TapeScratch,
-    ) -> [[f32; 8]; 4] {
+    pub fn eval32_ops(&self, ops: Ops, xs: &X32, ys: &X32, zs: &X32, scratch: &mut TapeScratch) -> X32 {
         #[cfg(target_arch = "x86_64")]
         if crate::simd::avx2() {
             // SAFETY: the CPU has AVX2 and FMA (checked just above).
@@ -735,14 +732,7 @@ impl Tape {
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    fn eval32_avx2(
-        &self,
-        ops: Ops,
-        xs: &[[f32; 8]; 4],
-        ys: &[[f32; 8]; 4],
-        zs: &[[f32; 8]; 4],
-        scratch: &mut TapeScratch,
-    ) -> [[f32; 8]; 4] {
+    fn eval32_avx2(&self, ops: Ops, xs: &X32, ys: &X32, zs: &X32, scratch: &mut TapeScratch) -> X32 {
         use avx::{A8x4, cast4, cast4x3};
         let p = [A8x4::load(xs), A8x4::load(ys), A8x4::load(zs)];
         run_ops!(ops, &self.triangles, cast4(&mut scratch.vals32), cast4x3(&mut scratch.pts32), p).store()
@@ -1324,11 +1314,11 @@ mod avx {
 
     impl A8x4 {
         #[inline(always)]
-        pub(super) fn load(x: &[[f32; 8]; 4]) -> A8x4 {
+        pub(super) fn load(x: &super::X32) -> A8x4 {
             A8x4([A8::load(&x[0]), A8::load(&x[1]), A8::load(&x[2]), A8::load(&x[3])])
         }
         #[inline(always)]
-        pub(super) fn store(self) -> [[f32; 8]; 4] {
+        pub(super) fn store(self) -> super::X32 {
             [self.0[0].store(), self.0[1].store(), self.0[2].store(), self.0[3].store()]
         }
     }
