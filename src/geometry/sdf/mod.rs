@@ -614,6 +614,15 @@ impl SdfField {
         }
     }
 
+    /// Whether the tape's error bound over `points` (a normal's stencil) is within a
+    /// quarter of `tolerance`, so that its values serve ([`DistanceField::distance4_within`]);
+    /// else the stencil takes the tree.
+    #[inline]
+    fn tape_resolves(&self, tape: &tape::Tape, points: &[DVec3; 4], tolerance: f64) -> bool {
+        let far = points.iter().map(|p| (*p - tape.origin).length()).fold(0.0, f64::max);
+        tape.error_bound(far) <= 0.25 * tolerance
+    }
+
     /// The tape at 1 to 8 world points in 8-wide evaluations (lanes past `points` repeat
     /// the first point and are ignored): one evaluation per distinct shortened tape among
     /// the points' regions, each running that region's shortened tape, so that every lane gets what
@@ -869,15 +878,22 @@ impl DistanceField for SdfField {
     }
 
     fn distance4_within(&self, points: &[DVec3; 4], tolerance: f64) -> [f64; 4] {
-        let Some(tape) = self.tape.as_ref() else {
+        let Some(tape) = self.tape.as_ref().filter(|t| self.tape_resolves(t, points, tolerance)) else {
             return points.map(|p| self.tree.distance(p));
         };
-        let far = points.iter().map(|p| (*p - tape.origin).length()).fold(0.0, f64::max);
-        if tape.error_bound(far) > 0.25 * tolerance {
-            return points.map(|p| self.tree.distance(p));
-        }
         let d = self.eval_tape8(tape, points);
         [d[0] as f64, d[1] as f64, d[2] as f64, d[3] as f64]
+    }
+
+    /// Both stencils in one 8-wide tape evaluation where the tape resolves both (each lane's
+    /// value is what it is alone); else one after the other.
+    fn distance4x2_within(&self, a: &[DVec3; 4], ta: f64, b: &[DVec3; 4], tb: f64) -> ([f64; 4], [f64; 4]) {
+        let both = |t: &&tape::Tape| self.tape_resolves(t, a, ta) && self.tape_resolves(t, b, tb);
+        let Some(tape) = self.tape.as_ref().filter(both) else {
+            return (self.distance4_within(a, ta), self.distance4_within(b, tb));
+        };
+        let d = self.eval_tape8(tape, &[a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3]]);
+        (std::array::from_fn(|i| d[i] as f64), std::array::from_fn(|i| d[i + 4] as f64))
     }
 
     fn is_signed(&self) -> bool {
