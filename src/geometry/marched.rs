@@ -133,9 +133,9 @@ pub trait DistanceField: Send + Sync {
 
     /// [`Self::distance8_rays`] for four packets at once (lane `8 g + l` is lane `l` of
     /// packet `g`: rays `o`, `d` at `t` to within `tol`), for the packets `g` whose bit is
-    /// set in `packets`; the other packets' values are not used. A field that evaluates 32 lanes faster than four packets of
-    /// eight overrides it; the default evaluates each packet asked for
-    /// ([`distance32_by_packets`]).
+    /// set in `packets`; the other packets' values are not used. A field that evaluates 32
+    /// lanes faster than four packets of eight overrides it; the default evaluates each
+    /// packet asked for ([`distance32_by_packets`]).
     #[inline]
     fn distance32_rays(&self, o: &Rays32, d: &Rays32, t: &Lanes32, tol: &Lanes32, packets: u32) -> Lanes32 {
         distance32_by_packets(self, o, d, t, tol, packets)
@@ -289,18 +289,17 @@ impl<F: DistanceField> Marched<F> {
         (hit.t >= t_min as f64 && hit.t <= t_max as f64).then_some(hit)
     }
 
-    /// Marches the rays `rays[i]` over `[t_min, reach(i)]` (none where `reach(i)` is
-    /// `None`) side by side, one
-    /// field evaluation per step for all lanes. A field that refills lanes
-    /// ([`DistanceField::refills_lanes`]) marches [`WIDE`] lanes, four packets evaluated
-    /// together ([`DistanceField::distance32_rays`]), and a lane whose march ends takes the
-    /// next ray of the batch, so lanes idle only once the batch runs out (a packet would
-    /// wait for its slowest ray). Otherwise a packet of [`PACKET`] lanes marches until its
-    /// last lane is done before it takes the next rays. Each lane takes the steps of its
-    /// own scalar march ([`MarchLane`]), so it converges where [`Marched::march`] does for
-    /// that ray alone, and `on_hit(i, hit, stats)` is called for each ray whose march
-    /// converges within `[t_min, reach(i)]`, in the order the marches end. `reach(i)` is read
-    /// before ray `i`'s march starts.
+    /// Marches the rays `rays[i]` over `[t_min, reach(i)]` (not at all where `reach(i)` is
+    /// `None`) side by side, one field evaluation per step for all lanes. A field that
+    /// refills lanes ([`DistanceField::refills_lanes`]) marches [`WIDE`] lanes, four
+    /// packets evaluated together ([`DistanceField::distance32_rays`]), and a lane whose
+    /// march ends takes the next ray of the batch, so lanes idle only once the batch runs
+    /// out (a packet would wait for its slowest ray). Otherwise a packet of [`PACKET`]
+    /// lanes marches until its last lane is done before it takes the next rays. Each lane
+    /// takes the steps of its own scalar march ([`MarchLane`]), so it converges where
+    /// [`Marched::march`] does for that ray alone, and `on_hit(i, hit, stats)` is called
+    /// for each ray whose march converges within `[t_min, reach(i)]`, in the order the
+    /// marches end. `reach(i)` is read before ray `i`'s march starts.
     fn march_batch(
         &self,
         rays: &[Ray],
@@ -353,7 +352,8 @@ impl<F: DistanceField> Marched<F> {
         // lanes reach them: `ready` has bit `k` set where ray `chunk + k` is asked for, has a
         // segment and waits for a lane; `next` is the first ray not clipped yet. `idle`
         // has bit `l` set where lane `l` (of the `all` in use) marches nothing.
-        let all: u32 = if refill { u32::MAX >> (32 - W) } else { (1 << PACKET) - 1 };
+        const ONE_PACKET: u32 = (1 << PACKET) - 1;
+        let all: u32 = if refill { u32::MAX >> (32 - W) } else { ONE_PACKET };
         let (mut clipped, mut ends) = ([None; PACKET], [0.0f32; PACKET]);
         let (mut chunk, mut next, mut ready, mut idle) = (0, 0, 0u32, all);
         loop {
@@ -404,11 +404,14 @@ impl<F: DistanceField> Marched<F> {
             // not used. (Their own last points would split the packet across more regions
             // of a pruned field: a smooth union of 64 spheres took 15% more instructions
             // per frame.)
-            let packets =
-                (0..W / PACKET).filter(|g| marching >> (PACKET * g) & 0xff != 0).fold(0, |p, g| p | 1 << g);
+            let packets = (0..W / PACKET)
+                .filter(|g| marching >> (PACKET * g) & ONE_PACKET != 0)
+                .fold(0, |p, g| p | 1 << g);
             let first = marching.trailing_zeros() as usize;
             let mut rest = idle
-                & (0..W / PACKET).filter(|g| packets & 1 << g != 0).fold(0, |m, g| m | 0xff << (PACKET * g));
+                & (0..W / PACKET)
+                    .filter(|g| packets & 1 << g != 0)
+                    .fold(0, |m, g| m | ONE_PACKET << (PACKET * g));
             while rest != 0 {
                 let l = rest.trailing_zeros() as usize;
                 rest &= rest - 1;

@@ -2,8 +2,8 @@
 //! frame statistics (time, rays per second, steps and nodes per ray), and PNG writing
 //! through a temporary file so a failed write never leaves a partial image.
 //! A tile's primary rays go to the tracer as one batch, in packets of eight (4x2 pixels)
-//! one after the other, which marched geometry marches eight at a time; everything else
-//! traces them one by one.
+//! one after the other, which marched geometry marches side by side (a lane taking the
+//! next ray as its march ends); everything else traces them one by one.
 
 pub mod tracer;
 
@@ -85,8 +85,7 @@ pub fn render(scene: &Scene, geometry: &dyn Geometry) -> Frame {
             let us: [f32; TILE as usize] = std::array::from_fn(|x| rays.u(x0 + (x as u32).min(tw - 1)));
             let vs: [f32; TILE as usize] = std::array::from_fn(|y| rays.v(y0 + (y as u32).min(th - 1)));
             // The tile's primary rays in packets of PACKET_W x PACKET_H pixels (clipped at
-            // the tile's edge), one packet after the other, traced as one batch: marched
-            // geometry marches them eight at a time.
+            // the tile's edge), one packet after the other, traced as one batch.
             let mut batch = [Ray::new(Vec3::ZERO, Vec3::Z); BATCH];
             let mut pixel = [0u32; BATCH];
             let mut n = 0;

@@ -674,8 +674,8 @@ impl SdfField {
             }
             return out;
         }
-        let lanes = |a: usize| -> [[f32; 8]; 4] {
-            std::array::from_fn(|g| std::array::from_fn(|l| rel[8 * g + l][a]))
+        let lanes = |a: usize| -> tape::X32 {
+            std::array::from_fn(|g| std::array::from_fn(|l| rel[PACKET * g + l][a]))
         };
         let (xs, ys, zs) = (lanes(0), lanes(1), lanes(2));
         let d = SCRATCH.with(|s| {
@@ -683,7 +683,7 @@ impl SdfField {
             s.fit(tape);
             tape.eval32_ops(self.ops_in(tape, cell), &xs, &ys, &zs, &mut s)
         });
-        std::array::from_fn(|i| d[i / 8][i % 8])
+        std::array::from_fn(|i| d[i / PACKET][i % PACKET])
     }
 
     /// The tape's distance at world point `p` (f32, widened), running the shortened tape
@@ -866,10 +866,11 @@ impl DistanceField for SdfField {
         std::array::from_fn(|i| self.choose(points[i], tolerances[i], |_| d[i] as f64))
     }
 
-    /// All four packets in one 32-lane tape evaluation ([`SdfField::eval_tape32`]); each
-    /// lane decides as `distance_within` at its point alone.
+    /// All four packets in one 32-lane tape evaluation ([`SdfField::eval_tape32`]) when all
+    /// four are asked for (else packet by packet: in a batch's last steps, evaluating idle
+    /// packets along costs more); each lane decides as `distance_within` at its point alone.
     fn distance32_rays(&self, o: &Rays32, d: &Rays32, t: &Lanes32, tol: &Lanes32, packets: u32) -> Lanes32 {
-        let Some(tape) = self.tape.as_ref().filter(|_| packets == 0b1111) else {
+        let Some(tape) = self.tape.as_ref().filter(|_| packets == (1 << (WIDE / PACKET)) - 1) else {
             return distance32_by_packets(self, o, d, t, tol, packets);
         };
         let points = ray_points32(o, d, t);

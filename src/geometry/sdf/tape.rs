@@ -497,9 +497,9 @@ pub struct Tape {
     magnitude: f64,
 }
 
-/// Registers for evaluating one [`Tape`] (scalar and 8-wide), allocated once; evaluation
-/// never allocates. A scratch sized for one tape serves any tape with as many registers
-/// or fewer ([`TapeScratch::fits`]).
+/// Registers for evaluating one [`Tape`] (scalar, 8-wide and 32-wide), allocated once;
+/// evaluation never allocates. A scratch sized for one tape serves any tape with as many
+/// registers or fewer ([`TapeScratch::fits`]).
 #[derive(Clone, Debug, Default)]
 pub struct TapeScratch {
     vals: Vec<f32>,
