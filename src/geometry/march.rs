@@ -1,8 +1,10 @@
 //! Sphere tracing of distance functions: plain and over-relaxed ("enhanced", Keinert et
 //! al. 2014), with a hit tolerance relative to the distance travelled, a step limit that is
 //! counted rather than hidden, a refinement step, and normals from the distance gradient.
-//! These are the loops; [`crate::geometry::marched::Marched`] is the one geometry that
-//! runs them on every marched field (analytic SDFs, SDF grids).
+//! One state machine ([`MarchLanes`]) runs one ray ([`sphere_trace`]) or 8 to 32 side by
+//! side, the common step of four lanes at a time in AVX2;
+//! [`crate::geometry::marched::Marched`] is the one geometry that runs it on every marched
+//! field (analytic SDFs, SDF grids).
 
 use glam::DVec3;
 
@@ -92,7 +94,7 @@ impl Segment {
 /// starts inside the solid marches `|f|` and finds the exit. With `refine`, a converged
 /// march takes one more step onto the surface (not for unsigned fields, whose gradient is
 /// undefined there). [`crate::geometry::marched::Marched`] calls it for every marched
-/// representation; its packets run the same steps through [`MarchLane`].
+/// representation; its batches run the same steps in more lanes of [`MarchLanes`].
 pub fn sphere_trace(
     f: &impl Fn(DVec3, f64) -> f64,
     seg: &Segment,
@@ -101,19 +103,28 @@ pub fn sphere_trace(
     refine: bool,
     stats: &mut RayStats,
 ) -> Option<MarchHit> {
-    let mut lane = MarchLane::new(seg, stats);
+    let mut lane = MarchLanes::<1>::new(params, size, refine);
+    lane.start(0, seg, stats);
     loop {
-        let raw = f(seg.origin + seg.dir * lane.t(), lane.tolerance(params, size));
-        if let Some(hit) = lane.feed(raw, seg, size, params, refine, stats) {
-            return hit;
+        let raw = f(seg.origin + seg.dir * lane.t[0], lane.tol[0]);
+        if lane.feed(&[raw], 1, stats) != 0 {
+            return lane.outcome(0);
         }
     }
 }
 
-/// One ray's sphere trace as a state machine: [`MarchLane::t`] is where the distance is
-/// needed next, [`MarchLane::feed`] takes it and says whether the march is over. Scalar
-/// marching ([`sphere_trace`]) feeds one lane; packets feed eight lanes from one 8-wide
-/// evaluation. Every lane takes exactly the steps [`sphere_trace`] would.
+/// `W` sphere traces side by side, each a state machine in its lane: [`MarchLanes::t`] is
+/// where a lane's distance is needed next, to within [`MarchLanes::tol`], and
+/// [`MarchLanes::feed`] takes the distances of the lanes marching and says whose marches
+/// are over. Scalar marching ([`sphere_trace`]) uses one lane; a batch
+/// ([`crate::geometry::marched::Marched`]) feeds 8 or 32 lanes from one wide evaluation.
+/// Every lane takes exactly the steps [`sphere_trace`] would for its ray alone.
+///
+/// The state is kept by field, one array per field (structure of arrays): the common step
+/// (a plain sphere-tracing step that neither converges, leaves the segment nor runs out of
+/// budget) runs for all lanes at once, without branches
+/// ([`MarchLanes::feed`]); the rest (first contact, probes, refinement, the end of a march)
+/// goes lane by lane.
 ///
 /// # The surface is where the field changes sign
 ///
@@ -126,33 +137,50 @@ pub fn sphere_trace(
 /// same rule in every representation). A march that converges (`|d| < tolerance`) already
 /// past the surface (`d < 0` in the march's sign) has crossed it; otherwise it probes the
 /// field at `t + d + tolerance / 2` along the ray (twice as far after each touch, see
-/// [`MAX_TOUCHES`]): a value of the other sign confirms the
-/// crossing, and the hit is refined between the two points (secant) and kept where the
-/// field is smaller there. Without a sign change the point only touches zero (a skin, or a
-/// ray grazing a surface it does not enter), and the march goes on from the probe with
-/// plain steps, up to [`MAX_TOUCHES`] times in a row. Unsigned fields (a triangle) have no inside: their hits are accepted on
-/// convergence, unrefined.
-#[derive(Clone, Copy, Debug)]
-pub struct MarchLane {
-    /// Ray parameter to evaluate next.
-    t: f64,
+/// [`MAX_TOUCHES`]): a value of the other sign confirms the crossing, and the hit is
+/// refined between the two points (secant) and kept where the field is smaller there.
+/// Without a sign change the point only touches zero (a skin, or a ray grazing a surface it
+/// does not enter), and the march goes on from the probe with plain steps, up to
+/// [`MAX_TOUCHES`] times in a row. Unsigned fields (a triangle) have no inside: their hits
+/// are accepted on convergence, unrefined.
+#[derive(Clone, Debug)]
+pub struct MarchLanes<const W: usize> {
+    /// Ray parameter where each lane's distance is needed next.
+    pub t: [f64; W],
+    /// The hit tolerance at [`Self::t`]: what the field's evaluation must resolve there
+    /// (world units; infinite for a lane that marches nothing).
+    pub tol: [f64; W],
     /// [`Segment::spread`].
-    spread: f64,
-    /// Sign of the field at the first point (1 outside, -1 inside).
-    sign: f64,
-    prev_t: f64,
-    prev_r: f64,
+    spread: [f64; W],
+    /// [`Segment::t0`] and [`Segment::t1`].
+    t0: [f64; W],
+    t1: [f64; W],
+    /// Sign of the field at the first point (1 outside, -1 inside; 0 before it).
+    sign: [f64; W],
+    prev_t: [f64; W],
+    prev_r: [f64; W],
     /// |distance| at the last point marched, `r_t`.
-    r: f64,
-    r_t: f64,
-    omega: f64,
+    r: [f64; W],
+    r_t: [f64; W],
+    omega: [f64; W],
     /// March evaluations so far (the step budget, [`MarchParams::max_steps`]).
-    iterations: u32,
+    iterations: [u32; W],
     /// Probes in a row that found no sign change (see [`MAX_TOUCHES`]).
-    touches: u32,
+    touches: [u32; W],
     /// The converged point where the current run of touches began.
-    first_touch: MarchHit,
-    phase: Phase,
+    first_touch: [MarchHit; W],
+    phase: [Phase; W],
+    /// Bit `l` set where lane `l`'s phase is not [`Phase::March`] (kept with `phase` by
+    /// [`Self::set_phase`]).
+    special: u32,
+    /// How each lane's march ended, for the lanes [`Self::feed`] last reported.
+    outcome: [Option<MarchHit>; W],
+    params: MarchParams,
+    /// `min(epsilon, tolerance_px * pixel_footprint)` and `1e-4 * size`: the factor and
+    /// floor of [`MarchParams::tolerance`], computed once.
+    tol_scale: f64,
+    tol_floor: f64,
+    refine: bool,
 }
 
 /// Converged points in a row without a sign change after which a march accepts the first
@@ -164,7 +192,7 @@ pub struct MarchLane {
 /// tolerances.
 pub const MAX_TOUCHES: u32 = 16;
 
-/// What the value fed to a [`MarchLane`] is for.
+/// What the value fed to a lane of [`MarchLanes`] is for.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Phase {
     /// A sphere-tracing step.
@@ -177,180 +205,398 @@ enum Phase {
     Refine { t: f64, r: f64, eps: f64 },
 }
 
-impl MarchLane {
-    /// A lane at the start of `seg` (counts the ray in `stats.marched_rays`).
-    pub fn new(seg: &Segment, stats: &mut RayStats) -> Self {
+/// What a lane's step says: the march goes on (`None`), or it is over with a hit or a
+/// miss.
+type Step = Option<Option<MarchHit>>;
+
+impl<const W: usize> MarchLanes<W> {
+    /// `W` idle lanes (`W <= 32`) marching with `params`, tolerances for an object of
+    /// characteristic `size`, and refinement onto the surface where `refine` (a signed
+    /// field).
+    pub fn new(params: &MarchParams, size: f64, refine: bool) -> Self {
+        const { assert!(W >= 1 && W <= 32) };
+        MarchLanes {
+            t: [0.0; W],
+            tol: [f64::INFINITY; W],
+            spread: [0.0; W],
+            t0: [0.0; W],
+            t1: [0.0; W],
+            sign: [0.0; W],
+            prev_t: [0.0; W],
+            prev_r: [0.0; W],
+            r: [f64::INFINITY; W],
+            r_t: [0.0; W],
+            omega: [0.0; W],
+            iterations: [0; W],
+            touches: [0; W],
+            first_touch: [MarchHit { t: 0.0, residual: 0.0 }; W],
+            phase: [Phase::March; W],
+            special: 0,
+            outcome: [None; W],
+            params: *params,
+            tol_scale: params.epsilon.min(params.tolerance_px * params.pixel_footprint),
+            tol_floor: 1e-4 * size,
+            refine,
+        }
+    }
+
+    /// Lane `l` starts marching `seg` (counts the ray in `stats.marched_rays`).
+    #[inline]
+    pub fn start(&mut self, l: usize, seg: &Segment, stats: &mut RayStats) {
         stats.marched_rays += 1;
-        MarchLane {
-            t: seg.t0,
-            spread: seg.spread,
-            sign: 0.0,
-            prev_t: seg.t0,
-            prev_r: 0.0,
-            r: f64::INFINITY,
-            r_t: seg.t0,
-            omega: 0.0,
-            iterations: 0,
-            touches: 0,
-            first_touch: MarchHit { t: seg.t0, residual: 0.0 },
-            phase: Phase::March,
+        self.t[l] = seg.t0;
+        self.spread[l] = seg.spread;
+        (self.t0[l], self.t1[l]) = (seg.t0, seg.t1);
+        self.sign[l] = 0.0;
+        (self.prev_t[l], self.prev_r[l]) = (seg.t0, 0.0);
+        (self.r[l], self.r_t[l]) = (f64::INFINITY, seg.t0);
+        self.omega[l] = 0.0;
+        (self.iterations[l], self.touches[l]) = (0, 0);
+        self.first_touch[l] = MarchHit { t: seg.t0, residual: 0.0 };
+        self.set_phase(l, Phase::March);
+        self.tol[l] = self.march_tolerance(l);
+    }
+
+    /// Lane `l` marches nothing (its tolerance is infinite, [`Self::tol`]).
+    #[inline]
+    pub fn stop(&mut self, l: usize) {
+        self.tol[l] = f64::INFINITY;
+    }
+
+    /// How lane `l`'s march ended, once [`Self::feed`] reported it: the hit, or `None` for
+    /// a miss.
+    #[inline]
+    pub fn outcome(&self, l: usize) -> Option<MarchHit> {
+        self.outcome[l]
+    }
+
+    /// [`MarchParams::tolerance`] at lane `l`'s [`Self::t`].
+    #[inline]
+    fn march_tolerance(&self, l: usize) -> f64 {
+        self.tol_scale * (self.spread[l] + self.t[l]).max(self.tol_floor)
+    }
+
+    #[inline]
+    fn set_phase(&mut self, l: usize, phase: Phase) {
+        self.phase[l] = phase;
+        let bit = 1u32 << l;
+        self.special = if phase == Phase::March { self.special & !bit } else { self.special | bit };
+    }
+
+    /// Takes the field's values `raw[l]` at [`Self::t`] for the lanes `l` whose bits are
+    /// set in `marching`; returns the lanes whose marches are over ([`Self::outcome`]).
+    /// Every other marching lane has its next [`Self::t`] and [`Self::tol`].
+    ///
+    /// The common step runs for all lanes at once: a lane in [`Phase::March`] whose step
+    /// neither converges, nor falls back from over-relaxation, nor leaves the segment, nor
+    /// spends the budget just moves on (the test and the move are the operations of
+    /// [`Self::step`], so the results are the same bits). The other lanes take
+    /// [`Self::feed_lane`].
+    #[inline]
+    pub fn feed(&mut self, raw: &[f64; W], marching: u32, stats: &mut RayStats) -> u32 {
+        let plain = self.plain_steps(raw, marching & !self.special);
+        stats.march_steps += u64::from(plain.count_ones());
+        let mut ended = 0;
+        let mut rest = marching & !plain;
+        while rest != 0 {
+            let l = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            if let Some(outcome) = self.feed_lane(l, raw[l], stats) {
+                self.outcome[l] = outcome;
+                ended |= 1 << l;
+            } else {
+                self.tol[l] = match self.phase[l] {
+                    Phase::Probe { eps, .. } | Phase::Refine { eps, .. } => eps,
+                    Phase::March => self.march_tolerance(l),
+                };
+            }
         }
+        ended
     }
 
-    /// Ray parameter where the distance is needed next.
+    /// The common steps of [`Self::feed`] for the lanes in `lanes` (all in
+    /// [`Phase::March`]): each lane whose step is plain ([`Self::plain_step`]) takes it;
+    /// returns those lanes. Four lanes at a time with AVX2 where the CPU has it.
     #[inline]
-    pub fn t(&self) -> f64 {
-        self.t
-    }
-
-    /// The hit tolerance at [`Self::t`] (what the field's evaluation must resolve).
-    #[inline]
-    pub fn tolerance(&self, params: &MarchParams, size: f64) -> f64 {
-        match self.phase {
-            Phase::Probe { eps, .. } | Phase::Refine { eps, .. } => eps,
-            Phase::March => params.tolerance(self.spread + self.t, size),
+    fn plain_steps(&mut self, raw: &[f64; W], lanes: u32) -> u32 {
+        #[cfg(target_arch = "x86_64")]
+        if W.is_multiple_of(4) && crate::simd::avx2() {
+            // SAFETY: the CPU has AVX2 (checked above).
+            return unsafe { avx2::plain_steps(self, raw, lanes) };
         }
+        let mut plain = 0;
+        let mut m = lanes;
+        while m != 0 {
+            let l = m.trailing_zeros() as usize;
+            m &= m - 1;
+            if self.plain_step(l, raw[l]) {
+                plain |= 1 << l;
+            }
+        }
+        plain
     }
 
-    /// Takes the field's value `raw` at [`Self::t`]; returns `Some(outcome)` when the
-    /// march is over (`Some(None)`: a miss), `None` when it needs the next point.
+    /// Lane `l`'s step with the field's value `raw` at [`Self::t`] if it is plain: the
+    /// lane is in [`Phase::March`], and [`Self::step`] would neither fall back from
+    /// over-relaxation, nor converge, nor leave the segment, nor spend the step budget, but
+    /// only move on by `d * omega`. Then takes it, as [`Self::step`] does (same
+    /// operations, same bits), and returns true; else changes nothing and returns false.
     #[inline]
-    pub fn feed(
-        &mut self,
-        raw: f64,
-        seg: &Segment,
-        size: f64,
-        params: &MarchParams,
-        refine: bool,
-        stats: &mut RayStats,
-    ) -> Option<Option<MarchHit>> {
-        match self.phase {
+    fn plain_step(&mut self, l: usize, raw: f64) -> bool {
+        let sign = if self.sign[l] != 0.0 {
+            self.sign[l]
+        } else if raw < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        let omega = if self.iterations[l] == 0 { self.params.relaxation } else { self.omega[l] };
+        let (t, d) = (self.t[l], sign * raw);
+        let (r, next) = (d.abs(), t + d * omega);
+        let fallback = omega > 1.0 && self.prev_r[l] + r < t - self.prev_t[l];
+        if fallback
+            || !(r >= self.tol[l])
+            || !(next <= self.t1[l])
+            || self.iterations[l] >= self.params.max_steps.saturating_sub(1)
+        {
+            return false;
+        }
+        (self.sign[l], self.omega[l]) = (sign, omega);
+        (self.prev_t[l], self.prev_r[l], self.r[l], self.r_t[l]) = (t, r, r, t);
+        self.t[l] = next;
+        self.iterations[l] += 1;
+        self.touches[l] = 0;
+        self.tol[l] = self.march_tolerance(l);
+        true
+    }
+
+    /// [`Self::feed`] for lane `l` alone, whatever its phase.
+    fn feed_lane(&mut self, l: usize, raw: f64, stats: &mut RayStats) -> Step {
+        match self.phase[l] {
             Phase::March => {}
             Phase::Refine { t, r, eps } => {
                 // Kept where the field is smaller than at the converged point and not
                 // before the segment.
                 let r2 = raw.abs();
-                return Some(Some(if r2 <= r && self.t >= seg.t0 - eps {
-                    MarchHit { t: self.t, residual: r2 }
+                return Some(Some(if r2 <= r && self.t[l] >= self.t0[l] - eps {
+                    MarchHit { t: self.t[l], residual: r2 }
                 } else {
                     MarchHit { t, residual: r }
                 }));
             }
             Phase::Probe { t, d, eps } => {
-                let dp = self.sign * raw;
+                let dp = self.sign[l] * raw;
                 if dp < 0.0 {
                     // The field changes sign between t and the probe: a surface. Refine at
                     // the secant's zero (two evaluations: the probe and the refinement).
                     stats.march_steps += 2;
-                    self.phase = Phase::Refine { t, r: d, eps };
-                    self.t = t + (self.t - t) * d / (d - dp);
+                    self.set_phase(l, Phase::Refine { t, r: d, eps });
+                    self.t[l] = t + (self.t[l] - t) * d / (d - dp);
                     return None;
                 }
                 // Only touching zero: march on from the probe, with plain steps.
-                self.phase = Phase::March;
-                if self.touches == 0 {
-                    self.first_touch = MarchHit { t, residual: d };
+                self.set_phase(l, Phase::March);
+                if self.touches[l] == 0 {
+                    self.first_touch[l] = MarchHit { t, residual: d };
                 }
-                self.touches += 1;
-                self.omega = 1.0;
-                self.prev_t = t;
-                self.prev_r = d;
-                if self.t > seg.t1 {
+                self.touches[l] += 1;
+                self.omega[l] = 1.0;
+                self.prev_t[l] = t;
+                self.prev_r[l] = d;
+                if self.t[l] > self.t1[l] {
                     return Some(None);
                 }
-                return self.step(raw, seg, size, params, refine, stats);
             }
         }
-        self.step(raw, seg, size, params, refine, stats)
+        self.step(l, raw, stats)
     }
 
-    /// One sphere-tracing step with the field's value `raw` at [`Self::t`].
+    /// One sphere-tracing step of lane `l` with the field's value `raw` at [`Self::t`].
     #[inline]
-    fn step(
-        &mut self,
-        raw: f64,
-        seg: &Segment,
-        size: f64,
-        params: &MarchParams,
-        refine: bool,
-        stats: &mut RayStats,
-    ) -> Option<Option<MarchHit>> {
-        if self.iterations == 0 {
-            self.omega = params.relaxation;
+    fn step(&mut self, l: usize, raw: f64, stats: &mut RayStats) -> Step {
+        if self.iterations[l] == 0 {
+            self.omega[l] = self.params.relaxation;
         }
-        self.iterations += 1;
+        self.iterations[l] += 1;
         stats.march_steps += 1;
-        let t = self.t;
-        let eps = params.tolerance(self.spread + t, size);
-        if self.sign == 0.0 {
-            self.sign = if raw < 0.0 { -1.0 } else { 1.0 };
+        let t = self.t[l];
+        let eps = self.march_tolerance(l);
+        if self.sign[l] == 0.0 {
+            self.sign[l] = if raw < 0.0 { -1.0 } else { 1.0 };
         }
-        let d = self.sign * raw;
-        self.r = d.abs();
-        self.r_t = t;
+        let d = self.sign[l] * raw;
+        let r = d.abs();
+        (self.r[l], self.r_t[l]) = (r, t);
         // With over-relaxation the step may jump over a surface; detect it by the two
         // unbounding spheres (radii prev_r and r) failing to cover the step, and go back
         // to the plain step from the previous point.
-        if self.omega > 1.0 && self.prev_r + self.r < t - self.prev_t {
-            self.omega = 1.0;
-            self.t = self.prev_t + self.prev_r;
-            return self.budget(params, stats);
+        if self.omega[l] > 1.0 && self.prev_r[l] + r < t - self.prev_t[l] {
+            self.omega[l] = 1.0;
+            self.t[l] = self.prev_t[l] + self.prev_r[l];
+            return self.budget(l, stats);
         }
-        if self.r >= eps {
-            self.touches = 0;
+        if r >= eps {
+            self.touches[l] = 0;
         }
-        if self.r < eps {
-            if !refine {
-                return Some(Some(MarchHit { t, residual: self.r }));
+        if r < eps {
+            if !self.refine {
+                return Some(Some(MarchHit { t, residual: r }));
             }
-            if self.touches >= MAX_TOUCHES {
-                return Some(Some(self.first_touch));
+            if self.touches[l] >= MAX_TOUCHES {
+                return Some(Some(self.first_touch[l]));
             }
             if d < 0.0 {
                 // Already past the surface: crossed. One refinement step back onto it.
                 stats.march_steps += 1;
-                self.phase = Phase::Refine { t, r: self.r, eps };
-                self.t = t + d;
+                self.set_phase(l, Phase::Refine { t, r, eps });
+                self.t[l] = t + d;
                 return None;
             }
-            if self.iterations >= params.max_steps {
-                return self.budget(params, stats);
+            if self.iterations[l] >= self.params.max_steps {
+                return self.budget(l, stats);
             }
             // The probe is counted as a step when it is marched on from (`step`), or with
             // the refinement when it confirms the crossing.
-            self.phase = Phase::Probe { t, d, eps };
-            self.t = t + d + 0.5 * eps * f64::from(1u32 << self.touches.min(15));
+            self.set_phase(l, Phase::Probe { t, d, eps });
+            self.t[l] = t + d + 0.5 * eps * f64::from(1u32 << self.touches[l].min(15));
             return None;
         }
-        self.prev_t = t;
-        self.prev_r = self.r;
-        self.t = t + d * self.omega;
-        if self.t > seg.t1 {
+        (self.prev_t[l], self.prev_r[l]) = (t, r);
+        self.t[l] = t + d * self.omega[l];
+        if self.t[l] > self.t1[l] {
             // A relaxed step past the end may have jumped a surface near the end: retry it
             // as a plain step, which is safe.
-            if self.omega > 1.0 && self.prev_t + self.prev_r <= seg.t1 {
-                self.omega = 1.0;
-                self.t = self.prev_t + self.prev_r;
-                return self.budget(params, stats);
+            if self.omega[l] > 1.0 && self.prev_t[l] + self.prev_r[l] <= self.t1[l] {
+                self.omega[l] = 1.0;
+                self.t[l] = self.prev_t[l] + self.prev_r[l];
+                return self.budget(l, stats);
             }
             return Some(None);
         }
-        self.budget(params, stats)
+        self.budget(l, stats)
     }
 
-    /// The end of a march that goes on: over when the step budget is spent (reported as a
-    /// hit at the last point marched, only within the pixel footprint of the surface).
+    /// The end of lane `l`'s march that goes on: over when the step budget is spent
+    /// (reported as a hit at the last point marched, only within the pixel footprint of
+    /// the surface).
     #[inline]
-    fn budget(&self, params: &MarchParams, stats: &mut RayStats) -> Option<Option<MarchHit>> {
-        if self.iterations < params.max_steps {
+    fn budget(&self, l: usize, stats: &mut RayStats) -> Step {
+        if self.iterations[l] < self.params.max_steps {
             return None;
         }
         stats.step_limit_hits += 1;
-        let (t, r) = (self.r_t, self.r);
+        let (t, r) = (self.r_t[l], self.r[l]);
         Some(
-            (t > 0.0 && r < params.pixel_footprint * (self.spread + t))
+            (t > 0.0 && r < self.params.pixel_footprint * (self.spread[l] + t))
                 .then_some(MarchHit { t, residual: r }),
         )
+    }
+}
+
+/// [`MarchLanes::plain_steps`] four lanes at a time.
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use std::arch::x86_64::*;
+
+    use super::MarchLanes;
+
+    /// [`MarchLanes::plain_steps`] for `W` a multiple of 4: [`MarchLanes::plain_step`]'s
+    /// operations on four lanes at once, with its comparisons as ordered ones (false with a
+    /// NaN, as Rust's are), its selections as blends and its updates kept only in the
+    /// lanes that take the step, so each lane's results are the scalar ones bit for bit.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn plain_steps<const W: usize>(
+        m: &mut MarchLanes<W>,
+        raw: &[f64; W],
+        lanes: u32,
+    ) -> u32 {
+        // Four lanes of an array of the lanes' state from lane `i`.
+        macro_rules! load {
+            ($a:expr, $i:expr) => {
+                _mm256_loadu_pd($a.as_ptr().add($i))
+            };
+        }
+        macro_rules! store {
+            ($a:expr, $i:expr, $v:expr, $keep:expr) => {
+                _mm256_storeu_pd($a.as_mut_ptr().add($i), _mm256_blendv_pd(load!($a, $i), $v, $keep))
+            };
+        }
+        // SAFETY: AVX2 is enabled; every load and store is of four lanes `i..i + 4` of a
+        // `[_; W]` with `i + 4 <= W`.
+        unsafe {
+            let zero = _mm256_setzero_pd();
+            let one = _mm256_set1_pd(1.0);
+            let relaxation = _mm256_set1_pd(m.params.relaxation);
+            let (scale, floor) = (_mm256_set1_pd(m.tol_scale), _mm256_set1_pd(m.tol_floor));
+            let magnitude = _mm256_castsi256_pd(_mm256_set1_epi64x(i64::MAX));
+            // `iterations < max_steps - 1` as a signed comparison: a lane past i32::MAX
+            // iterations takes the scalar step.
+            let limit = _mm_set1_epi32(m.params.max_steps.saturating_sub(1).min(i32::MAX as u32) as i32);
+            let (bits64, bits32) = (_mm256_setr_epi64x(1, 2, 4, 8), _mm_setr_epi32(1, 2, 4, 8));
+            let mut plain = 0u32;
+            for i in (0..W).step_by(4) {
+                let want = lanes >> i & 0xf;
+                if want == 0 {
+                    continue;
+                }
+                let (t, x, sign0) = (load!(m.t, i), load!(raw, i), load!(m.sign, i));
+                let iterations = _mm_loadu_si128(m.iterations.as_ptr().add(i).cast());
+                let fresh = _mm256_castsi256_pd(_mm256_cvtepi32_epi64(_mm_cmpeq_epi32(
+                    iterations,
+                    _mm_setzero_si128(),
+                )));
+                let negative = _mm256_cmp_pd::<_CMP_LT_OQ>(x, zero);
+                let first_sign = _mm256_blendv_pd(one, _mm256_set1_pd(-1.0), negative);
+                let sign = _mm256_blendv_pd(sign0, first_sign, _mm256_cmp_pd::<_CMP_EQ_OQ>(sign0, zero));
+                let omega = _mm256_blendv_pd(load!(m.omega, i), relaxation, fresh);
+                let d = _mm256_mul_pd(sign, x);
+                let r = _mm256_and_pd(d, magnitude);
+                let next = _mm256_add_pd(t, _mm256_mul_pd(d, omega));
+                let covered = _mm256_add_pd(load!(m.prev_r, i), r);
+                let fallback = _mm256_and_pd(
+                    _mm256_cmp_pd::<_CMP_GT_OQ>(omega, one),
+                    _mm256_cmp_pd::<_CMP_LT_OQ>(covered, _mm256_sub_pd(t, load!(m.prev_t, i))),
+                );
+                let moves = _mm256_and_pd(
+                    _mm256_cmp_pd::<_CMP_GE_OQ>(r, load!(m.tol, i)),
+                    _mm256_cmp_pd::<_CMP_LE_OQ>(next, load!(m.t1, i)),
+                );
+                let budget = _mm256_castsi256_pd(_mm256_cvtepi32_epi64(_mm_cmplt_epi32(iterations, limit)));
+                let go = _mm256_and_pd(_mm256_andnot_pd(fallback, moves), budget);
+                let k = _mm256_movemask_pd(go) as u32 & want;
+                if k == 0 {
+                    continue;
+                }
+                plain |= k << i;
+                let keep = _mm256_castsi256_pd(_mm256_cmpeq_epi64(
+                    _mm256_and_si256(_mm256_set1_epi64x(i64::from(k)), bits64),
+                    bits64,
+                ));
+                store!(m.sign, i, sign, keep);
+                store!(m.omega, i, omega, keep);
+                store!(m.prev_t, i, t, keep);
+                store!(m.prev_r, i, r, keep);
+                store!(m.r, i, r, keep);
+                store!(m.r_t, i, t, keep);
+                store!(m.t, i, next, keep);
+                let spread = load!(m.spread, i);
+                store!(
+                    m.tol,
+                    i,
+                    _mm256_mul_pd(scale, _mm256_max_pd(_mm256_add_pd(spread, next), floor)),
+                    keep
+                );
+                // `keep` in 32-bit lanes: -1 where the step is taken.
+                let keep32 = _mm_cmpeq_epi32(_mm_and_si128(_mm_set1_epi32(k as i32), bits32), bits32);
+                _mm_storeu_si128(m.iterations.as_mut_ptr().add(i).cast(), _mm_sub_epi32(iterations, keep32));
+                let touches = _mm_loadu_si128(m.touches.as_ptr().add(i).cast());
+                _mm_storeu_si128(m.touches.as_mut_ptr().add(i).cast(), _mm_andnot_si128(keep32, touches));
+            }
+            plain
+        }
     }
 }
 
@@ -438,16 +684,17 @@ mod tests {
         let clearance = 0.05;
         let origin = DVec3::new(1.0 + clearance, 0.0, 0.0);
         let mut s = seg(origin, DVec3::Z, 0.0, 10.0);
-        assert_eq!(
-            MarchLane::new(&s, &mut RayStats::default()).tolerance(&params, size),
-            params.tolerance(0.0, size)
-        );
+        let tolerance_at_start = |s: &Segment| {
+            let mut lane = MarchLanes::<1>::new(&params, size, false);
+            lane.start(0, s, &mut RayStats::default());
+            lane.tol[0]
+        };
+        assert_eq!(tolerance_at_start(&s), params.tolerance(0.0, size));
         let mut stats = RayStats::default();
         // Hits accepted on convergence (as for an unsigned field): the test is the tolerance.
         assert!(sphere_trace(&sphere, &s, size, &params, false, &mut stats).is_none());
         s.spread = spread;
-        let lane = MarchLane::new(&s, &mut stats);
-        assert_eq!(lane.tolerance(&params, size), params.tolerance(spread, size));
+        assert_eq!(tolerance_at_start(&s), params.tolerance(spread, size));
         let hit = sphere_trace(&sphere, &s, size, &params, false, &mut stats)
             .expect("a touch within the footprint");
         assert!((hit.t - 5.0).abs() < 0.5, "{hit:?}");
@@ -513,5 +760,99 @@ mod tests {
         let t =
             sphere_trace(&f, &seg(DVec3::ZERO, DVec3::Z, 0.0, 10.0), 1.0, &relaxed, true, &mut s).unwrap().t;
         assert!((t - 2.99).abs() < 1e-3, "{t}");
+    }
+
+    /// A field with what a march must survive: a rippled sphere (not a true distance, so
+    /// relaxed steps overshoot), a sheet thinner than most tolerances, a skin where the
+    /// field touches zero without changing sign, and a slab where it is NaN.
+    fn rough(p: DVec3, _tol: f64) -> f64 {
+        if (p.x - 0.3).abs() < 2e-3 && p.z > 6.0 {
+            return f64::NAN;
+        }
+        let ripple = 0.08 * (7.0 * p.x).sin() * (5.0 * p.y).cos();
+        let ball = (p - DVec3::new(0.0, 0.0, 5.0)).length() - 1.0 + ripple;
+        let sheet = (p.z - 8.0).abs() - 1e-5;
+        let skin = (p.y - 0.5).abs().max(p.z - 3.0);
+        ball.min(sheet).min(skin)
+    }
+
+    /// `W` rays marched side by side through [`rough`], one lane each, refilled from
+    /// `segs` as lanes end; the outcomes and counters.
+    fn march_wide<const W: usize>(
+        segs: &[Segment],
+        params: &MarchParams,
+        refine: bool,
+    ) -> (Vec<Option<MarchHit>>, RayStats) {
+        let (mut stats, mut out) = (RayStats::default(), vec![None; segs.len()]);
+        let mut lanes = MarchLanes::<W>::new(params, 2.0, refine);
+        let (mut ray_of, mut next, mut marching) = ([0usize; W], 0, 0u32);
+        loop {
+            for (l, ray) in ray_of.iter_mut().enumerate() {
+                if marching & 1 << l == 0 && next < segs.len() {
+                    lanes.start(l, &segs[next], &mut stats);
+                    (*ray, next, marching) = (next, next + 1, marching | 1 << l);
+                }
+            }
+            if marching == 0 {
+                return (out, stats);
+            }
+            let raw = std::array::from_fn(|l| {
+                let s = &segs[ray_of[l]];
+                if marching & 1 << l != 0 {
+                    rough(s.origin + s.dir * lanes.t[l], lanes.tol[l])
+                } else {
+                    f64::NAN
+                }
+            });
+            let mut ended = lanes.feed(&raw, marching, &mut stats);
+            marching &= !ended;
+            while ended != 0 {
+                let l = ended.trailing_zeros() as usize;
+                ended &= ended - 1;
+                lanes.stop(l);
+                out[ray_of[l]] = lanes.outcome(l);
+            }
+        }
+    }
+
+    proptest::proptest! {
+        /// Lanes marched side by side (4 at a time with AVX2 in 8 and 32 lanes) take the
+        /// steps of [`sphere_trace`] alone, bit for bit, and count the same work.
+        #[test]
+        fn lanes_march_as_one_ray_alone(
+            rays in proptest::collection::vec(
+                ((-1.5f64..1.5, -1.5f64..1.5), (-0.3f64..0.3, -0.3f64..0.3), 0.0f64..0.5, 0.0f64..50.0),
+                1..40,
+            ),
+            relaxation in proptest::sample::select(vec![1.0, 1.6, 1.95]),
+            max_steps in proptest::sample::select(vec![1u32, 2, 7, 40, 512]),
+            tolerance_px in proptest::sample::select(vec![0.25, 4.0]),
+            refine in proptest::bool::ANY,
+        ) {
+            let params = MarchParams { relaxation, max_steps, tolerance_px, ..Default::default() };
+            let segs: Vec<Segment> = rays
+                .iter()
+                .map(|&((x, y), (dx, dy), t0, spread)| Segment {
+                    origin: DVec3::new(x, y, 0.0),
+                    dir: DVec3::new(dx, dy, 1.0).normalize(),
+                    t0,
+                    t1: 12.0,
+                    spread,
+                })
+                .collect();
+            let mut one_stats = RayStats::default();
+            let one: Vec<_> =
+                segs.iter().map(|s| sphere_trace(&rough, s, 2.0, &params, refine, &mut one_stats)).collect();
+            let bits = |h: &Option<MarchHit>| h.map(|h| (h.t.to_bits(), h.residual.to_bits()));
+            for (wide, stats) in [march_wide::<8>(&segs, &params, refine), march_wide::<32>(&segs, &params, refine)] {
+                for (i, (a, b)) in one.iter().zip(&wide).enumerate() {
+                    proptest::prop_assert_eq!(bits(a), bits(b), "ray {}: {:?} alone, {:?} in lanes", i, a, b);
+                }
+                proptest::prop_assert_eq!(
+                    (stats.march_steps, stats.marched_rays, stats.step_limit_hits),
+                    (one_stats.march_steps, one_stats.marched_rays, one_stats.step_limit_hits)
+                );
+            }
+        }
     }
 }

@@ -12,12 +12,12 @@
 //! today; a new marched representation is a new field, not a new marcher. A field that
 //! evaluates eight points at once ([`DistanceField::distance8_within`]) gets packets of
 //! primary rays marched side by side ([`Geometry::closest_hits`]), each lane taking exactly
-//! the steps of its own scalar march ([`MarchLane`]).
+//! the steps of its own scalar march ([`sphere_trace`] and the batch share [`MarchLanes`]).
 
 use glam::{DVec3, Vec3};
 
 use crate::geometry::march::{
-    MarchHit, MarchLane, MarchParams, Segment, gradient_normal, gradient_normal2, sphere_trace,
+    MarchHit, MarchLanes, MarchParams, Segment, gradient_normal, gradient_normal2, sphere_trace,
 };
 use crate::geometry::{
     Aabb, Census, Geometry, Hit, MaterialId, PACKET, Ray, RayStats, Shared, f32_error, max_abs,
@@ -296,7 +296,7 @@ impl<F: DistanceField> Marched<F> {
     /// march ends takes the next ray of the batch, so lanes idle only once the batch runs
     /// out (a packet would wait for its slowest ray). Otherwise a packet of [`PACKET`]
     /// lanes marches until its last lane is done before it takes the next rays. Each lane
-    /// takes the steps of its own scalar march ([`MarchLane`]), so it converges where
+    /// takes the steps of its own scalar march (one state machine, [`MarchLanes`]), so it converges where
     /// [`Marched::march`] does for that ray alone, and `on_hit(i, hit, stats)` is called
     /// for each ray whose march converges within `[t_min, reach(i)]`, in the order the
     /// marches end. `reach(i)` is read before ray `i`'s march starts.
@@ -335,19 +335,13 @@ impl<F: DistanceField> Marched<F> {
         refill: bool,
         eval: impl Fn(&[[f64; W]; 3], &[[f64; W]; 3], &[f64; W], &[f64; W], u32) -> [f64; W],
     ) {
-        let refine = self.field.is_signed();
-        const IDLE: Segment =
-            Segment { origin: DVec3::ZERO, dir: DVec3::ZERO, t0: 0.0, t1: 0.0, spread: 0.0 };
-        // Lane `l` marches ray `ray_of[l]` along `segs[l]`; `reach_of[l]` is that ray's end.
-        let mut lanes: [Option<MarchLane>; W] = [None; W];
-        let mut segs = [IDLE; W];
+        // Lane `l` marches ray `ray_of[l]`; `reach_of[l]` is that ray's end.
+        let mut lanes = MarchLanes::<W>::new(&self.march, self.size, self.field.is_signed());
         let mut ray_of = [0usize; W];
         let mut reach_of = [0.0f32; W];
         // The rays by component for the field's evaluation at `origin + dir * t`.
         let mut origin = [[0.0; W]; 3];
         let mut dir = [[0.0; W]; 3];
-        let mut t = [0.0; W];
-        let mut tolerances = [f64::INFINITY; W];
         // The rays are clipped to the bounds eight at a time ([`Marched::segments8`]) as the
         // lanes reach them: `ready` has bit `k` set where ray `chunk + k` is asked for, has a
         // segment and waits for a lane; `next` is the first ray not clipped yet. `idle`
@@ -380,8 +374,8 @@ impl<F: DistanceField> Marched<F> {
                     (ready, idle) = (ready & (ready - 1), idle & (idle - 1));
                     let (i, (t0, t1)) = (chunk + k, clipped[k].unwrap_or_default());
                     let seg = Segment::along(&rays[i], t0, t1);
-                    lanes[l] = Some(MarchLane::new(&seg, stats));
-                    (segs[l], ray_of[l], reach_of[l]) = (seg, i, ends[k]);
+                    lanes.start(l, &seg, stats);
+                    (ray_of[l], reach_of[l]) = (i, ends[k]);
                     for a in 0..3 {
                         (origin[a][l], dir[a][l]) = (seg.origin[a], seg.dir[a]);
                     }
@@ -390,14 +384,6 @@ impl<F: DistanceField> Marched<F> {
             let marching = !idle & all;
             if marching == 0 {
                 break;
-            }
-            let mut m = marching;
-            while m != 0 {
-                let l = m.trailing_zeros() as usize;
-                m &= m - 1;
-                if let Some(lane) = &lanes[l] {
-                    (t[l], tolerances[l]) = (lane.t(), lane.tolerance(&self.march, self.size));
-                }
             }
             // The packets with a marching lane are evaluated. Their idle lanes evaluate the
             // first marching lane's point, with no tolerance to meet, and their values are
@@ -415,24 +401,21 @@ impl<F: DistanceField> Marched<F> {
             while rest != 0 {
                 let l = rest.trailing_zeros() as usize;
                 rest &= rest - 1;
-                t[l] = t[first];
+                lanes.t[l] = lanes.t[first];
                 for a in 0..3 {
                     (origin[a][l], dir[a][l]) = (origin[a][first], dir[a][first]);
                 }
             }
-            let d = eval(&origin, &dir, &t, &tolerances, packets);
-            let mut m = marching;
-            while m != 0 {
-                let l = m.trailing_zeros() as usize;
-                m &= m - 1;
-                let Some(lane) = &mut lanes[l] else { continue };
-                let Some(outcome) = lane.feed(d[l], &segs[l], self.size, &self.march, refine, stats) else {
-                    continue;
-                };
-                lanes[l] = None;
-                idle |= 1 << l;
-                tolerances[l] = f64::INFINITY;
-                if let Some(mh) = outcome.filter(|h| h.t >= t_min as f64 && h.t <= reach_of[l] as f64) {
+            let d = eval(&origin, &dir, &lanes.t, &lanes.tol, packets);
+            let mut ended = lanes.feed(&d, marching, stats);
+            idle |= ended;
+            while ended != 0 {
+                let l = ended.trailing_zeros() as usize;
+                ended &= ended - 1;
+                lanes.stop(l);
+                if let Some(mh) =
+                    lanes.outcome(l).filter(|h| h.t >= t_min as f64 && h.t <= reach_of[l] as f64)
+                {
                     on_hit(ray_of[l], mh, stats);
                 }
             }
@@ -588,14 +571,19 @@ fn clip4(rays: [&Ray; 4], b: &Aabb, t_min: f32, t_max: [f32; 4]) -> [Option<(f32
     // SAFETY: SSE and SSE2 are part of the x86-64 baseline; the transmutes are between
     // `__m128` and four f32.
     unsafe {
-        let lanes = |f: &dyn Fn(&Ray) -> f32| _mm_setr_ps(f(rays[0]), f(rays[1]), f(rays[2]), f(rays[3]));
         let mut t0 = _mm_set1_ps(t_min);
         let mut t1 = std::mem::transmute::<[f32; 4], __m128>(t_max);
         let mut dead = _mm_setzero_ps();
         let mut moving = _mm_setzero_ps();
         for axis in 0..3 {
-            let o = lanes(&|r| r.origin[axis]);
-            let d = lanes(&|r| r.dir[axis]);
+            // Written out, not through a closure or `dyn Fn`, so the loads inline.
+            let o = _mm_setr_ps(
+                rays[0].origin[axis],
+                rays[1].origin[axis],
+                rays[2].origin[axis],
+                rays[3].origin[axis],
+            );
+            let d = _mm_setr_ps(rays[0].dir[axis], rays[1].dir[axis], rays[2].dir[axis], rays[3].dir[axis]);
             let (lo, hi) = (_mm_set1_ps(b.min[axis]), _mm_set1_ps(b.max[axis]));
             // A ray parallel to the slab: inside it for all t or for none.
             let flat = _mm_cmpeq_ps(d, _mm_setzero_ps());

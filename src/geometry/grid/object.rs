@@ -16,9 +16,11 @@ use glam::{DVec3, Vec3};
 use crate::geometry::grid::SdfGrid;
 use crate::geometry::grid::band::BandGrid;
 use crate::geometry::march::MarchParams;
-use crate::geometry::marched::{DistanceField, Marched, ray_points8};
+use crate::geometry::marched::{
+    DistanceField, Lanes32, Marched, Rays32, WIDE, distance32_by_packets, ray_points8,
+};
 use crate::geometry::{
-    Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, Shared, aabb, box_distance,
+    Aabb, Census, Geometry, Hit, MaterialId, PACKET, Ray, RayStats, Shared, aabb, box_distance,
     distance_by_projection,
 };
 use crate::scene::Scene;
@@ -305,9 +307,28 @@ impl DistanceField for GridField {
         _tolerances: &[f64; 8],
     ) -> [f64; 8] {
         if let (None, GridStore::Dense(g)) = (&self.placement, &*self.grid) {
-            return g.trilinear8_rays(origin, dir, t).map(|v| v as f64 * GRID_STEP_SCALE);
+            return g.trilinear8_rays(origin, dir, t, 0).map(|v| v as f64 * GRID_STEP_SCALE);
         }
         self.field8(&ray_points8(origin, dir, t)).map(|v| v * GRID_STEP_SCALE)
+    }
+
+    /// A dense grid in world space interpolates each packet from the 32 lanes in place
+    /// ([`SdfGrid::trilinear8_rays`]); other grids go packet by packet.
+    #[inline]
+    fn distance32_rays(&self, o: &Rays32, d: &Rays32, t: &Lanes32, tol: &Lanes32, packets: u32) -> Lanes32 {
+        let (None, GridStore::Dense(g)) = (&self.placement, &*self.grid) else {
+            return distance32_by_packets(self, o, d, t, tol, packets);
+        };
+        let mut out = [0.0; WIDE];
+        for p in 0..WIDE / PACKET {
+            if packets & 1 << p != 0 {
+                let v = g.trilinear8_rays(o, d, t, PACKET * p);
+                for (x, v) in out[PACKET * p..PACKET * (p + 1)].iter_mut().zip(v) {
+                    *x = v as f64 * GRID_STEP_SCALE;
+                }
+            }
+        }
+        out
     }
 
     #[inline]

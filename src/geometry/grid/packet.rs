@@ -35,12 +35,20 @@ impl SdfGrid {
         self.trilinear8_portable(xs, ys, zs)
     }
 
-    /// [`SdfGrid::trilinear8`] at the points `origin + dir * t[l]` of eight rays (`origin[a][l]`
-    /// is component `a` of lane `l`), each computed in double precision as `DVec3` does
-    /// (`o + d * t` per component) and rounded to single precision; lane `l` equals
-    /// `trilinear` at that point bit for bit.
+    /// [`SdfGrid::trilinear8`] at the points `origin + dir * t[l]` of the eight rays in lanes
+    /// `at..at + 8` of `N` (`origin[a][l]` is component `a` of lane `l`; `at + 8 <= N`),
+    /// each computed in double precision as `DVec3` does (`o + d * t` per component) and
+    /// rounded to single precision; lane `l` of the result equals `trilinear` at the point
+    /// of lane `at + l` bit for bit.
     #[inline]
-    pub fn trilinear8_rays(&self, origin: &[[f64; 8]; 3], dir: &[[f64; 8]; 3], t: &[f64; 8]) -> [f32; 8] {
+    pub fn trilinear8_rays<const N: usize>(
+        &self,
+        origin: &[[f64; N]; 3],
+        dir: &[[f64; N]; 3],
+        t: &[f64; N],
+        at: usize,
+    ) -> [f32; 8] {
+        assert!(at + 8 <= N, "lanes {at}..{} of {N}", at + 8);
         #[cfg(target_arch = "x86_64")]
         if crate::simd::avx2()
             && self.values.len() <= i32::MAX as usize
@@ -48,9 +56,11 @@ impl SdfGrid {
         {
             // SAFETY: the CPU has AVX2 and FMA (checked just above), and every sample index
             // fits the gathers' `i32` offsets.
-            return unsafe { avx2::dense_rays(self, origin, dir, t) };
+            return unsafe { avx2::dense_rays(self, origin, dir, t, at) };
         }
-        let p = |a: usize| -> [f32; 8] { std::array::from_fn(|l| (origin[a][l] + dir[a][l] * t[l]) as f32) };
+        let p = |a: usize| -> [f32; 8] {
+            std::array::from_fn(|l| (origin[a][at + l] + dir[a][at + l] * t[at + l]) as f32)
+        };
         self.trilinear8_portable(&p(0), &p(1), &p(2))
     }
 
@@ -239,20 +249,23 @@ mod avx2 {
 
     /// [`SdfGrid::trilinear8_rays`]'s kernel: the points `origin + dir * t` in double
     /// precision (a product and a sum, rounded after each), rounded to single precision,
-    /// then [`dense`]'s interpolation. The caller checks as for [`dense`].
+    /// then [`dense`]'s interpolation, for lanes `at..at + 8` of `N`. The caller checks as
+    /// for [`dense`], and that `at + 8 <= N`.
     #[target_feature(enable = "avx2,fma")]
-    pub(super) unsafe fn dense_rays(
+    pub(super) unsafe fn dense_rays<const N: usize>(
         g: &SdfGrid,
-        origin: &[[f64; 8]; 3],
-        dir: &[[f64; 8]; 3],
-        t: &[f64; 8],
+        origin: &[[f64; N]; 3],
+        dir: &[[f64; N]; 3],
+        t: &[f64; N],
+        at: usize,
     ) -> [f32; 8] {
         unsafe {
-            let (t0, t1) = (_mm256_loadu_pd(t.as_ptr()), _mm256_loadu_pd(t.as_ptr().add(4)));
+            let t = t.as_ptr().add(at);
+            let (t0, t1) = (_mm256_loadu_pd(t), _mm256_loadu_pd(t.add(4)));
             // A plain loop, no closure: everything must inline into this AVX2 function.
             let mut p = [_mm256_setzero_ps(); 3];
             for a in 0..3 {
-                let (o, d) = (origin[a].as_ptr(), dir[a].as_ptr());
+                let (o, d) = (origin[a].as_ptr().add(at), dir[a].as_ptr().add(at));
                 let lo = _mm256_add_pd(_mm256_loadu_pd(o), _mm256_mul_pd(_mm256_loadu_pd(d), t0));
                 let hi =
                     _mm256_add_pd(_mm256_loadu_pd(o.add(4)), _mm256_mul_pd(_mm256_loadu_pd(d.add(4)), t1));
