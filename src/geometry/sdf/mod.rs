@@ -659,29 +659,38 @@ impl SdfField {
         })
     }
 
-    /// The tape at 32 world points (four packets of eight): one 32-lane evaluation
-    /// ([`tape::Tape::eval32_ops`]) where all of them fall in one region (or there are no
-    /// regions), else each packet as [`SdfField::eval_tape8`] does it; every lane gets
-    /// what [`SdfField::eval_tape`] gives at its point alone.
+    /// The tape at 32 points given relative to its origin ([`tape_inputs32`]): one 32-lane
+    /// evaluation ([`tape::Tape::eval32_ops`]) where all of them fall in one region (or
+    /// there are no regions), else each packet of the world points `points()` as
+    /// [`SdfField::eval_tape8`] does it; every lane gets what [`SdfField::eval_tape`] gives
+    /// at its point alone.
     #[inline]
-    fn eval_tape32(&self, tape: &tape::Tape, points: &[DVec3; WIDE]) -> [f32; WIDE] {
-        let rel: [Vec3; WIDE] = std::array::from_fn(|i| tape.relative(points[i]));
-        let cell = self.region(rel[0]);
-        if self.regions.is_some() && rel.iter().any(|&r| self.region(r) != cell) {
+    fn eval_tape32(
+        &self,
+        tape: &tape::Tape,
+        rel: &[tape::X32; 3],
+        points: impl FnOnce() -> [DVec3; WIDE],
+    ) -> [f32; WIDE] {
+        let at = |i: usize| {
+            Vec3::new(
+                rel[0][i / PACKET][i % PACKET],
+                rel[1][i / PACKET][i % PACKET],
+                rel[2][i / PACKET][i % PACKET],
+            )
+        };
+        let cell = self.region(at(0));
+        if self.regions.is_some() && (1..WIDE).any(|i| self.region(at(i)) != cell) {
+            let points = points();
             let mut out = [0.0; WIDE];
             for (g, packet) in points.chunks_exact(PACKET).enumerate() {
                 out[g * PACKET..(g + 1) * PACKET].copy_from_slice(&self.eval_tape8(tape, packet));
             }
             return out;
         }
-        let lanes = |a: usize| -> tape::X32 {
-            std::array::from_fn(|g| std::array::from_fn(|l| rel[PACKET * g + l][a]))
-        };
-        let (xs, ys, zs) = (lanes(0), lanes(1), lanes(2));
         let d = SCRATCH.with(|s| {
             let mut s = s.borrow_mut();
             s.fit(tape);
-            tape.eval32_ops(self.ops_in(tape, cell), &xs, &ys, &zs, &mut s)
+            tape.eval32_ops(self.ops_in(tape, cell), &rel[0], &rel[1], &rel[2], &mut s)
         });
         std::array::from_fn(|i| d[i / PACKET][i % PACKET])
     }
@@ -834,6 +843,95 @@ impl Geometry for SdfUnion {
 /// The analytic field: distances from the tape where f32 is precise enough for the
 /// tolerance asked, else from the tree (exact or Lipschitz-1 bounds, marched as they
 /// are); the material of the nearest surface at a hit from the tree.
+/// The tape's inputs at the 32 ray points `o + d * t` (lane `8 g + l` in `[g][l]` of each
+/// component): each point relative to the tape's origin, rounded to f32
+/// ([`tape::Tape::relative`] of the point as `DVec3` arithmetic gives it), and the lanes
+/// whose tape value [`SdfField::choose`] takes as it is (the tape's error bound at the
+/// point at most a quarter of the lane's tolerance), as bits. Four lanes at a time with
+/// AVX2 where the CPU has it; the same operations, so the same bits.
+fn tape_inputs32(
+    tape: &tape::Tape,
+    o: &Rays32,
+    d: &Rays32,
+    t: &Lanes32,
+    tol: &Lanes32,
+) -> ([tape::X32; 3], u32) {
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2() {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { inputs_avx2::tape_inputs32(tape, o, d, t, tol) };
+    }
+    let mut rel = [[[0.0f32; PACKET]; WIDE / PACKET]; 3];
+    let mut resolved = 0;
+    for i in 0..WIDE {
+        let p = DVec3::new(o[0][i], o[1][i], o[2][i]) + DVec3::new(d[0][i], d[1][i], d[2][i]) * t[i];
+        let r = tape.relative(p);
+        for a in 0..3 {
+            rel[a][i / PACKET][i % PACKET] = r[a];
+        }
+        if tape.error_bound((p - tape.origin).length()) <= 0.25 * tol[i] {
+            resolved |= 1 << i;
+        }
+    }
+    (rel, resolved)
+}
+
+/// [`tape_inputs32`] four lanes at a time.
+#[cfg(target_arch = "x86_64")]
+mod inputs_avx2 {
+    use std::arch::x86_64::*;
+
+    use super::tape;
+    use crate::geometry::PACKET;
+    use crate::geometry::marched::{Lanes32, Rays32, WIDE};
+
+    /// [`super::tape_inputs32`]: `DVec3` arithmetic on four lanes at once (`o + d * t`, the
+    /// difference to the origin, `x * x + y * y + z * z` and its square root, rounded after
+    /// each operation as the scalar code is), the rounding to f32 by `cvtpd_ps` (to
+    /// nearest, as `as f32` is) and the tolerance test as an ordered comparison.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn tape_inputs32(
+        tape: &tape::Tape,
+        o: &Rays32,
+        d: &Rays32,
+        t: &Lanes32,
+        tol: &Lanes32,
+    ) -> ([tape::X32; 3], u32) {
+        let mut rel = [[[0.0f32; PACKET]; WIDE / PACKET]; 3];
+        let mut resolved = 0u32;
+        let (k, m) = tape.error_parts();
+        // SAFETY: AVX2 is enabled; every load and store is of four lanes `i..i + 4` of a
+        // 32-lane array, or of lanes `l..l + 4` (`l` 0 or 4) of an 8-lane packet.
+        unsafe {
+            let (k, m, quarter) = (_mm256_set1_pd(k), _mm256_set1_pd(m), _mm256_set1_pd(0.25));
+            for i in (0..WIDE).step_by(4) {
+                let ti = _mm256_loadu_pd(t.as_ptr().add(i));
+                let mut sq = _mm256_setzero_pd();
+                for a in 0..3 {
+                    let p = _mm256_add_pd(
+                        _mm256_loadu_pd(o[a].as_ptr().add(i)),
+                        _mm256_mul_pd(_mm256_loadu_pd(d[a].as_ptr().add(i)), ti),
+                    );
+                    let r = _mm256_sub_pd(p, _mm256_set1_pd(tape.origin[a]));
+                    _mm_storeu_ps(rel[a][i / PACKET].as_mut_ptr().add(i % PACKET), _mm256_cvtpd_ps(r));
+                    let rr = _mm256_mul_pd(r, r);
+                    sq = if a == 0 { rr } else { _mm256_add_pd(sq, rr) };
+                }
+                let err = _mm256_mul_pd(k, _mm256_add_pd(_mm256_sqrt_pd(sq), m));
+                let within = _mm256_cmp_pd::<_CMP_LE_OQ>(
+                    err,
+                    _mm256_mul_pd(quarter, _mm256_loadu_pd(tol.as_ptr().add(i))),
+                );
+                resolved |= (_mm256_movemask_pd(within) as u32) << i;
+            }
+        }
+        (rel, resolved)
+    }
+}
+
 impl DistanceField for SdfField {
     #[inline]
     fn distance(&self, p: DVec3) -> f64 {
@@ -873,9 +971,15 @@ impl DistanceField for SdfField {
         let Some(tape) = self.tape.as_ref().filter(|_| packets == (1 << (WIDE / PACKET)) - 1) else {
             return distance32_by_packets(self, o, d, t, tol, packets);
         };
-        let points = ray_points32(o, d, t);
-        let v = self.eval_tape32(tape, &points);
-        std::array::from_fn(|i| self.choose(points[i], tol[i], |_| v[i] as f64))
+        let (rel, resolved) = tape_inputs32(tape, o, d, t, tol);
+        let v = self.eval_tape32(tape, &rel, || ray_points32(o, d, t));
+        std::array::from_fn(|i| {
+            if resolved >> i & 1 != 0 {
+                return v[i] as f64;
+            }
+            let p = DVec3::new(o[0][i], o[1][i], o[2][i]) + DVec3::new(d[0][i], d[1][i], d[2][i]) * t[i];
+            self.choose(p, tol[i], |_| v[i] as f64)
+        })
     }
 
     fn distance4_within(&self, points: &[DVec3; 4], tolerance: f64) -> [f64; 4] {

@@ -612,7 +612,15 @@ impl Tape {
     /// where `K` is the largest coordinate magnitude the tape computes with (see the module
     /// documentation).
     pub fn error_bound(&self, radius: f64) -> f64 {
-        ERROR_FACTOR * f32::EPSILON as f64 * (radius + self.magnitude)
+        let (k, m) = self.error_parts();
+        k * (radius + m)
+    }
+
+    /// [`Tape::error_bound`] is `k * (radius + m)` with `(k, m)` these two: for kernels that
+    /// compute it themselves, with the same operations.
+    #[inline]
+    pub fn error_parts(&self) -> (f64, f64) {
+        (ERROR_FACTOR * f32::EPSILON as f64, self.magnitude)
     }
 
     /// Whether f32 evaluation is precise enough for a march whose smallest hit tolerance
