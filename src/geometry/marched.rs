@@ -48,10 +48,13 @@ pub type Lanes32 = [f64; WIDE];
 /// [`ray_points8`] for [`WIDE`] rays.
 #[inline]
 pub fn ray_points32(origin: &Rays32, dir: &Rays32, t: &Lanes32) -> [DVec3; WIDE] {
-    std::array::from_fn(|l| {
-        DVec3::new(origin[0][l], origin[1][l], origin[2][l])
-            + DVec3::new(dir[0][l], dir[1][l], dir[2][l]) * t[l]
-    })
+    std::array::from_fn(|l| ray_point32(origin, dir, t, l))
+}
+
+/// Lane `l`'s point of [`ray_points32`].
+#[inline]
+pub fn ray_point32(origin: &Rays32, dir: &Rays32, t: &Lanes32, l: usize) -> DVec3 {
+    DVec3::new(origin[0][l], origin[1][l], origin[2][l]) + DVec3::new(dir[0][l], dir[1][l], dir[2][l]) * t[l]
 }
 
 /// [`DistanceField::distance32_rays`] packet by packet: [`DistanceField::distance8_rays`]
@@ -249,9 +252,8 @@ impl<F: DistanceField> Marched<F> {
     }
 
     /// The intervals of [`Self::segment`] for up to [`PACKET`] rays (ray `i` up to
-    /// `t_max[i]`), bit for bit: where the CPU has SSE (the x86-64 baseline) the box clip
-    /// ([`Ray::clip_to_box`]) runs four rays at a time ([`clip4`]), eight with AVX
-    /// ([`clip8`]).
+    /// `t_max[i]`), bit for bit: where the CPU has AVX2 the box clip
+    /// ([`Ray::clip_to_box`]) runs for the eight rays at once ([`clip8`]).
     #[inline]
     fn segments8(&self, rays: &[Ray], t_min: f32, t_max: &[f32; PACKET]) -> [Option<(f64, f64)>; PACKET] {
         let n = rays.len().min(PACKET);
@@ -259,32 +261,17 @@ impl<F: DistanceField> Marched<F> {
             return std::array::from_fn(|i| (i < n).then_some((t_min as f64, t_max[i] as f64)));
         }
         #[cfg(target_arch = "x86_64")]
-        {
+        if crate::simd::avx2() {
             let mut out = [None; PACKET];
-            if crate::simd::avx2() {
-                // Lanes past the packet's end clip a copy of its first ray (not used).
-                let eight = std::array::from_fn(|k| rays.get(k).unwrap_or(&rays[0]));
-                // SAFETY: the CPU has AVX2, so AVX (checked just above).
-                let clipped = unsafe { clip8(eight, &self.bounds, t_min, *t_max) };
-                for (k, c) in clipped.into_iter().enumerate().take(n) {
-                    out[k] = c.map(|(t0, t1)| (t0 as f64, t1 as f64));
-                }
-                return out;
+            // Lanes past the packet's end clip a copy of its first ray (not used).
+            let eight = std::array::from_fn(|k| rays.get(k).unwrap_or(&rays[0]));
+            // SAFETY: the CPU has AVX2, so AVX (checked just above).
+            let clipped = unsafe { clip8(eight, &self.bounds, t_min, *t_max) };
+            for (k, c) in clipped.into_iter().enumerate().take(n) {
+                out[k] = c.map(|(t0, t1)| (t0 as f64, t1 as f64));
             }
-            for half in 0..n.div_ceil(4) {
-                // Lanes past the packet's end clip a copy of its first ray (not used).
-                let lane = |k: usize| rays.get(4 * half + k).unwrap_or(&rays[0]);
-                let quad = [lane(0), lane(1), lane(2), lane(3)];
-                let tq = std::array::from_fn(|k| t_max[(4 * half + k).min(PACKET - 1)]);
-                for (k, c) in clip4(quad, &self.bounds, t_min, tq).into_iter().enumerate() {
-                    if 4 * half + k < n {
-                        out[4 * half + k] = c.map(|(t0, t1)| (t0 as f64, t1 as f64));
-                    }
-                }
-            }
-            out
+            return out;
         }
-        #[cfg(not(target_arch = "x86_64"))]
         std::array::from_fn(|i| {
             let (t0, t1) = rays.get(i)?.clip_to_box(&self.bounds, t_min, t_max[i])?;
             Some((t0 as f64, t1 as f64))
@@ -570,56 +557,11 @@ impl<F: DistanceField> Geometry for Marched<F> {
     }
 }
 
-/// [`Ray::clip_to_box`] for four rays at once (ray `k` over `[t_min, t_max[k]]`), bit for
-/// bit: the same single precision operations, with the scalar code's comparisons as SSE
+/// [`Ray::clip_to_box`] for eight rays at once (ray `k` over `[t_min, t_max[k]]`), bit for
+/// bit: the same single precision operations, with the scalar code's comparisons as AVX
 /// `min`/`max` in its operand order (`a > t0 ? a : t0` is `max(a, t0)`, NaN keeping
 /// `t0`) and its early exits as masks (the interval only narrows from one axis to the
 /// next, so an interval found empty at one axis is empty at the end).
-#[cfg(target_arch = "x86_64")]
-#[inline]
-fn clip4(rays: [&Ray; 4], b: &Aabb, t_min: f32, t_max: [f32; 4]) -> [Option<(f32, f32)>; 4] {
-    use std::arch::x86_64::*;
-    // SAFETY: SSE and SSE2 are part of the x86-64 baseline; the transmutes are between
-    // `__m128` and four f32.
-    unsafe {
-        let mut t0 = _mm_set1_ps(t_min);
-        let mut t1 = std::mem::transmute::<[f32; 4], __m128>(t_max);
-        let mut dead = _mm_setzero_ps();
-        let mut moving = _mm_setzero_ps();
-        for axis in 0..3 {
-            // Written out, not through a closure or `dyn Fn`, so the loads inline.
-            let o = _mm_setr_ps(
-                rays[0].origin[axis],
-                rays[1].origin[axis],
-                rays[2].origin[axis],
-                rays[3].origin[axis],
-            );
-            let d = _mm_setr_ps(rays[0].dir[axis], rays[1].dir[axis], rays[2].dir[axis], rays[3].dir[axis]);
-            let (lo, hi) = (_mm_set1_ps(b.min[axis]), _mm_set1_ps(b.max[axis]));
-            // A ray parallel to the slab: inside it for all t or for none.
-            let flat = _mm_cmpeq_ps(d, _mm_setzero_ps());
-            dead = _mm_or_ps(dead, _mm_and_ps(flat, _mm_or_ps(_mm_cmplt_ps(o, lo), _mm_cmpgt_ps(o, hi))));
-            moving = _mm_or_ps(moving, _mm_andnot_ps(flat, _mm_castsi128_ps(_mm_set1_epi32(-1))));
-            let inv = _mm_div_ps(_mm_set1_ps(1.0), d);
-            let ta = _mm_mul_ps(_mm_sub_ps(lo, o), inv);
-            let tb = _mm_mul_ps(_mm_sub_ps(hi, o), inv);
-            // `if ta > tb { swap }`.
-            let (near, far) = (_mm_min_ps(tb, ta), _mm_max_ps(ta, tb));
-            // `if near > t0 { t0 = near }`, `if far < t1 { t1 = far }`, not for flat lanes.
-            t0 = _mm_or_ps(_mm_and_ps(flat, t0), _mm_andnot_ps(flat, _mm_max_ps(near, t0)));
-            t1 = _mm_or_ps(_mm_and_ps(flat, t1), _mm_andnot_ps(flat, _mm_min_ps(far, t1)));
-        }
-        dead = _mm_or_ps(dead, _mm_and_ps(moving, _mm_cmpgt_ps(t0, t1)));
-        let dead = _mm_movemask_ps(dead);
-        let (t0, t1) =
-            (std::mem::transmute::<__m128, [f32; 4]>(t0), std::mem::transmute::<__m128, [f32; 4]>(t1));
-        std::array::from_fn(|k| (dead & (1 << k) == 0).then_some((t0[k], t1[k])))
-    }
-}
-
-/// [`clip4`] for eight rays at once with AVX: the same operations on 256-bit vectors (its
-/// comparisons with the SSE predicates' AVX names), so the same bits as
-/// [`Ray::clip_to_box`].
 ///
 /// # Safety
 /// The CPU must have AVX.
@@ -682,7 +624,7 @@ mod tests {
 
     #[test]
     #[cfg(target_arch = "x86_64")]
-    fn four_and_eight_box_clips_at_once_equal_one_by_one() {
+    fn eight_box_clips_at_once_equal_one_by_one() {
         let b = aabb(Vec3::new(-1.0, -0.5, 0.25), Vec3::new(2.0, 1.5, 3.0));
         let mut s = 0x2545_f491_4f6c_dd1du64;
         let mut next = || {
@@ -705,26 +647,19 @@ mod tests {
             }
             rays.push(Ray::new(o, d));
         }
-        for (q, chunk) in rays.chunks(4).enumerate() {
+        if !crate::simd::avx2() {
+            return;
+        }
+        for (q, chunk) in rays.chunks(8).enumerate() {
             let t_min = if q % 5 == 0 { 1.0 } else { 0.0 };
-            let t_max = std::array::from_fn(|k| [100.0, 2.0, 0.5, f32::INFINITY][(q + k) % 4]);
-            let wide = clip4([&chunk[0], &chunk[1], &chunk[2], &chunk[3]], &b, t_min, t_max);
+            let t_max: [f32; 8] = std::array::from_fn(|k| [100.0, 2.0, 0.5, f32::INFINITY, 3.0][(q + k) % 5]);
+            let eight: [&Ray; 8] = std::array::from_fn(|k| &chunk[k]);
+            // SAFETY: the CPU has AVX2, so AVX.
+            let wide = unsafe { clip8(eight, &b, t_min, t_max) };
             let bits = |c: Option<(f32, f32)>| c.map(|(a, b)| (a.to_bits(), b.to_bits()));
-            for k in 0..4 {
+            for k in 0..8 {
                 let one = chunk[k].clip_to_box(&b, t_min, t_max[k]);
                 assert_eq!(bits(wide[k]), bits(one), "{:?} over [{t_min}, {}]", chunk[k], t_max[k]);
-            }
-            if crate::simd::avx2() {
-                // Eight at once: this quad and the next one.
-                let next = &rays[(4 * q + 4) % rays.len()..][..4];
-                let eight: [&Ray; 8] = std::array::from_fn(|k| if k < 4 { &chunk[k] } else { &next[k - 4] });
-                let t8: [f32; 8] = std::array::from_fn(|k| t_max[k % 4] * if k < 4 { 1.0 } else { 0.5 });
-                // SAFETY: the CPU has AVX2, so AVX.
-                let wide8 = unsafe { clip8(eight, &b, t_min, t8) };
-                for k in 0..8 {
-                    let one = eight[k].clip_to_box(&b, t_min, t8[k]);
-                    assert_eq!(bits(wide8[k]), bits(one), "{:?} over [{t_min}, {}]", eight[k], t8[k]);
-                }
             }
         }
     }

@@ -13,7 +13,7 @@ pub mod tape;
 
 use crate::geometry::march::MarchParams;
 use crate::geometry::marched::{
-    DistanceField, Lanes32, Marched, Rays32, WIDE, distance32_by_packets, ray_points32,
+    DistanceField, Lanes32, Marched, Rays32, WIDE, distance32_by_packets, ray_point32, ray_points32,
 };
 use crate::geometry::scene::SceneGeometry;
 use crate::geometry::{
@@ -840,9 +840,6 @@ impl Geometry for SdfUnion {
     }
 }
 
-/// The analytic field: distances from the tape where f32 is precise enough for the
-/// tolerance asked, else from the tree (exact or Lipschitz-1 bounds, marched as they
-/// are); the material of the nearest surface at a hit from the tree.
 /// The tape's inputs at the 32 ray points `o + d * t` (lane `8 g + l` in `[g][l]` of each
 /// component): each point relative to the tape's origin, rounded to f32
 /// ([`tape::Tape::relative`] of the point as `DVec3` arithmetic gives it), and the lanes
@@ -859,12 +856,12 @@ fn tape_inputs32(
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx2() {
         // SAFETY: the CPU has AVX2 (checked just above).
-        return unsafe { inputs_avx2::tape_inputs32(tape, o, d, t, tol) };
+        return unsafe { inputs_avx2::tape_inputs32(tape, (o, d, t, tol)) };
     }
     let mut rel = [[[0.0f32; PACKET]; WIDE / PACKET]; 3];
     let mut resolved = 0;
     for i in 0..WIDE {
-        let p = DVec3::new(o[0][i], o[1][i], o[2][i]) + DVec3::new(d[0][i], d[1][i], d[2][i]) * t[i];
+        let p = ray_point32(o, d, t, i);
         let r = tape.relative(p);
         for a in 0..3 {
             rel[a][i / PACKET][i % PACKET] = r[a];
@@ -895,10 +892,7 @@ mod inputs_avx2 {
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn tape_inputs32(
         tape: &tape::Tape,
-        o: &Rays32,
-        d: &Rays32,
-        t: &Lanes32,
-        tol: &Lanes32,
+        (o, d, t, tol): (&Rays32, &Rays32, &Lanes32, &Lanes32),
     ) -> ([tape::X32; 3], u32) {
         let mut rel = [[[0.0f32; PACKET]; WIDE / PACKET]; 3];
         let mut resolved = 0u32;
@@ -932,6 +926,9 @@ mod inputs_avx2 {
     }
 }
 
+/// The analytic field: distances from the tape where f32 is precise enough for the
+/// tolerance asked, else from the tree (exact or Lipschitz-1 bounds, marched as they
+/// are); the material of the nearest surface at a hit from the tree.
 impl DistanceField for SdfField {
     #[inline]
     fn distance(&self, p: DVec3) -> f64 {
@@ -977,8 +974,7 @@ impl DistanceField for SdfField {
             if resolved >> i & 1 != 0 {
                 return v[i] as f64;
             }
-            let p = DVec3::new(o[0][i], o[1][i], o[2][i]) + DVec3::new(d[0][i], d[1][i], d[2][i]) * t[i];
-            self.choose(p, tol[i], |_| v[i] as f64)
+            self.choose(ray_point32(o, d, t, i), tol[i], |_| v[i] as f64)
         })
     }
 
