@@ -631,19 +631,17 @@ pub fn gradient_normal(
     tetrahedron_normal(f4(&tetrahedron_points(p, h)))
 }
 
-/// [`gradient_normal`] at two points at once (`a` with step `ha`, `b` with step `hb`):
-/// `f8` evaluates both stencils together (a field does that with one 8-wide evaluation),
-/// each lane as [`gradient_normal`]'s `f4` would, so each normal is bit for bit the one
+/// [`gradient_normal`] at `N` points at once (`at[k]`: point `k` and its step): `f`
+/// evaluates all the stencils together (a field does that in one wide evaluation), each
+/// lane as [`gradient_normal`]'s `f4` would, so each normal is bit for bit the one
 /// [`gradient_normal`] gives at that point alone.
-pub fn gradient_normal2(
-    f8: &impl Fn(&[DVec3; 4], &[DVec3; 4]) -> ([f64; 4], [f64; 4]),
-    (a, ha): (DVec3, f64),
-    (b, hb): (DVec3, f64),
+pub fn gradient_normals<const N: usize>(
+    f: impl FnOnce(&[[DVec3; 4]; N]) -> [[f64; 4]; N],
+    at: [(DVec3, f64); N],
     stats: &mut RayStats,
-) -> (DVec3, DVec3) {
-    stats.march_steps += 8;
-    let (da, db) = f8(&tetrahedron_points(a, ha), &tetrahedron_points(b, hb));
-    (tetrahedron_normal(da), tetrahedron_normal(db))
+) -> [DVec3; N] {
+    stats.march_steps += 4 * N as u64;
+    f(&at.map(|(p, h)| tetrahedron_points(p, h))).map(tetrahedron_normal)
 }
 
 /// The stencil of [`gradient_normal`]: `p + h * k` for each of [`TETRAHEDRON`]'s `k`.

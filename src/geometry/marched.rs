@@ -17,7 +17,7 @@
 use glam::{DVec3, Vec3};
 
 use crate::geometry::march::{
-    MarchHit, MarchLanes, MarchParams, Segment, gradient_normal, gradient_normal2, sphere_trace,
+    MarchHit, MarchLanes, MarchParams, Segment, gradient_normal, gradient_normals, sphere_trace,
 };
 use crate::geometry::{
     Aabb, Census, Geometry, Hit, MaterialId, PACKET, Ray, RayStats, Shared, f32_error, max_abs,
@@ -78,6 +78,20 @@ where
         let part = |a: &[f64; WIDE]| -> [f64; PACKET] { std::array::from_fn(|l| a[PACKET * g + l]) };
         let v = field.distance8_rays(&o.each_ref().map(part), &d.each_ref().map(part), &part(t), &part(tol));
         out[PACKET * g..PACKET * (g + 1)].copy_from_slice(&v);
+    }
+    out
+}
+
+/// [`DistanceField::distance4x8_within`] two stencils at a time
+/// ([`DistanceField::distance4x2_within`]).
+pub fn distance4x8_by_pairs<F>(field: &F, stencils: &[[DVec3; 4]; 8], tolerances: &[f64; 8]) -> [[f64; 4]; 8]
+where
+    F: DistanceField + ?Sized,
+{
+    let mut out = [[0.0; 4]; 8];
+    for k in (0..8).step_by(2) {
+        (out[k], out[k + 1]) =
+            field.distance4x2_within(&stencils[k], tolerances[k], &stencils[k + 1], tolerances[k + 1]);
     }
     out
 }
@@ -161,11 +175,20 @@ pub trait DistanceField: Send + Sync {
     }
 
     /// [`Self::distance4_within`] at two stencils at once (the normals of two hits of a
-    /// packet, [`gradient_normal2`]), each as [`Self::distance4_within`] gives it alone.
+    /// packet, [`gradient_normals`]), each as [`Self::distance4_within`] gives it alone.
     /// The default evaluates them one after the other.
     #[inline]
     fn distance4x2_within(&self, a: &[DVec3; 4], ta: f64, b: &[DVec3; 4], tb: f64) -> ([f64; 4], [f64; 4]) {
         (self.distance4_within(a, ta), self.distance4_within(b, tb))
+    }
+
+    /// [`Self::distance4_within`] at eight stencils at once (`stencils[k]` to within
+    /// `tolerances[k]`: the normals of eight hits of a batch, [`gradient_normals`]), each as
+    /// [`Self::distance4_within`] gives it alone. The default takes them two at a time
+    /// ([`Self::distance4x2_within`]).
+    #[inline]
+    fn distance4x8_within(&self, stencils: &[[DVec3; 4]; 8], tolerances: &[f64; 8]) -> [[f64; 4]; 8] {
+        distance4x8_by_pairs(self, stencils, tolerances)
     }
 
     /// Whether the field is the exact Euclidean distance everywhere (false: a bound).
@@ -459,15 +482,20 @@ impl<F: DistanceField> Marched<F> {
         self.record(hit.t, p, eps, normal)
     }
 
-    /// [`Marched::hit`] for two converged marches at once, their normals' stencils
-    /// evaluated together ([`DistanceField::distance4x2_within`]); each record is bit for
-    /// bit the one [`Marched::hit`] gives alone.
-    fn hit2(&self, (ra, a): (&Ray, MarchHit), (rb, b): (&Ray, MarchHit), stats: &mut RayStats) -> (Hit, Hit) {
-        let (pa, ea, ha) = self.hit_point(ra, a);
-        let (pb, eb, hb) = self.hit_point(rb, b);
-        let f8 = |qa: &[DVec3; 4], qb: &[DVec3; 4]| self.field.distance4x2_within(qa, 0.2 * ha, qb, 0.2 * hb);
-        let (na, nb) = gradient_normal2(&f8, (pa, ha), (pb, hb), stats);
-        (self.record(a.t, pa, ea, na), self.record(b.t, pb, eb, nb))
+    /// [`Marched::hit`] for `N` converged marches at once, their normals' stencils evaluated
+    /// together by `f(stencils, tolerances)` ([`DistanceField::distance4x2_within`],
+    /// [`DistanceField::distance4x8_within`]); each record is bit for bit the one
+    /// [`Marched::hit`] gives alone.
+    fn hits<const N: usize>(
+        &self,
+        found: [(&Ray, MarchHit); N],
+        f: impl FnOnce(&[[DVec3; 4]; N], &[f64; N]) -> [[f64; 4]; N],
+        stats: &mut RayStats,
+    ) -> [Hit; N] {
+        let at = found.map(|(ray, mh)| self.hit_point(ray, mh));
+        let tolerances = at.map(|(_, _, h)| 0.2 * h);
+        let normals = gradient_normals(|s| f(s, &tolerances), at.map(|(p, _, h)| (p, h)), stats);
+        std::array::from_fn(|k| self.record(found[k].1.t, at[k].0, at[k].1, normals[k]))
     }
 }
 
@@ -497,20 +525,36 @@ impl<F: DistanceField> Geometry for Marched<F> {
         stats: &mut RayStats,
     ) {
         debug_assert!(t_max.len() == rays.len() && hits.len() == rays.len());
-        // The hit records two at a time, as the marches end: both normals' stencils in one
-        // evaluation.
-        let mut pending: Option<(usize, MarchHit)> = None;
+        // The hit records eight at a time, as the marches end: their normals' stencils in one
+        // evaluation ([`DistanceField::distance4x8_within`]); the last ones two at a time,
+        // then alone.
+        const EIGHT: usize = 8;
+        let mut pending = [(0usize, MarchHit { t: 0.0, residual: 0.0 }); EIGHT];
+        let mut n = 0;
         let mut record = |i: usize, mh: MarchHit, stats: &mut RayStats| {
-            let Some((j, first)) = pending.take() else {
-                pending = Some((i, mh));
-                return;
-            };
-            let (a, b) = self.hit2((&rays[j], first), (&rays[i], mh), stats);
-            (hits[j], hits[i]) = (Some(a), Some(b));
+            pending[n] = (i, mh);
+            n += 1;
+            if n == EIGHT {
+                n = 0;
+                let found = pending.map(|(j, mh)| (&rays[j], mh));
+                let done = self.hits(found, |s, tol| self.field.distance4x8_within(s, tol), stats);
+                for ((j, _), h) in pending.iter().zip(done) {
+                    hits[*j] = Some(h);
+                }
+            }
         };
         self.march_batch(rays, t_min, |i| Some(t_max[i]), stats, &mut record);
-        if let Some((j, mh)) = pending {
-            hits[j] = Some(self.hit(&rays[j], mh, stats));
+        for pair in pending[..n].chunks(2) {
+            if let [(i, a), (j, b)] = *pair {
+                let pair_of = |s: &[[DVec3; 4]; 2], tol: &[f64; 2]| {
+                    let (da, db) = self.field.distance4x2_within(&s[0], tol[0], &s[1], tol[1]);
+                    [da, db]
+                };
+                let [ha, hb] = self.hits([(&rays[i], a), (&rays[j], b)], pair_of, stats);
+                (hits[i], hits[j]) = (Some(ha), Some(hb));
+            } else if let [(i, a)] = *pair {
+                hits[i] = Some(self.hit(&rays[i], a, stats));
+            }
         }
         // A new hit is nearer than its ray's `t_max`; one found before sets it already.
         for (t, h) in t_max.iter_mut().zip(hits.iter()) {

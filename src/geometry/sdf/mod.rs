@@ -13,7 +13,8 @@ pub mod tape;
 
 use crate::geometry::march::MarchParams;
 use crate::geometry::marched::{
-    DistanceField, Lanes32, Marched, Rays32, WIDE, distance32_by_packets, ray_point32, ray_points32,
+    DistanceField, Lanes32, Marched, Rays32, WIDE, distance4x8_by_pairs, distance32_by_packets, ray_point32,
+    ray_points32,
 };
 use crate::geometry::scene::SceneGeometry;
 use crate::geometry::{
@@ -858,19 +859,24 @@ fn tape_inputs32(
         // SAFETY: the CPU has AVX2 (checked just above).
         return unsafe { inputs_avx2::tape_inputs32(tape, (o, d, t, tol)) };
     }
+    let points = ray_points32(o, d, t);
+    let resolved = (0..WIDE)
+        .filter(|&i| tape.error_bound((points[i] - tape.origin).length()) <= 0.25 * tol[i])
+        .fold(0, |m, i| m | 1 << i);
+    (relative32(tape, &points), resolved)
+}
+
+/// The 32 world `points` relative to the tape's origin, rounded to f32
+/// ([`tape::Tape::relative`]), by component (`[a][g][l]`: component `a` of lane `8 g + l`).
+fn relative32(tape: &tape::Tape, points: &[DVec3; WIDE]) -> [tape::X32; 3] {
     let mut rel = [[[0.0f32; PACKET]; WIDE / PACKET]; 3];
-    let mut resolved = 0;
-    for i in 0..WIDE {
-        let p = ray_point32(o, d, t, i);
-        let r = tape.relative(p);
+    for (i, p) in points.iter().enumerate() {
+        let r = tape.relative(*p);
         for a in 0..3 {
             rel[a][i / PACKET][i % PACKET] = r[a];
         }
-        if tape.error_bound((p - tape.origin).length()) <= 0.25 * tol[i] {
-            resolved |= 1 << i;
-        }
     }
-    (rel, resolved)
+    rel
 }
 
 /// [`tape_inputs32`] four lanes at a time.
@@ -995,6 +1001,18 @@ impl DistanceField for SdfField {
         };
         let d = self.eval_tape8(tape, &[a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3]]);
         (std::array::from_fn(|i| d[i] as f64), std::array::from_fn(|i| d[i + 4] as f64))
+    }
+
+    /// The eight stencils in one 32-lane tape evaluation ([`SdfField::eval_tape32`]) where
+    /// the tape resolves each (each lane's value is what it is alone); else two at a time.
+    fn distance4x8_within(&self, stencils: &[[DVec3; 4]; 8], tolerances: &[f64; 8]) -> [[f64; 4]; 8] {
+        let resolves = |t: &&tape::Tape| (0..8).all(|k| self.tape_resolves(t, &stencils[k], tolerances[k]));
+        let Some(tape) = self.tape.as_ref().filter(resolves) else {
+            return distance4x8_by_pairs(self, stencils, tolerances);
+        };
+        let points: [DVec3; WIDE] = std::array::from_fn(|i| stencils[i / 4][i % 4]);
+        let v = self.eval_tape32(tape, &relative32(tape, &points), || points);
+        std::array::from_fn(|k| std::array::from_fn(|j| v[4 * k + j] as f64))
     }
 
     fn is_signed(&self) -> bool {
