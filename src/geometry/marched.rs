@@ -317,10 +317,10 @@ impl<F: DistanceField> Marched<F> {
     /// march ends takes the next ray of the batch, so lanes idle only once the batch runs
     /// out (a packet would wait for its slowest ray). Otherwise a packet of [`PACKET`]
     /// lanes marches until its last lane is done before it takes the next rays. Each lane
-    /// takes the steps of its own scalar march (one state machine, [`MarchLanes`]), so it converges where
-    /// [`Marched::march`] does for that ray alone, and `on_hit(i, hit, stats)` is called
-    /// for each ray whose march converges within `[t_min, reach(i)]`, in the order the
-    /// marches end. `reach(i)` is read before ray `i`'s march starts.
+    /// takes the steps of its own scalar march (one state machine, [`MarchLanes`]), so it
+    /// converges where [`Marched::march`] does for that ray alone, and `on_hit(i, hit,
+    /// stats)` is called for each ray whose march converges within `[t_min, reach(i)]`, in
+    /// the order the marches end. `reach(i)` is read before ray `i`'s march starts.
     fn march_batch(
         &self,
         rays: &[Ray],
@@ -525,9 +525,9 @@ impl<F: DistanceField> Geometry for Marched<F> {
         stats: &mut RayStats,
     ) {
         debug_assert!(t_max.len() == rays.len() && hits.len() == rays.len());
-        // The hit records eight at a time, as the marches end: their normals' stencils in one
-        // evaluation ([`DistanceField::distance4x8_within`]); the last ones two at a time,
-        // then alone.
+        // The hit records eight at a time, as the marches end: their normals' stencils in
+        // one evaluation ([`DistanceField::distance4x8_within`]); the last ones two at a
+        // time, then alone.
         const EIGHT: usize = 8;
         let mut pending = [(0usize, MarchHit { t: 0.0, residual: 0.0 }); EIGHT];
         let mut n = 0;

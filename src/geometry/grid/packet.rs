@@ -35,8 +35,8 @@ impl SdfGrid {
         self.trilinear8_portable(xs, ys, zs)
     }
 
-    /// [`SdfGrid::trilinear8`] at the points `origin + dir * t[l]` of the eight rays in lanes
-    /// `at..at + 8` of `N` (`origin[a][l]` is component `a` of lane `l`; `at + 8 <= N`),
+    /// [`SdfGrid::trilinear8`] at the points `origin + dir * t[l]` of the eight rays in
+    /// lanes `at..at + 8` of `N` (`origin[a][l]` is component `a` of lane `l`; `at + 8 <= N`),
     /// each computed in double precision as `DVec3` does (`o + d * t` per component) and
     /// rounded to single precision; lane `l` of the result equals `trilinear` at the point
     /// of lane `at + l` bit for bit.
