@@ -9,7 +9,7 @@
 use glam::{DVec3, UVec3, Vec3};
 use proptest::prelude::*;
 use sdfmesh::geometry::sdf::SdfTree;
-use sdfmesh::geometry::sdf::tape::{ERROR_FACTOR, Tape, TapeScratch};
+use sdfmesh::geometry::sdf::tape::{ERROR_FACTOR, Op, Tape, TapeScratch};
 use sdfmesh::scene::shape::{CsgOp, Object, ObjectKind, Primitive};
 use sdfmesh::scene::transform::TransformDesc;
 
@@ -276,16 +276,21 @@ fn calibrate() {
     assert!(t.jumps * 10_000 < t.points, "{t:?}");
 }
 
-/// The bundled scenes' analytic objects compile, and their tapes agree with the trees.
-#[test]
-fn bundled_scenes() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/scenes");
-    let unit: Vec<Vec3> = (0..512)
+/// 512 points spread over the cube [-1, 1]^3 (a fixed hash, no randomness).
+fn spread_points() -> Vec<Vec3> {
+    (0..512)
         .map(|i| {
             let f = |k: u32| ((i * 7919 + k * 104729).wrapping_mul(2654435761) % 1000) as f32 / 500.0 - 1.0;
             Vec3::new(f(1), f(2), f(3))
         })
-        .collect();
+        .collect()
+}
+
+/// The bundled scenes' analytic objects compile, and their tapes agree with the trees.
+#[test]
+fn bundled_scenes() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/scenes");
+    let unit = spread_points();
     let mut objects = 0;
     for entry in std::fs::read_dir(&dir).unwrap() {
         let path = entry.unwrap().path();
@@ -347,4 +352,21 @@ fn jump_at_a_cell_centre() {
     let p = Vec3::new(0.17907129, 0.0, 0.0);
     let seen = check(&o, &[p; 8]).unwrap();
     assert_eq!((seen.points, seen.jumps), (8, 8), "{seen:?}");
+}
+
+/// Common subexpressions are computed once: the rotated Menger sponge maps its point once
+/// for the four children of its subtraction, and each level's bars share their cell
+/// lookups (two of the three axes each, three lookups per level instead of six); the tape
+/// still agrees with the tree.
+#[test]
+fn shared_subexpressions_once() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/scenes/fractal/menger_3.toml");
+    let scene = sdfmesh::scene::load_scene(&path).unwrap();
+    let o = &scene.objects[0];
+    let tape = Tape::from_object(o).unwrap();
+    let count = |f: fn(&Op) -> bool| tape.ops().iter().filter(|op| f(op)).count();
+    assert_eq!(count(|op| matches!(op, Op::Affine { .. })), 1, "{:#?}", tape.ops());
+    assert_eq!(count(|op| matches!(op, Op::CellFace { .. })), 6, "{:#?}", tape.ops());
+    let unit = spread_points();
+    check(o, &sample(o, &unit)).unwrap();
 }

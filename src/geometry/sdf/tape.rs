@@ -26,6 +26,11 @@
 //!   times. Along an axis where the child stays inside its cell ([`super::cell_gaps`]),
 //!   [`Op::CellFace`] takes the nearest cell only and bounds the others by the cell's face
 //!   plus the gap, as the tree does; a child that fits on every axis appears once.
+//! * Common subexpressions are computed once: a point map or a cell lookup whose input
+//!   register never changes (the input point, or the result of another such operation)
+//!   writes registers that nothing else writes, and an identical one later reads them
+//!   instead of being emitted (a rotated Menger sponge maps its point once for its whole
+//!   subtraction, and the three bars of a cross share their cell lookups).
 //!
 //! # Coordinates and precision
 //!
@@ -401,6 +406,56 @@ impl Op {
         }
     }
 
+    /// Calls `f` on every register the operation names, read or written, with whether it
+    /// is a point register (else a value register); [`NO_REG`] included.
+    pub fn for_each_register(&mut self, mut f: impl FnMut(&mut u32, bool)) {
+        match self {
+            Op::Translate { src, dst, .. } | Op::Affine { src, dst, .. } => {
+                f(src, true);
+                f(dst, true);
+            }
+            Op::Sphere { p, out, .. }
+            | Op::Plane { p, out, .. }
+            | Op::Box { p, out, .. }
+            | Op::Ellipsoid { p, out, .. }
+            | Op::Cylinder { p, out, .. }
+            | Op::Cone { p, out, .. }
+            | Op::Torus { p, out, .. }
+            | Op::Triangle { p, out, .. }
+            | Op::Capsule { p, out, .. } => {
+                f(p, true);
+                f(out, false);
+            }
+            Op::Min { out, a, b }
+            | Op::Max { out, a, b }
+            | Op::Subtract { out, a, b }
+            | Op::SmoothUnion { out, a, b, .. }
+            | Op::SmoothIntersection { out, a, b, .. }
+            | Op::SmoothSubtraction { out, a, b, .. } => {
+                for r in [out, a, b] {
+                    f(r, false);
+                }
+            }
+            Op::Scale { a, .. } => f(a, false),
+            Op::Cells { p, base, other: second, .. } | Op::CellFace { p, base, face: second, .. } => {
+                f(p, true);
+                f(base, false);
+                f(second, false);
+            }
+            Op::Offset { src, dst, offs } => {
+                f(src, true);
+                f(dst, true);
+                for r in offs {
+                    f(r, false);
+                }
+            }
+            Op::Copy { out, a } | Op::Neg { out, a } => {
+                f(out, false);
+                f(a, false);
+            }
+        }
+    }
+
     /// The factor a primitive's local distance is multiplied by ([`Op::Sphere`]'s `scale`
     /// and the like); `None` for the rest.
     pub fn primitive_scale(&self) -> Option<f32> {
@@ -558,8 +613,18 @@ impl Tape {
             }
             _ => (DVec3::ZERO, 0.0),
         };
-        let mut c = Compiler { ops: Vec::new(), triangles: Vec::new(), vals: 1, points: 1, magnitude: 0.0 };
+        let mut c = Compiler {
+            ops: Vec::new(),
+            triangles: Vec::new(),
+            vals: 1,
+            points: 1,
+            magnitude: 0.0,
+            once: std::collections::HashMap::new(),
+            once_vals: 0,
+            once_points: 0,
+        };
         c.node(&tree.root, 0, DAffine3::from_translation(origin), 1.0, 0.0, 0, 1);
+        let (vals, points) = c.finish();
         Tape {
             origin,
             reach,
@@ -567,8 +632,8 @@ impl Tape {
             signed: tree.signed,
             ops: c.ops,
             triangles: c.triangles,
-            vals: c.vals as usize,
-            points: c.points as usize,
+            vals,
+            points,
             magnitude: c.magnitude,
         }
     }
@@ -747,35 +812,136 @@ impl Tape {
     }
 }
 
+/// The first write-once register number of either file while compiling
+/// ([`Compiler::once`]); [`Compiler::finish`] renumbers them above the others.
+const ONCE: u32 = 1 << 30;
+
+/// What makes two point maps or repetition cell lookups the same computation: the kind of
+/// operation, its input register and the bits of its constants.
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+struct OnceKey {
+    kind: u8,
+    input: u32,
+    bits: [u32; 12],
+}
+
 /// The tape compiler's state.
 struct Compiler {
     ops: Vec<Op>,
     triangles: Vec<TriangleConsts>,
-    /// Value registers used.
+    /// Value registers used (below [`ONCE`]).
     vals: u32,
-    /// Point registers used.
+    /// Point registers used (below [`ONCE`]).
     points: u32,
     /// `K` of [`Tape::error_bound`] so far.
     magnitude: f64,
+    /// Common subexpressions: point maps and cell lookups whose input never changes (the
+    /// input point, or a write-once register) write write-once registers (numbered from
+    /// [`ONCE`]) that no other operation writes, and an identical one later reads those
+    /// instead of being emitted again: a rotated Menger sponge maps its point once, not
+    /// once per child of its subtraction, and its crosses' bars share their cell lookups.
+    /// The results are the same bits, as the same f32 operations on the same inputs.
+    once: std::collections::HashMap<OnceKey, u32>,
+    /// Write-once value registers used.
+    once_vals: u32,
+    /// Write-once point registers used.
+    once_points: u32,
 }
 
 impl Compiler {
+    /// Whether point register `r` never changes once written: the input point, or a
+    /// write-once register.
+    fn fixed_point(r: u32) -> bool {
+        r == 0 || r >= ONCE
+    }
+
     /// Emits `map(pts[src])` into point register `dst` and returns it, or returns `src` when
-    /// `map` is the identity.
+    /// `map` is the identity. Where `src` never changes, the result goes to a write-once
+    /// register instead, shared with every identical map ([`Compiler::once`]).
     fn point(&mut self, src: u32, map: &DAffine3, dst: u32) -> u32 {
         if *map == DAffine3::IDENTITY {
             return src;
         }
-        self.points = self.points.max(dst + 1);
         let t = map.translation.as_vec3().to_array();
-        if map.matrix3 == DMat3::IDENTITY {
-            self.ops.push(Op::Translate { src, dst, t });
+        let mut bits = [0u32; 12];
+        let op = if map.matrix3 == DMat3::IDENTITY {
+            bits[..3].copy_from_slice(&t.map(f32::to_bits));
+            Op::Translate { src, dst, t }
         } else {
             let m = map.matrix3.as_mat3();
             let row = |i: usize| [m.x_axis[i], m.y_axis[i], m.z_axis[i], t[i]];
-            self.ops.push(Op::Affine { src, dst, m: [row(0), row(1), row(2)] });
+            let m = [row(0), row(1), row(2)];
+            for (b, x) in bits.iter_mut().zip(m.as_flattened()) {
+                *b = x.to_bits();
+            }
+            Op::Affine { src, dst, m }
+        };
+        if !Self::fixed_point(src) {
+            self.points = self.points.max(dst + 1);
+            self.ops.push(op);
+            return dst;
         }
-        dst
+        let key = OnceKey { kind: matches!(op, Op::Affine { .. }) as u8, input: src, bits };
+        if let Some(&r) = self.once.get(&key) {
+            return r;
+        }
+        let r = ONCE + self.once_points;
+        self.once_points += 1;
+        self.once.insert(key, r);
+        self.ops.push(match op {
+            Op::Translate { src, t, .. } => Op::Translate { src, dst: r, t },
+            Op::Affine { src, m, .. } => Op::Affine { src, dst: r, m },
+            _ => unreachable!("a point map"),
+        });
+        r
+    }
+
+    /// Emits `lookup(base)`, an [`Op::Cells`] or [`Op::CellFace`] writing value registers
+    /// `base` and `base + 1`, and returns `base`: `reg`, or, where its point register never
+    /// changes, the first of a pair of write-once registers shared with every identical
+    /// lookup ([`Compiler::once`]).
+    fn cells(&mut self, reg: u32, lookup: impl Fn(u32) -> Op) -> u32 {
+        let (p, consts, kind) = match lookup(reg) {
+            Op::Cells { p, axis, period, inv_period, shift, lo, hi, .. } => {
+                (p, [axis as f32, period, inv_period, shift, lo, hi, 0.0], 2)
+            }
+            Op::CellFace { p, axis, period, inv_period, shift, lo, hi, half_gap, .. } => {
+                (p, [axis as f32, period, inv_period, shift, lo, hi, half_gap], 3)
+            }
+            _ => unreachable!("a cell lookup"),
+        };
+        if !Self::fixed_point(p) {
+            self.vals = self.vals.max(reg + 2);
+            self.ops.push(lookup(reg));
+            return reg;
+        }
+        let mut bits = [0u32; 12];
+        for (b, x) in bits.iter_mut().zip(consts) {
+            *b = x.to_bits();
+        }
+        let key = OnceKey { kind, input: p, bits };
+        if let Some(&r) = self.once.get(&key) {
+            return r;
+        }
+        let r = ONCE + self.once_vals;
+        self.once_vals += 2;
+        self.once.insert(key, r);
+        self.ops.push(lookup(r));
+        r
+    }
+
+    /// Renumbers the write-once registers above the others, so that each file is one
+    /// contiguous range from 0; returns the value and point register counts.
+    fn finish(&mut self) -> (usize, usize) {
+        let (vals, points) = (self.vals, self.points);
+        for op in &mut self.ops {
+            op.for_each_register(|r, point| {
+                if *r != NO_REG && *r >= ONCE {
+                    *r = *r - ONCE + if point { points } else { vals };
+                }
+            });
+        }
+        ((vals + self.once_vals) as usize, (points + self.once_points) as usize)
     }
 
     /// Emits `node`: its distance in its parent's units into value register `out`, for the
@@ -888,11 +1054,11 @@ impl Compiler {
                     };
                     if let Some(gap) = gaps[axis] {
                         let half_gap = (0.5 * s as f64 + gap) as f32;
-                        self.ops.push(Op::CellFace {
+                        let base = self.cells(reg, |base| Op::CellFace {
                             p: q,
                             axis: axis as u32,
-                            base: reg,
-                            face: reg + 1,
+                            base,
+                            face: base + 1,
                             period: s,
                             inv_period: 1.0 / s,
                             shift,
@@ -900,31 +1066,32 @@ impl Compiler {
                             hi,
                             half_gap,
                         });
-                        fixed[axis] = reg;
-                        faces[axis] = reg + 1;
-                        reg += 2;
+                        fixed[axis] = base;
+                        faces[axis] = base + 1;
+                        reg += if base == reg { 2 } else { 0 };
                         continue;
                     }
-                    self.ops.push(Op::Cells {
+                    let base = self.cells(reg, |base| Op::Cells {
                         p: q,
                         axis: axis as u32,
-                        base: reg,
-                        other: reg + 1,
+                        base,
+                        other: base + 1,
                         period: s,
                         inv_period: 1.0 / s,
                         shift,
                         lo,
                         hi,
                     });
-                    axes[n] = (axis as u32, reg);
+                    axes[n] = (axis as u32, base);
                     n += 1;
-                    reg += 2;
+                    reg += if base == reg { 2 } else { 0 };
                 }
                 // Every copy of the child is evaluated above the cell registers (the child
                 // uses the registers above its result), the last combination writes `out`.
                 let acc = reg;
                 self.vals = self.vals.max(acc + 2);
-                let folded = if q == pin { next_pt } else { next_pt + 1 };
+                // The folded point goes above the mapped one where that took `next_pt`.
+                let folded = if q == next_pt { next_pt + 1 } else { next_pt };
                 self.points = self.points.max(folded + 1);
                 let inherited = inherited + mult * (map.translation.length() + extent);
                 let corners = 1u32 << n;
