@@ -392,7 +392,13 @@ pub enum Op {
 impl Op {
     /// `(point register, value register)` of a primitive operation; `None` for the rest.
     pub fn primitive_registers(&self) -> Option<(u32, u32)> {
-        match *self {
+        let mut op = *self;
+        op.primitive_registers_mut().map(|(p, out)| (*p, *out))
+    }
+
+    /// [`Op::primitive_registers`], to rewrite.
+    fn primitive_registers_mut(&mut self) -> Option<(&mut u32, &mut u32)> {
+        match self {
             Op::Sphere { p, out, .. }
             | Op::Plane { p, out, .. }
             | Op::Box { p, out, .. }
@@ -409,22 +415,15 @@ impl Op {
     /// Calls `f` on every register the operation names, read or written, with whether it
     /// is a point register (else a value register); [`NO_REG`] included.
     pub fn for_each_register(&mut self, mut f: impl FnMut(&mut u32, bool)) {
+        if let Some((p, out)) = self.primitive_registers_mut() {
+            f(p, true);
+            f(out, false);
+            return;
+        }
         match self {
             Op::Translate { src, dst, .. } | Op::Affine { src, dst, .. } => {
                 f(src, true);
                 f(dst, true);
-            }
-            Op::Sphere { p, out, .. }
-            | Op::Plane { p, out, .. }
-            | Op::Box { p, out, .. }
-            | Op::Ellipsoid { p, out, .. }
-            | Op::Cylinder { p, out, .. }
-            | Op::Cone { p, out, .. }
-            | Op::Torus { p, out, .. }
-            | Op::Triangle { p, out, .. }
-            | Op::Capsule { p, out, .. } => {
-                f(p, true);
-                f(out, false);
             }
             Op::Min { out, a, b }
             | Op::Max { out, a, b }
@@ -453,6 +452,7 @@ impl Op {
                 f(out, false);
                 f(a, false);
             }
+            _ => unreachable!("primitives are handled above"),
         }
     }
 
