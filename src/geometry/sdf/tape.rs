@@ -820,7 +820,7 @@ const ONCE: u32 = 1 << 30;
 /// operation, its input register and the bits of its constants.
 #[derive(Clone, Copy, PartialEq, Eq, Hash)]
 struct OnceKey {
-    kind: u8,
+    kind: std::mem::Discriminant<Op>,
     input: u32,
     bits: [u32; 12],
 }
@@ -863,36 +863,30 @@ impl Compiler {
             return src;
         }
         let t = map.translation.as_vec3().to_array();
-        let mut bits = [0u32; 12];
-        let op = if map.matrix3 == DMat3::IDENTITY {
-            bits[..3].copy_from_slice(&t.map(f32::to_bits));
-            Op::Translate { src, dst, t }
-        } else {
-            let m = map.matrix3.as_mat3();
-            let row = |i: usize| [m.x_axis[i], m.y_axis[i], m.z_axis[i], t[i]];
-            let m = [row(0), row(1), row(2)];
-            for (b, x) in bits.iter_mut().zip(m.as_flattened()) {
-                *b = x.to_bits();
-            }
-            Op::Affine { src, dst, m }
-        };
+        let m = map.matrix3.as_mat3();
+        let row = |i: usize| [m.x_axis[i], m.y_axis[i], m.z_axis[i], t[i]];
+        let m = [row(0), row(1), row(2)];
+        let translate = map.matrix3 == DMat3::IDENTITY;
+        let op =
+            |dst: u32| if translate { Op::Translate { src, dst, t } } else { Op::Affine { src, dst, m } };
         if !Self::fixed_point(src) {
             self.points = self.points.max(dst + 1);
-            self.ops.push(op);
+            self.ops.push(op(dst));
             return dst;
         }
-        let key = OnceKey { kind: matches!(op, Op::Affine { .. }) as u8, input: src, bits };
+        let mut bits = [0u32; 12];
+        let consts = if translate { &t[..] } else { m.as_flattened() };
+        for (b, x) in bits.iter_mut().zip(consts) {
+            *b = x.to_bits();
+        }
+        let key = OnceKey { kind: std::mem::discriminant(&op(0)), input: src, bits };
         if let Some(&r) = self.once.get(&key) {
             return r;
         }
         let r = ONCE + self.once_points;
         self.once_points += 1;
         self.once.insert(key, r);
-        self.ops.push(match op {
-            Op::Translate { src, t, .. } => Op::Translate { src, dst: r, t },
-            Op::Affine { src, m, .. } => Op::Affine { src, dst: r, m },
-            _ => unreachable!("a point map"),
-        });
+        self.ops.push(op(r));
         r
     }
 
@@ -901,25 +895,26 @@ impl Compiler {
     /// changes, the first of a pair of write-once registers shared with every identical
     /// lookup ([`Compiler::once`]).
     fn cells(&mut self, reg: u32, lookup: impl Fn(u32) -> Op) -> u32 {
-        let (p, consts, kind) = match lookup(reg) {
+        let op = lookup(reg);
+        let (p, consts) = match op {
             Op::Cells { p, axis, period, inv_period, shift, lo, hi, .. } => {
-                (p, [axis as f32, period, inv_period, shift, lo, hi, 0.0], 2)
+                (p, [axis as f32, period, inv_period, shift, lo, hi, 0.0])
             }
             Op::CellFace { p, axis, period, inv_period, shift, lo, hi, half_gap, .. } => {
-                (p, [axis as f32, period, inv_period, shift, lo, hi, half_gap], 3)
+                (p, [axis as f32, period, inv_period, shift, lo, hi, half_gap])
             }
             _ => unreachable!("a cell lookup"),
         };
         if !Self::fixed_point(p) {
             self.vals = self.vals.max(reg + 2);
-            self.ops.push(lookup(reg));
+            self.ops.push(op);
             return reg;
         }
         let mut bits = [0u32; 12];
         for (b, x) in bits.iter_mut().zip(consts) {
             *b = x.to_bits();
         }
-        let key = OnceKey { kind, input: p, bits };
+        let key = OnceKey { kind: std::mem::discriminant(&op), input: p, bits };
         if let Some(&r) = self.once.get(&key) {
             return r;
         }
