@@ -263,6 +263,25 @@ impl<const W: usize> MarchLanes<W> {
         self.tol[l] = f64::INFINITY;
     }
 
+    /// Lane `to` (idle) takes over lane `from`'s march where it stands, and `from` marches
+    /// nothing: the march goes on in `to` with the same steps.
+    #[inline]
+    pub fn move_lane(&mut self, from: usize, to: usize) {
+        self.t[to] = self.t[from];
+        self.tol[to] = self.tol[from];
+        self.spread[to] = self.spread[from];
+        (self.t0[to], self.t1[to]) = (self.t0[from], self.t1[from]);
+        self.sign[to] = self.sign[from];
+        (self.prev_t[to], self.prev_r[to]) = (self.prev_t[from], self.prev_r[from]);
+        (self.r[to], self.r_t[to]) = (self.r[from], self.r_t[from]);
+        self.omega[to] = self.omega[from];
+        (self.iterations[to], self.touches[to]) = (self.iterations[from], self.touches[from]);
+        self.first_touch[to] = self.first_touch[from];
+        self.set_phase(to, self.phase[from]);
+        self.set_phase(from, Phase::March);
+        self.stop(from);
+    }
+
     /// How lane `l`'s march ended, once [`Self::feed`] reported it: the hit, or `None` for
     /// a miss.
     #[inline]

@@ -402,9 +402,27 @@ impl<F: DistanceField> Marched<F> {
                     }
                 }
             }
-            let marching = !idle & all;
+            let mut marching = !idle & all;
             if marching == 0 {
                 break;
+            }
+            // Once no ray waits, the marches left move to the lowest lanes, so that the
+            // batch's last steps evaluate as few packets as their lanes fill.
+            if refill && ready == 0 && next >= rays.len() {
+                loop {
+                    // The lowest idle lane (32: none) and the highest marching one.
+                    let (to, from) =
+                        ((idle & all).trailing_zeros() as usize, 31 - marching.leading_zeros() as usize);
+                    if to >= from {
+                        break;
+                    }
+                    lanes.move_lane(from, to);
+                    (ray_of[to], reach_of[to]) = (ray_of[from], reach_of[from]);
+                    for a in 0..3 {
+                        (origin[a][to], dir[a][to]) = (origin[a][from], dir[a][from]);
+                    }
+                    (idle, marching) = ((idle & !(1 << to)) | 1 << from, (marching & !(1 << from)) | 1 << to);
+                }
             }
             // The packets with a marching lane are evaluated. Their idle lanes evaluate the
             // first marching lane's point, with no tolerance to meet, and their values are
