@@ -15,6 +15,10 @@ pub const MIN_CONTRIBUTION: f32 = 1.0 / 512.0;
 /// any further lights are traced one by one.
 pub const PACKET_LIGHTS: usize = 8;
 
+/// The most shadow rays [`Tracer::trace_batch`] hands to one [`Geometry::any_hits`] call:
+/// the rays of two lights of a full batch.
+const SHADOW_BATCH: usize = 2 * BATCH;
+
 /// The most primary rays [`Tracer::trace_batch`] takes at once: a 16 x 16 pixel tile.
 pub const BATCH: usize = 256;
 
@@ -84,8 +88,9 @@ impl<'a> Tracer<'a> {
     }
 
     /// The shadow rays of a batch's hits towards each of the first [`PACKET_LIGHTS`] lights
-    /// that cast shadows, traced together per light ([`Geometry::any_hits`]): sets
-    /// `occluded[i][l]` where hit `i`'s ray towards light `l` is blocked.
+    /// that cast shadows, traced together ([`Geometry::any_hits`]; the rays of two lights
+    /// in one call where they fit in [`SHADOW_BATCH`], so that fewer calls end with lanes
+    /// idle): sets `occluded[i][l]` where hit `i`'s ray towards light `l` is blocked.
     fn batch_shadows(
         &self,
         rays: &[Ray],
@@ -96,31 +101,38 @@ impl<'a> Tracer<'a> {
         let n = rays.len().min(BATCH);
         let frames: [Option<SurfaceFrame>; BATCH] =
             std::array::from_fn(|i| hits.get(i).and_then(|h| h.as_ref()).map(|h| surface_frame(&rays[i], h)));
+        let mut shadow = [Ray::new(Vec3::ZERO, Vec3::Z); SHADOW_BATCH];
+        let mut reach = [0.0f32; SHADOW_BATCH];
+        // Ray j is hit `of[j].0`'s towards light `of[j].1`.
+        let mut of = [(0usize, 0usize); SHADOW_BATCH];
+        let mut m = 0;
+        let mut flush = |shadow: &[Ray], reach: &[f32], of: &[(usize, usize)], stats: &mut RayStats| {
+            let blocked = &mut [false; SHADOW_BATCH][..shadow.len()];
+            if !shadow.is_empty() {
+                self.geometry.any_hits(shadow, 0.0, reach, blocked, stats);
+            }
+            for (&(i, l), &b) in of.iter().zip(blocked.iter()) {
+                occluded[i][l] = b;
+            }
+        };
         for (l, light) in self.scene.lights.iter().take(PACKET_LIGHTS).enumerate() {
             if matches!(light, Light::Ambient { .. }) {
                 continue;
             }
-            let mut shadow = [Ray::new(Vec3::ZERO, Vec3::Z); BATCH];
-            let mut reach = [0.0f32; BATCH];
-            let mut lane_of = [0usize; BATCH];
-            let mut m = 0;
+            if m + n > SHADOW_BATCH {
+                flush(&shadow[..m], &reach[..m], &of[..m], stats);
+                m = 0;
+            }
             for (i, frame) in frames.iter().enumerate().take(n) {
                 let Some(f) = frame else { continue };
                 let Some((to_light, dist, ..)) = self.light_towards(light, f.above) else { continue };
                 if f.n.dot(to_light) > 0.0 {
-                    (shadow[m], reach[m], lane_of[m]) = (Ray::spawned(f.above, to_light, f.spread), dist, i);
+                    (shadow[m], reach[m], of[m]) = (Ray::spawned(f.above, to_light, f.spread), dist, (i, l));
                     m += 1;
                 }
             }
-            if m == 0 {
-                continue;
-            }
-            let mut blocked = [false; BATCH];
-            self.geometry.any_hits(&shadow[..m], 0.0, &reach[..m], &mut blocked[..m], stats);
-            for j in 0..m {
-                occluded[lane_of[j]][l] = blocked[j];
-            }
         }
+        flush(&shadow[..m], &reach[..m], &of[..m], stats);
     }
 
     fn trace_rec(&self, ray: &Ray, depth: u32, weight: f32, stats: &mut RayStats) -> Vec3 {
