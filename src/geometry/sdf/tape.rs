@@ -874,20 +874,8 @@ impl Compiler {
             self.ops.push(op(dst));
             return dst;
         }
-        let mut bits = [0u32; 12];
         let consts = if translate { &t[..] } else { m.as_flattened() };
-        for (b, x) in bits.iter_mut().zip(consts) {
-            *b = x.to_bits();
-        }
-        let key = OnceKey { kind: std::mem::discriminant(&op(0)), input: src, bits };
-        if let Some(&r) = self.once.get(&key) {
-            return r;
-        }
-        let r = ONCE + self.once_points;
-        self.once_points += 1;
-        self.once.insert(key, r);
-        self.ops.push(op(r));
-        r
+        self.share(&op(0), src, consts, op)
     }
 
     /// Emits `lookup(base)`, an [`Op::Cells`] or [`Op::CellFace`] writing value registers
@@ -910,18 +898,31 @@ impl Compiler {
             self.ops.push(op);
             return reg;
         }
+        self.share(&op, p, &consts, lookup)
+    }
+
+    /// The write-once register that holds `like`'s result (a point map, or a cell lookup's
+    /// pair of value registers) for input register `input` (which never changes) and
+    /// constants `consts`: the one an identical operation wrote, else new ones, written by
+    /// `emit(register)`.
+    fn share(&mut self, like: &Op, input: u32, consts: &[f32], emit: impl Fn(u32) -> Op) -> u32 {
         let mut bits = [0u32; 12];
         for (b, x) in bits.iter_mut().zip(consts) {
             *b = x.to_bits();
         }
-        let key = OnceKey { kind: std::mem::discriminant(&op), input: p, bits };
+        let key = OnceKey { kind: std::mem::discriminant(like), input, bits };
         if let Some(&r) = self.once.get(&key) {
             return r;
         }
-        let r = ONCE + self.once_vals;
-        self.once_vals += 2;
+        let r = if matches!(like, Op::Translate { .. } | Op::Affine { .. }) {
+            self.once_points += 1;
+            ONCE + self.once_points - 1
+        } else {
+            self.once_vals += 2;
+            ONCE + self.once_vals - 2
+        };
         self.once.insert(key, r);
-        self.ops.push(lookup(r));
+        self.ops.push(emit(r));
         r
     }
 
