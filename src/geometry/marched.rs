@@ -274,31 +274,32 @@ impl<F: DistanceField> Marched<F> {
         Some(Segment::along(ray, t0 as f64, t1 as f64))
     }
 
-    /// The intervals of [`Self::segment`] for up to [`PACKET`] rays (ray `i` up to
-    /// `t_max[i]`), bit for bit: where the CPU has AVX2 the box clip
+    /// The intervals of [`Self::segment`] for up to [`PACKET`] rays (ray `k` up to
+    /// `t_max[k]`), bit for bit: where the CPU has AVX2 the box clip
     /// ([`Ray::clip_to_box`]) runs for the eight rays at once ([`clip8`]).
     #[inline]
-    fn segments8(&self, rays: &[Ray], t_min: f32, t_max: &[f32; PACKET]) -> [Option<(f64, f64)>; PACKET] {
+    fn segments8(&self, rays: &[Ray], t_min: f32, t_max: &[f32; PACKET]) -> Segments8 {
         let n = rays.len().min(PACKET);
+        let first_n = (1u32 << n) - 1;
         if !self.bounded {
-            return std::array::from_fn(|i| (i < n).then_some((t_min as f64, t_max[i] as f64)));
+            return Segments8 { t0: [t_min; PACKET], t1: *t_max, some: first_n };
         }
         #[cfg(target_arch = "x86_64")]
         if crate::simd::avx2() {
-            let mut out = [None; PACKET];
             // Lanes past the packet's end clip a copy of its first ray (not used).
             let eight = std::array::from_fn(|k| rays.get(k).unwrap_or(&rays[0]));
             // SAFETY: the CPU has AVX2, so AVX (checked just above).
-            let clipped = unsafe { clip8(eight, &self.bounds, t_min, *t_max) };
-            for (k, c) in clipped.into_iter().enumerate().take(n) {
-                out[k] = c.map(|(t0, t1)| (t0 as f64, t1 as f64));
-            }
-            return out;
+            let mut clipped = unsafe { clip8(eight, &self.bounds, t_min, *t_max) };
+            clipped.some &= first_n;
+            return clipped;
         }
-        std::array::from_fn(|i| {
-            let (t0, t1) = rays.get(i)?.clip_to_box(&self.bounds, t_min, t_max[i])?;
-            Some((t0 as f64, t1 as f64))
-        })
+        let mut out = Segments8 { t0: [0.0; PACKET], t1: [0.0; PACKET], some: 0 };
+        for (k, ray) in rays.iter().enumerate().take(n) {
+            if let Some((t0, t1)) = ray.clip_to_box(&self.bounds, t_min, t_max[k]) {
+                (out.t0[k], out.t1[k], out.some) = (t0, t1, out.some | 1 << k);
+            }
+        }
+        out
     }
 
     /// Sphere traces the world ray `ray` (unit direction) through the field, only inside
@@ -369,7 +370,8 @@ impl<F: DistanceField> Marched<F> {
         // has bit `l` set where lane `l` (of the `all` in use) marches nothing.
         const ONE_PACKET: u32 = (1 << PACKET) - 1;
         let all: u32 = if refill { u32::MAX >> (32 - W) } else { ONE_PACKET };
-        let (mut clipped, mut ends) = ([None; PACKET], [0.0f32; PACKET]);
+        let mut clipped = Segments8 { t0: [0.0; PACKET], t1: [0.0; PACKET], some: 0 };
+        let mut ends = [0.0f32; PACKET];
         let (mut chunk, mut next, mut ready, mut idle) = (0, 0, 0u32, all);
         loop {
             if idle != 0 && (refill || idle == all) {
@@ -379,22 +381,26 @@ impl<F: DistanceField> Marched<F> {
                             break;
                         }
                         let end = (next + PACKET).min(rays.len());
-                        let asked: [Option<f32>; PACKET] =
-                            std::array::from_fn(|k| if next + k < end { reach(next + k) } else { None });
-                        ends = asked.map(|e| e.unwrap_or(0.0));
-                        clipped = self.segments8(&rays[next..end], t_min, &ends);
-                        for (k, c) in clipped.iter().enumerate() {
-                            if c.is_some() && asked[k].is_some() {
-                                ready |= 1 << k;
-                            }
+                        // Bit `k` set: ray `next + k` is asked for, up to `ends[k]`.
+                        let mut asked = 0u32;
+                        for (k, e) in ends.iter_mut().enumerate() {
+                            *e = match (next + k < end).then(|| reach(next + k)).flatten() {
+                                Some(reach) => {
+                                    asked |= 1 << k;
+                                    reach
+                                }
+                                None => 0.0,
+                            };
                         }
+                        clipped = self.segments8(&rays[next..end], t_min, &ends);
+                        ready = clipped.some & asked;
                         (chunk, next) = (next, end);
                         continue;
                     }
                     let (k, l) = (ready.trailing_zeros() as usize, idle.trailing_zeros() as usize);
                     (ready, idle) = (ready & (ready - 1), idle & (idle - 1));
-                    let (i, (t0, t1)) = (chunk + k, clipped[k].unwrap_or_default());
-                    let seg = Segment::along(&rays[i], t0, t1);
+                    let i = chunk + k;
+                    let seg = Segment::along(&rays[i], clipped.t0[k] as f64, clipped.t1[k] as f64);
                     lanes.start(l, &seg, stats);
                     (ray_of[l], reach_of[l]) = (i, ends[k]);
                     for a in 0..3 {
@@ -619,6 +625,18 @@ impl<F: DistanceField> Geometry for Marched<F> {
     }
 }
 
+/// The march intervals of up to [`PACKET`] rays ([`Marched::segments8`]): ray `k`'s is
+/// `[t0[k], t1[k]]` where bit `k` of `some` is set; it misses the bounds where it is not.
+#[derive(Clone, Copy)]
+struct Segments8 {
+    /// Interval starts, world units along each ray.
+    t0: [f32; PACKET],
+    /// Interval ends, world units along each ray.
+    t1: [f32; PACKET],
+    /// Bit `k` set: ray `k` has an interval.
+    some: u32,
+}
+
 /// [`Ray::clip_to_box`] for eight rays at once (ray `k` over `[t_min, t_max[k]]`), bit for
 /// bit: the same single precision operations, with the scalar code's comparisons as AVX
 /// `min`/`max` in its operand order (`a > t0 ? a : t0` is `max(a, t0)`, NaN keeping
@@ -629,7 +647,7 @@ impl<F: DistanceField> Geometry for Marched<F> {
 /// The CPU must have AVX.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
-unsafe fn clip8(rays: [&Ray; 8], b: &Aabb, t_min: f32, t_max: [f32; 8]) -> [Option<(f32, f32)>; 8] {
+unsafe fn clip8(rays: [&Ray; 8], b: &Aabb, t_min: f32, t_max: [f32; 8]) -> Segments8 {
     use std::arch::x86_64::*;
     // Component `$c` of axis `$a` of the eight rays. A macro, not a closure: a closure
     // would not inline into this AVX function.
@@ -670,10 +688,11 @@ unsafe fn clip8(rays: [&Ray; 8], b: &Aabb, t_min: f32, t_max: [f32; 8]) -> [Opti
             t1 = _mm256_or_ps(_mm256_and_ps(flat, t1), _mm256_andnot_ps(flat, _mm256_min_ps(far, t1)));
         }
         dead = _mm256_or_ps(dead, _mm256_and_ps(moving, _mm256_cmp_ps::<_CMP_GT_OS>(t0, t1)));
-        let dead = _mm256_movemask_ps(dead);
-        let (t0, t1) =
-            (std::mem::transmute::<__m256, [f32; 8]>(t0), std::mem::transmute::<__m256, [f32; 8]>(t1));
-        std::array::from_fn(|k| (dead & (1 << k) == 0).then_some((t0[k], t1[k])))
+        Segments8 {
+            t0: std::mem::transmute::<__m256, [f32; 8]>(t0),
+            t1: std::mem::transmute::<__m256, [f32; 8]>(t1),
+            some: !(_mm256_movemask_ps(dead) as u32) & 0xff,
+        }
     }
 }
 
@@ -721,7 +740,8 @@ mod tests {
             let bits = |c: Option<(f32, f32)>| c.map(|(a, b)| (a.to_bits(), b.to_bits()));
             for k in 0..8 {
                 let one = chunk[k].clip_to_box(&b, t_min, t_max[k]);
-                assert_eq!(bits(wide[k]), bits(one), "{:?} over [{t_min}, {}]", chunk[k], t_max[k]);
+                let eight = (wide.some & 1 << k != 0).then_some((wide.t0[k], wide.t1[k]));
+                assert_eq!(bits(eight), bits(one), "{:?} over [{t_min}, {}]", chunk[k], t_max[k]);
             }
         }
     }
