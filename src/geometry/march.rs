@@ -107,7 +107,10 @@ pub fn sphere_trace(
     lane.start(0, seg, stats);
     loop {
         let raw = f(seg.origin + seg.dir * lane.t[0], lane.tol[0]);
-        if lane.feed(&[raw], 1, stats) != 0 {
+        // [`MarchLanes::feed`] for the one lane, its common step taken directly.
+        if lane.special == 0 && lane.plain_step(0, raw) {
+            stats.march_steps += 1;
+        } else if lane.feed_lanes(&[raw], 1, stats) != 0 {
             return lane.outcome(0);
         }
     }
@@ -315,8 +318,15 @@ impl<const W: usize> MarchLanes<W> {
     pub fn feed(&mut self, raw: &[f64; W], marching: u32, stats: &mut RayStats) -> u32 {
         let plain = self.plain_steps(raw, marching & !self.special);
         stats.march_steps += u64::from(plain.count_ones());
+        self.feed_lanes(raw, marching & !plain, stats)
+    }
+
+    /// [`Self::feed_lane`] for each lane set in `lanes` (those whose step is not plain);
+    /// returns the lanes whose marches are over, and sets the others' [`Self::tol`].
+    #[inline]
+    fn feed_lanes(&mut self, raw: &[f64; W], lanes: u32, stats: &mut RayStats) -> u32 {
         let mut ended = 0;
-        let mut rest = marching & !plain;
+        let mut rest = lanes;
         while rest != 0 {
             let l = rest.trailing_zeros() as usize;
             rest &= rest - 1;
