@@ -323,7 +323,7 @@ impl<const W: usize> MarchLanes<W> {
 
     /// [`Self::feed_lane`] for each lane set in `lanes` (those whose step is not plain);
     /// returns the lanes whose marches are over, and sets the others' [`Self::tol`].
-    #[inline]
+    #[inline(always)]
     fn feed_lanes(&mut self, raw: &[f64; W], lanes: u32, stats: &mut RayStats) -> u32 {
         let mut ended = 0;
         let mut rest = lanes;
@@ -370,7 +370,7 @@ impl<const W: usize> MarchLanes<W> {
     /// over-relaxation, nor converge, nor leave the segment, nor spend the step budget, but
     /// only move on by `d * omega`. Then takes it, as [`Self::step`] does (same
     /// operations, same bits), and returns true; else changes nothing and returns false.
-    #[inline]
+    #[inline(always)]
     fn plain_step(&mut self, l: usize, raw: f64) -> bool {
         let sign = if self.sign[l] != 0.0 {
             self.sign[l]
@@ -400,6 +400,7 @@ impl<const W: usize> MarchLanes<W> {
     }
 
     /// [`Self::feed`] for lane `l` alone, whatever its phase.
+    #[inline(always)]
     fn feed_lane(&mut self, l: usize, raw: f64, stats: &mut RayStats) -> Step {
         match self.phase[l] {
             Phase::March => {}
@@ -441,7 +442,7 @@ impl<const W: usize> MarchLanes<W> {
     }
 
     /// One sphere-tracing step of lane `l` with the field's value `raw` at [`Self::t`].
-    #[inline]
+    #[inline(always)]
     fn step(&mut self, l: usize, raw: f64, stats: &mut RayStats) -> Step {
         if self.iterations[l] == 0 {
             self.omega[l] = self.params.relaxation;
@@ -508,7 +509,7 @@ impl<const W: usize> MarchLanes<W> {
     /// The end of lane `l`'s march that goes on: over when the step budget is spent
     /// (reported as a hit at the last point marched, only within the pixel footprint of
     /// the surface).
-    #[inline]
+    #[inline(always)]
     fn budget(&self, l: usize, stats: &mut RayStats) -> Step {
         if self.iterations[l] < self.params.max_steps {
             return None;
