@@ -156,3 +156,22 @@ pub fn write_png(image: &RgbImage, path: &Path) -> Result<()> {
     }
     result
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// [`to_rgb8`] against the plain reference (`clamp`, then a saturating cast) on special
+    /// values and a sweep over [-1, 2] in steps finer than a level.
+    #[test]
+    fn to_rgb8_matches_clamp_and_cast() {
+        let reference = |x: f32| (x.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+        let special =
+            [f32::NAN, -f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -0.0, 0.0, 1.0, f32::MIN_POSITIVE];
+        let sweep = (0..=30_000).map(|i| -1.0 + i as f32 * 1e-4);
+        for x in special.into_iter().chain(sweep) {
+            let [r, g, b] = to_rgb8(Vec3::new(x, 0.5, 1.0 - x));
+            assert_eq!([r, g, b], [reference(x), reference(0.5), reference(1.0 - x)], "x = {x}");
+        }
+    }
+}
