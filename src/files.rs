@@ -42,8 +42,9 @@
 //!
 //! [`check_outputs`] refuses a command whose output is one of its inputs (or two outputs
 //! that are one file), comparing device and inode where the file exists and the canonical
-//! path where it does not, so links and `..` do not hide a match. The commands call it once,
-//! where the command line is turned into options, before any work.
+//! path where it does not, so links and `..` do not hide a match, and an output that is
+//! there but not a regular file. `main.rs` calls it once for every command, where the
+//! command line is turned into options, before any work.
 
 use std::fs::{self, File, FileType, Metadata, OpenOptions};
 use std::io::{self, BufWriter, Read, Write};
@@ -261,7 +262,7 @@ pub fn write_atomic(path: &Path, body: impl FnOnce(&mut BufWriter<File>) -> io::
     let name = target.file_name().ok_or_else(|| fail(&"the path names no file"))?;
     let dir = folder_of(&target);
     if !dir.is_dir() {
-        return Err(fail(&format_args!("the directory '{}' does not exist", dir.display())));
+        return Err(fail(&format_args!("the directory does not exist ({})", dir.display())));
     }
     let tmp = dir.join(format!(
         ".{}.tmp-{}-{}",
@@ -316,14 +317,20 @@ fn file_id(path: &Path) -> Option<FileId> {
 }
 
 /// Refuses `outputs` of one command when one of them is one of its `inputs` or two of
-/// them are the same file, after resolving links (see the module documentation).
+/// them are the same file, after resolving links (see the module documentation), or when
+/// one is there but not a regular file (writers that append, such as `compare`'s CSV,
+/// would otherwise block on a FIFO or write into a device).
 ///
 /// # Errors
-/// [`Error::Usage`] naming both paths.
+/// [`Error::Usage`] naming both paths; [`Error::Io`] naming an output that is not a
+/// regular file.
 pub fn check_outputs(inputs: &[&Path], outputs: &[&Path]) -> Result<()> {
     let inputs: Vec<(&Path, FileId)> = inputs.iter().filter_map(|p| Some((*p, file_id(p)?))).collect();
     let mut seen: Vec<(&Path, FileId)> = Vec::new();
     for &out in outputs {
+        resolve_links(out)
+            .and_then(|target| require_replaceable(&target))
+            .map_err(|e| Error::io(out, format!("cannot write: {e}")))?;
         let Some(id) = file_id(out) else { continue };
         if let Some((input, _)) = inputs.iter().find(|(_, i)| *i == id) {
             return Err(Error::Usage(format!(
@@ -403,5 +410,7 @@ mod tests {
         let e = check_outputs(&[&a], &[&b, &b2]).unwrap_err();
         assert!(e.to_string().contains("also the output"), "{e}");
         assert_eq!(e.exit_code(), 2);
+        let e = check_outputs(&[&a], &[dir.path()]).unwrap_err().to_string();
+        assert!(e.ends_with("cannot write: is a directory, not a regular file"), "{e}");
     }
 }

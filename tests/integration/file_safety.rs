@@ -405,6 +405,24 @@ fn an_output_that_is_not_a_regular_file_is_refused() {
     let fifo = mkfifo(&dir.join("fifo.png"));
     refused(&["render", s, "-o", fifo.to_str().unwrap()], &["fifo.png", "is a FIFO"]);
     assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
+    // compare's CSV (appended to, not renamed over) and summary, hard's table: refused
+    // before any work, where opening the FIFO used to wait for a reader forever.
+    let f = fifo.to_str().unwrap();
+    refused(
+        &["compare", s, "--csv", f, "--res", "8", "--frames", "1", "--quiet"],
+        &["fifo.png", "is a FIFO"],
+    );
+    refused(&["compare", s, "--csv", f, "--resume", "--res", "8", "--frames", "1"], &["is a FIFO"]);
+    refused(
+        &["compare", s, "--csv", "/dev/null", "--overwrite", "--res", "8", "--frames", "1"],
+        &["is a character"],
+    );
+    let csv = dir.join("c.csv");
+    let c = csv.to_str().unwrap();
+    refused(&["compare", s, "--csv", c, "--summary-json", f, "--res", "8", "--frames", "1"], &["is a FIFO"]);
+    assert!(!csv.exists());
+    let manifest = put(&dir, "cases.toml", "");
+    refused(&["hard", manifest.to_str().unwrap(), "--table", f], &["is a FIFO"]);
     // A link to a device is followed to the device and refused the same way.
     let link = dir.join("null.png");
     symlink("/dev/null", &link).unwrap();
