@@ -251,8 +251,15 @@ fn percent_decode(uri: &str) -> String {
 /// glTF file's): it must be a regular file (a device, a FIFO or a folder such as
 /// `/dev/zero` or `/dev/stdin` would read without end or block) inside `folder` after `..`
 /// and symbolic links are resolved (the glTF file comes from a stranger; it must not make
-/// us read, and quote in messages, files elsewhere). Bytes past `declared` are never read.
+/// us read, and quote in messages, files elsewhere). Bytes past `declared` are never read,
+/// and a `declared` over [`crate::files::MAX_INPUT_BYTES`] is refused.
 fn read_buffer_file(folder: &Path, relative: &Path, declared: usize) -> std::io::Result<Vec<u8>> {
+    let limit = crate::files::MAX_INPUT_BYTES;
+    if declared as u64 > limit {
+        return Err(std::io::Error::other(format!(
+            "its byteLength {declared} is more than the limit of {limit} bytes"
+        )));
+    }
     let file = crate::files::resolve_inside(folder, relative)?;
     crate::files::read_regular_prefix(&file, declared as u64)
 }

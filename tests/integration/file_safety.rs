@@ -195,7 +195,7 @@ fn fifo_inputs_are_refused_without_blocking() {
 
 /// `/dev/zero` as an input, directly, through a symbolic link with a mesh's or grid's
 /// extension, and as a scene's mesh `path`: refused before a byte is read (it used to be
-/// read until memory ran out).
+/// read until memory ran out); regular files over the size limits likewise.
 #[test]
 fn dev_zero_is_refused_directly_through_a_link_and_from_a_scene() {
     let dir = temp_dir("zero");
@@ -221,6 +221,16 @@ fn dev_zero_is_refused_directly_through_a_link_and_from_a_scene() {
     let s =
         put(&dir, "grid_zero.toml", format!("{SCENE}\n[[objects]]\ntype = \"grid\"\npath = \"zero.sdf\"\n"));
     refused(&["render", s.to_str().unwrap(), "-o", out_s], &["zero.sdf", "is a character device"]);
+    // Regular files over the size limits (sparse: no disk used) are refused before they
+    // are read, and so never take their size in memory.
+    let big = dir.join("big.stl");
+    std::fs::File::create(&big).unwrap().set_len(sdfmesh::files::MAX_INPUT_BYTES + 1).unwrap();
+    let limit = format!("more than the limit of {} bytes", sdfmesh::files::MAX_INPUT_BYTES);
+    refused(&["render", big.to_str().unwrap(), "-o", out_s], &["big.stl", &limit]);
+    let big = dir.join("big.toml");
+    std::fs::File::create(&big).unwrap().set_len(sdfmesh::files::MAX_TEXT_BYTES + 1).unwrap();
+    let limit = format!("more than the limit of {} bytes", sdfmesh::files::MAX_TEXT_BYTES);
+    refused(&["render", big.to_str().unwrap(), "-o", out_s], &["big.toml", &limit]);
     // A folder as an input.
     let sub = dir.join("folder.obj");
     std::fs::create_dir(&sub).unwrap();
@@ -315,6 +325,16 @@ fn gltf_buffers_stay_inside_the_model_folder() {
         let m = load_mesh(&p).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(m.triangles.len(), 1, "{name}");
     }
+    // A byteLength over the size limit, on a sparse file that really is that long.
+    let big = model.join("big.bin");
+    std::fs::File::create(&big).unwrap().set_len(sdfmesh::files::MAX_INPUT_BYTES + 2).unwrap();
+    let doc = gltf_with_index_buffer("big.bin").replace(
+        r#""byteLength":6,"uri""#,
+        &format!(r#""byteLength":{},"uri""#, sdfmesh::files::MAX_INPUT_BYTES + 2),
+    );
+    let p = put(&model, "big.gltf", doc);
+    lib_refused(&p, "buffer 1: cannot read 'big.bin'", load_mesh);
+    lib_refused(&p, "more than the limit", load_mesh);
     mkfifo(&model.join("fifo.bin"));
     let p = put(&model, "fifo.gltf", gltf_with_index_buffer("fifo.bin"));
     lib_refused(&p, "buffer 1: cannot read 'fifo.bin'", load_mesh);
