@@ -26,6 +26,8 @@
 //! - [`convert`]: conversions between representations.
 //! - [`render`]: the tracer and frame loop; [`metrics`]: error measures.
 //! - [`compare`]: the study's runs, CSV and summaries; [`cli`]: the `toolkit` subcommands.
+//! - [`files`]: how every input file is read and every output file written; [`error`]:
+//!   the error type.
 
 // `!(x >= 0.0)` is the NaN-rejecting form used on purpose in the numerical code.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -34,6 +36,7 @@ pub mod cli;
 pub mod compare;
 pub mod convert;
 pub mod error;
+pub mod files;
 pub mod geometry;
 pub mod mesh;
 pub mod metrics;

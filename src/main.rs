@@ -1,6 +1,6 @@
 //! `toolkit`: parses the command line, calls the library, maps errors to exit codes.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
@@ -335,9 +335,40 @@ impl MarchArgs {
     }
 }
 
+impl Command {
+    /// The files this command reads and the files it writes, as the command line names
+    /// them (`compare`'s default inputs where it names none; `gallery` writes
+    /// `NAME.REPR.png` files of its own naming and has none here).
+    fn files(&self) -> (Vec<PathBuf>, Vec<&Path>) {
+        match self {
+            Command::Render { scene, output, .. } => (vec![scene.clone()], vec![output]),
+            Command::Convert { input, output, .. } => (vec![input.clone()], vec![output]),
+            Command::Compare { inputs, csv, summary_json, scaling, .. } => {
+                let inputs = match (inputs.is_empty(), scaling) {
+                    // An error here is reported when the command runs.
+                    (true, false) => sdfmesh::compare::default_inputs().unwrap_or_default(),
+                    _ => inputs.clone(),
+                };
+                (inputs, std::iter::once(csv).chain(summary_json).map(PathBuf::as_path).collect())
+            }
+            Command::Hard { manifest, table } => {
+                (vec![manifest.clone()], table.iter().map(PathBuf::as_path).collect())
+            }
+            Command::Gallery { .. } => (Vec::new(), Vec::new()),
+        }
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let budget = cli.max_memory.unwrap_or_else(MemoryBudget::machine_default);
+    // No output may be one of the command's inputs: checked once, before any work.
+    let (inputs, outputs) = cli.command.files();
+    let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+    if let Err(e) = sdfmesh::files::check_outputs(&inputs, &outputs) {
+        eprintln!("error: {e}");
+        return ExitCode::from(e.exit_code() as u8);
+    }
     let result = match cli.command {
         Command::Render { scene, output, repr, mesh, settings, march } => {
             let opts = commands::RenderOptions {

@@ -139,7 +139,7 @@ pub struct Skipped {
 /// a tolerance outside (0, 1], a resolution outside 3..=512, or an `expect` naming an
 /// unknown representation or missing one.
 pub fn load_cases(manifest: &Path) -> Result<Vec<Case>> {
-    let text = std::fs::read_to_string(manifest).map_err(|e| Error::io(manifest, e))?;
+    let text = crate::files::read_input_text(manifest, crate::files::MAX_TEXT_BYTES)?;
     let m: Manifest = toml::from_str(&text).map_err(|e| Error::input(manifest, None, e.message()))?;
     let dir = manifest.parent().unwrap_or(Path::new(""));
     let mut cases = m.case;
@@ -272,7 +272,7 @@ pub fn hard_command(manifest: &Path, table_out: Option<&Path>) -> Result<(String
     let ok = outcomes.iter().all(Outcome::as_expected);
     let text = table(&outcomes, &skipped);
     if let Some(path) = table_out {
-        crate::mesh::write::atomic_write(path, text.as_bytes())?;
+        crate::files::write_atomic_bytes(path, text.as_bytes())?;
     }
     Ok((text, ok))
 }

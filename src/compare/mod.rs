@@ -920,7 +920,7 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
     let summary = summary::summarize(&rows);
     if let Some(path) = &opts.summary_json {
         let json = serde_json::to_string_pretty(&summary).map_err(|e| Error::io(path, e))?;
-        crate::mesh::write::atomic_write(path, json.as_bytes())?;
+        crate::files::write_atomic_bytes(path, json.as_bytes())?;
     }
     Ok(summary::to_text(&summary))
 }

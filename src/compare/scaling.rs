@@ -315,6 +315,6 @@ pub fn scaling_command(opts: &ScalingOptions, csv_path: &Path) -> Result<String>
         }
     }
     let bytes = w.into_inner().map_err(|e| Error::io(csv_path, e))?;
-    crate::mesh::write::atomic_write(csv_path, &bytes)?;
+    crate::files::write_atomic_bytes(csv_path, &bytes)?;
     Ok(text)
 }

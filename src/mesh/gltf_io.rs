@@ -247,18 +247,21 @@ fn percent_decode(uri: &str) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
-/// Reads at most `declared` bytes of an external buffer file, which must be a regular
-/// file: a URI naming a device, a FIFO or a folder (`/dev/zero`, `/dev/stdin`) would
-/// otherwise read without end or block. Bytes past `declared` are never used.
-fn read_buffer_file(file: &Path, declared: usize) -> std::io::Result<Vec<u8>> {
-    use std::io::Read;
-    let f = std::fs::File::open(file)?;
-    if !f.metadata()?.is_file() {
-        return Err(std::io::Error::other("not a regular file"));
+/// Reads at most `declared` bytes of the external buffer file `relative` to `folder` (the
+/// glTF file's): it must be a regular file (a device, a FIFO or a folder such as
+/// `/dev/zero` or `/dev/stdin` would read without end or block) inside `folder` after `..`
+/// and symbolic links are resolved (the glTF file comes from a stranger; it must not make
+/// us read, and quote in messages, files elsewhere). Bytes past `declared` are never read,
+/// and a `declared` over [`crate::files::MAX_INPUT_BYTES`] is refused.
+fn read_buffer_file(folder: &Path, relative: &Path, declared: usize) -> std::io::Result<Vec<u8>> {
+    let limit = crate::files::MAX_INPUT_BYTES;
+    if declared as u64 > limit {
+        return Err(std::io::Error::other(format!(
+            "its byteLength {declared} is more than the limit of {limit} bytes"
+        )));
     }
-    let mut out = Vec::new();
-    f.take(declared as u64).read_to_end(&mut out)?;
-    Ok(out)
+    let file = crate::files::resolve_inside(folder, relative)?;
+    crate::files::read_regular_prefix(&file, declared as u64)
 }
 
 /// Buffers, loaded on first use.
@@ -287,7 +290,7 @@ impl<'a> Buffers<'a> {
                         let rel = PathBuf::from(percent_decode(uri));
                         let base = self.path.parent().unwrap_or(Path::new(""));
                         let file = base.join(&rel);
-                        read_buffer_file(&file, declared).map_err(|e| {
+                        read_buffer_file(base, &rel, declared).map_err(|e| {
                             let file = one_line(&file.display().to_string(), usize::MAX);
                             err(format!("cannot read '{}' ({file}): {e}", one_line(uri, 200)))
                         })?

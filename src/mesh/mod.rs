@@ -167,7 +167,7 @@ fn format_for(path: &Path, supported: &[&str], verb: &str) -> Result<MeshFormat>
 /// glTF node graph, a missing glTF buffer, or when no triangle remains.
 pub fn load_mesh(path: &Path) -> Result<(TriangleMesh, LoadReport)> {
     let format = format_for(path, LOADABLE_EXTENSIONS, "read")?;
-    let data = std::fs::read(path).map_err(|e| Error::io(path, format!("cannot read: {e}")))?;
+    let data = crate::files::read_input(path, crate::files::MAX_INPUT_BYTES)?;
     load_mesh_bytes(path, data, format)
 }
 
@@ -217,7 +217,7 @@ pub fn save_mesh(mesh: &TriangleMesh, path: &Path) -> Result<()> {
             .map_err(|msg| Error::input(path, None, format!("cannot write mesh: {msg}")))?,
         MeshFormat::Stl | MeshFormat::Gltf => unreachable!("not in WRITABLE_EXTENSIONS"),
     };
-    write::atomic_write(path, &bytes)
+    crate::files::write_atomic_bytes(path, &bytes)
 }
 
 /// Whether the triangle `a, b, c` has zero area to `f32` precision: the cross product of

@@ -1,12 +1,8 @@
-//! Writers for OBJ and PLY, and the write-then-rename that every writer goes through.
+//! Writers for OBJ and PLY: the bytes of a file (written by [`crate::files::write_atomic_bytes`]).
 
 use std::fmt::Write as _;
-use std::io::Write as _;
-use std::path::Path;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use super::TriangleMesh;
-use crate::error::{Error, Result};
 
 /// OBJ text: `v` lines, `vn` lines when there are normals, then `f` lines (1-based, with
 /// `v//vn` references when there are normals). `f32` values are printed in the shortest
@@ -72,36 +68,4 @@ pub(crate) fn ply_bytes(mesh: &TriangleMesh) -> Vec<u8> {
         }
     }
     out
-}
-
-static COUNTER: AtomicUsize = AtomicUsize::new(0);
-
-/// Writes `bytes` to a temporary file beside `path`, flushes it to disk and renames it
-/// over `path`. On failure the temporary file is removed and `path` is untouched.
-pub(crate) fn atomic_write(path: &Path, bytes: &[u8]) -> Result<()> {
-    let name = path.file_name().ok_or_else(|| Error::io(path, "cannot write: the path names no file"))?;
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    if !dir.is_dir() {
-        return Err(Error::io(path, format!("cannot write: directory '{}' does not exist", dir.display())));
-    }
-    let tmp = dir.join(format!(
-        ".{}.tmp-{}-{}",
-        name.to_string_lossy(),
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let result = (|| -> std::io::Result<()> {
-        let mut f = std::fs::OpenOptions::new().write(true).create_new(true).open(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        drop(f);
-        std::fs::rename(&tmp, path)
-    })();
-    result.map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::io(path, format!("cannot write: {e}"))
-    })
 }

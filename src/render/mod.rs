@@ -14,7 +14,7 @@ use glam::Vec3;
 use image::RgbImage;
 use rayon::prelude::*;
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::geometry::{Geometry, PACKET, Ray, RayStats};
 use crate::render::tracer::{BATCH, Tracer};
 use crate::scene::Scene;
@@ -135,26 +135,16 @@ pub fn render(scene: &Scene, geometry: &dyn Geometry) -> Frame {
     Frame { image, time, stats }
 }
 
-/// Writes `image` as PNG to `path` via a temporary file in the same directory, renamed into
-/// place only when complete: a failure leaves any existing file untouched.
+/// Writes `image` as PNG to `path` through [`crate::files::write_atomic`]: a temporary
+/// file in the same directory, renamed into place only when complete, so a failure leaves
+/// any existing file untouched.
 pub fn write_png(image: &RgbImage, path: &Path) -> Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    if !dir.is_dir() {
-        return Err(Error::io(path, "cannot write: the directory does not exist"));
-    }
-    let name = path.file_name().ok_or_else(|| Error::io(path, "not a file name"))?;
-    let tmp = dir.join(format!(".{}.tmp{}", name.to_string_lossy(), std::process::id()));
-    let result = image
-        .save_with_format(&tmp, image::ImageFormat::Png)
-        .map_err(|e| Error::io(path, format!("cannot write: {e}")))
-        .and_then(|_| std::fs::rename(&tmp, path).map_err(|e| Error::io(path, format!("cannot write: {e}"))));
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+    use image::ImageEncoder;
+    crate::files::write_atomic(path, |w| {
+        image::codecs::png::PngEncoder::new(w)
+            .write_image(image.as_raw(), image.width(), image.height(), image::ExtendedColorType::Rgb8)
+            .map_err(std::io::Error::other)
+    })
 }
 
 #[cfg(test)]

@@ -95,7 +95,7 @@ fn light_type_keys(ty: &str) -> Option<&'static [&'static str]> {
 
 /// Reads and parses the scene file at `path`.
 pub fn load_scene(path: &Path) -> Result<Scene> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let text = crate::files::read_input_text(path, crate::files::MAX_TEXT_BYTES)?;
     parse_scene(&text, path)
 }
 

@@ -15,6 +15,7 @@ mod contract;
 mod extract;
 mod extract_dc;
 mod extract_mc;
+mod file_safety;
 mod fuzz_regressions;
 mod grid_band;
 mod grid_cli;

@@ -37,10 +37,9 @@
 //! (`Float32`), stored raw in the appended data section with a `UInt64` byte count. Write
 //! only.
 
-use std::fs::{File, OpenOptions};
-use std::io::{BufWriter, Read, Write};
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::fs::File;
+use std::io::{Read, Write};
+use std::path::Path;
 
 use glam::{UVec3, Vec3};
 
@@ -104,7 +103,7 @@ pub fn save_grid(grid: &SdfGrid, path: &Path) -> Result<()> {
         ))
     })?;
     check_grid(grid, path)?;
-    write_atomic(path, |w| match format {
+    crate::files::write_atomic(path, |w| match format {
         Format::Sdf => write_sdf(grid, w),
         Format::Npy => write_npy(grid, w),
         Format::Vti => write_vti(grid, w),
@@ -134,44 +133,6 @@ fn check_grid(grid: &SdfGrid, path: &Path) -> Result<()> {
         return Err(bad(format!("its voxel size {} is not a finite number > 0", grid.voxel)));
     }
     Ok(())
-}
-
-static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
-
-/// Writes a file through `body` into a temporary file next to `path`, then renames it.
-fn write_atomic(path: &Path, body: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    if !dir.is_dir() {
-        return Err(Error::io(path, "cannot write: the directory does not exist"));
-    }
-    let name = path.file_name().ok_or_else(|| Error::io(path, "cannot write: not a file name"))?;
-    let tmp: PathBuf = dir.join(format!(
-        ".{}.tmp{}-{}",
-        name.to_string_lossy(),
-        std::process::id(),
-        TMP_COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let file = OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&tmp)
-        .map_err(|e| Error::io(path, format!("cannot write: {e}")))?;
-    let result = (|| {
-        let mut w = BufWriter::with_capacity(1 << 16, file);
-        body(&mut w)?;
-        let file = w.into_inner().map_err(|e| e.into_error())?;
-        file.sync_all()?;
-        drop(file);
-        std::fs::rename(&tmp, path)
-    })()
-    .map_err(|e| Error::io(path, format!("cannot write: {e}")));
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
 }
 
 fn write_values(values: &[f32], w: &mut impl Write) -> std::io::Result<()> {
@@ -275,8 +236,7 @@ pub fn load_grid(path: &Path) -> Result<SdfGrid> {
         };
         Error::input(path, None, format!("{what}; supported for loading: {SUPPORTED_LOAD}"))
     })?;
-    let mut file = File::open(path).map_err(|e| Error::io(path, format!("cannot read: {e}")))?;
-    let len = file.metadata().map_err(|e| Error::io(path, format!("cannot read: {e}")))?.len();
+    let (mut file, len) = crate::files::open_input(path)?;
     match format {
         Format::Sdf => load_sdf(path, &mut file, len),
         Format::Npy => load_npy(path, &mut file, len),
