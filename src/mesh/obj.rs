@@ -22,8 +22,9 @@ use super::build::{RawMesh, check_vertex_count, non_finite};
 use super::text::{one_line, warning};
 use crate::error::{Error, Location, Result};
 
-/// OBJ keywords (Wavefront's specification, version 3.0, and the superseded statements
-/// it still lists) that carry no triangle data or that `tobj` reads.
+/// The OBJ statements of Wavefront's specification (version 3.0) other than free-form
+/// geometry: read here or by `tobj`, or holding nothing a triangle mesh needs (grouping,
+/// display and rendering attributes).
 const KEYWORDS: &[&str] = &[
     "v",
     "vt",
@@ -51,7 +52,8 @@ const KEYWORDS: &[&str] = &[
     "csh",
 ];
 
-/// The free-form geometry statements (curves and surfaces): valid OBJ, not read.
+/// The free-form geometry statements (curves and surfaces, with the superseded ones the
+/// specification still lists): valid OBJ, not read.
 const FREE_FORM: &[&str] = &[
     "vp", "cstype", "deg", "bmat", "step", "curv", "curv2", "surf", "parm", "trim", "hole", "scrv", "sp",
     "end", "con", "res", "bsp", "bzp", "cdc", "cdp",

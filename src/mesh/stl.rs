@@ -63,7 +63,7 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
                         ),
                     ));
                 }
-                let note = warning(
+                let padding = warning(
                     path,
                     None,
                     format!(
@@ -71,7 +71,7 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
                          50-byte triangle record: padding)"
                     ),
                 );
-                return read_binary(path, data, n as usize, Some(note));
+                return read_binary(path, data, n as usize, Some(padding));
             }
             return Err(size_error());
         }
