@@ -171,10 +171,11 @@ pub fn render_scene(scene: &Scene, repr: Representation) -> RenderReport {
 }
 
 /// Loads a scene file, or a mesh file or a signed distance grid file (`.sdf`, `.npy`) into
-/// a preview scene, by the file's extension.
+/// a preview scene, by the file's extension. A `.vti` grid goes to the grid loader too,
+/// which says that it cannot read one (rather than the scene parser failing on its bytes).
 pub fn load_scene_or_mesh(path: &Path, shading: Shading) -> Result<Scene> {
     let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
-    if matches!(ext.as_deref(), Some("sdf" | "npy")) {
+    if matches!(ext.as_deref(), Some("sdf" | "npy" | "vti")) {
         let grid = load_grid(path)?;
         return Ok(grid_preview_scene(Arc::new(grid), path.to_path_buf()));
     }

@@ -72,11 +72,18 @@ pub struct LoadReport {
     /// Vertices removed because no triangle used them.
     pub unreferenced_vertices_removed: usize,
     /// Non-triangle primitives skipped: glTF point and line primitives, OBJ points and
-    /// lines, PLY faces and STL facets with fewer than three corners.
+    /// lines, PLY triangle strips too short to hold a triangle. (An OBJ or PLY face or an
+    /// STL facet with fewer than three corners is an error, as is an STL facet with more.)
     pub skipped_primitives: usize,
-    /// One-line remarks about anything else ignored (normals dropped, extensions
-    /// ignored, trailing bytes ...).
+    /// One-line remarks about anything else ignored that the format allows (normals
+    /// dropped, extensions or unused elements ignored ...).
     pub notes: Vec<String>,
+    /// Departures from the format that real-world exporters write and that the loader
+    /// therefore tolerates (free text in a PLY header, a few padding bytes after a binary
+    /// STL's triangles, an OBJ statement that is no OBJ keyword ...): one-line messages
+    /// naming the file, the place and the element. [`load_mesh`] prints each on stderr
+    /// as `warning: ...`; everything the format forbids outright is an error instead.
+    pub warnings: Vec<String>,
 }
 
 impl fmt::Display for LoadReport {
@@ -93,6 +100,9 @@ impl fmt::Display for LoadReport {
         )?;
         for n in &self.notes {
             write!(f, "; {n}")?;
+        }
+        for w in &self.warnings {
+            write!(f, "; warning: {w}")?;
         }
         Ok(())
     }
@@ -159,7 +169,8 @@ fn format_for(path: &Path, supported: &[&str], verb: &str) -> Result<MeshFormat>
 /// [`LOADABLE_EXTENSIONS`]).
 ///
 /// All objects, groups, nodes and primitives are merged into one mesh (glTF node
-/// transforms applied). Returns the mesh and what was dropped or ignored on the way.
+/// transforms applied). Returns the mesh and what was dropped or ignored on the way;
+/// each of the report's [`LoadReport::warnings`] is also printed on stderr.
 ///
 /// # Errors
 /// [`Error::Io`] when the file cannot be read; [`Error::Input`] for an unknown extension,
@@ -168,7 +179,11 @@ fn format_for(path: &Path, supported: &[&str], verb: &str) -> Result<MeshFormat>
 pub fn load_mesh(path: &Path) -> Result<(TriangleMesh, LoadReport)> {
     let format = format_for(path, LOADABLE_EXTENSIONS, "read")?;
     let data = crate::files::read_input(path, crate::files::MAX_INPUT_BYTES)?;
-    load_mesh_bytes(path, data, format)
+    let loaded = load_mesh_bytes(path, data, format)?;
+    for w in &loaded.1.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(loaded)
 }
 
 /// Loads a triangle mesh of `format` from bytes already in memory, exactly as
@@ -176,7 +191,8 @@ pub fn load_mesh(path: &Path) -> Result<(TriangleMesh, LoadReport)> {
 ///
 /// `path` is not read: it names the data in error messages and, for glTF, is the file
 /// whose folder relative buffer URIs are resolved against. [`MeshFormat::Gltf`] and
-/// [`MeshFormat::Glb`] behave alike (the GLB magic decides).
+/// [`MeshFormat::Glb`] behave alike (the GLB magic decides). Warnings are returned in
+/// the report, not printed.
 ///
 /// # Errors
 /// As [`load_mesh`], except that the extension of `path` is not checked.

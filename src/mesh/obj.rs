@@ -1,12 +1,17 @@
 //! Wavefront OBJ, through `tobj`.
 //!
 //! A first pass here checks what `tobj` would report without a line number, or not at
-//! all: vertex coordinates (count, finiteness, `w`), face index syntax and range (with
-//! the face number and the line), UTF-16 text. The same pass blanks the lines whose data
-//! is ignored (texture coordinates, materials, points, lines, faces with fewer than three
-//! corners, vertex colours) so that `tobj` cannot fail on them; blanking keeps line
-//! numbers. `tobj` then triangulates polygons (as fans) and the objects and groups it
-//! returns are merged. Materials are never read, so a missing `.mtl` does not matter.
+//! all: vertex coordinates (count, finiteness, `w`), normals (three numbers), face index
+//! syntax and range (with the face number and the line), faces with fewer than three
+//! corners, UTF-16 text, and statements `tobj` would skip without a word: a line whose
+//! first word holds control characters or other bytes no OBJ keyword has (binary data,
+//! such as a face line behind NUL bytes) is an error; a printable word that is not an OBJ
+//! keyword is ignored with one warning per file; free-form geometry (curves, surfaces),
+//! which is valid but not read, is ignored with a note. The same pass blanks the lines
+//! whose data is ignored (texture coordinates, materials, points, lines, vertex colours)
+//! so that `tobj` cannot fail on them; blanking keeps line numbers. `tobj` then
+//! triangulates polygons (as fans) and the objects and groups it returns are merged.
+//! Materials are never read, so a missing `.mtl` does not matter.
 
 use std::io::{BufRead, Read};
 use std::path::Path;
@@ -14,7 +19,62 @@ use std::path::Path;
 use glam::Vec3;
 
 use super::build::{RawMesh, check_vertex_count, non_finite};
+use super::text::{one_line, warning};
 use crate::error::{Error, Location, Result};
+
+/// The OBJ statements of Wavefront's specification (version 3.0) other than free-form
+/// geometry: read here or by `tobj`, or holding nothing a triangle mesh needs (grouping,
+/// display and rendering attributes).
+const KEYWORDS: &[&str] = &[
+    "v",
+    "vt",
+    "vn",
+    "f",
+    "l",
+    "p",
+    "g",
+    "s",
+    "o",
+    "mg",
+    "usemtl",
+    "mtllib",
+    "maplib",
+    "usemap",
+    "lod",
+    "bevel",
+    "c_interp",
+    "d_interp",
+    "shadow_obj",
+    "trace_obj",
+    "ctech",
+    "stech",
+    "call",
+    "csh",
+];
+
+/// The free-form geometry statements (curves and surfaces, with the superseded ones the
+/// specification still lists): valid OBJ, not read.
+const FREE_FORM: &[&str] = &[
+    "vp", "cstype", "deg", "bmat", "step", "curv", "curv2", "surf", "parm", "trim", "hole", "scrv", "sp",
+    "end", "con", "res", "bsp", "bzp", "cdc", "cdp",
+];
+
+/// The first of some lines and how many there were, for one message about all of them.
+#[derive(Debug)]
+struct First {
+    keyword: String,
+    loc: Location,
+    count: usize,
+}
+
+impl First {
+    fn record(slot: &mut Option<First>, keyword: &str, loc: Location) {
+        match slot {
+            Some(f) => f.count += 1,
+            None => *slot = Some(First { keyword: one_line(keyword, 40), loc, count: 1 }),
+        }
+    }
+}
 
 /// A face vertex index whose range can only be checked once all vertices are counted.
 struct Pending {
@@ -28,6 +88,10 @@ struct Pending {
 struct Scan {
     vertices: usize,
     skipped: usize,
+    /// Lines whose first word is printable but no OBJ keyword.
+    unknown: Option<First>,
+    /// Free-form geometry statements.
+    free_form: Option<First>,
 }
 
 fn scan(path: &Path, data: &mut [u8]) -> Result<Scan> {
@@ -45,6 +109,8 @@ fn scan(path: &Path, data: &mut [u8]) -> Result<Scan> {
     let mut nn = 0usize;
     let mut nf = 0usize;
     let mut skipped = 0usize;
+    let mut unknown = None;
+    let mut free_form = None;
     let mut max_v: Option<Pending> = None;
     let mut max_n: Option<Pending> = None;
     let mut start = 0usize;
@@ -122,7 +188,7 @@ fn scan(path: &Path, data: &mut [u8]) -> Result<Scan> {
             }
             "vn" => {
                 let rest: Vec<(&str, usize)> = words.collect();
-                if rest.len() < 3 || rest[..3].iter().any(|(w, _)| w.parse::<f32>().is_err()) {
+                if rest.len() != 3 || rest.iter().any(|(w, _)| w.parse::<f32>().is_err()) {
                     return Err(Error::input(path, loc(0), format!("normal {nn}: expected 'vn x y z'")));
                 }
                 nn += 1;
@@ -183,8 +249,15 @@ fn scan(path: &Path, data: &mut [u8]) -> Result<Scan> {
                     }
                 }
                 if corners.len() < 3 {
-                    skipped += 1;
-                    blank = true;
+                    return Err(Error::input(
+                        path,
+                        loc(0),
+                        format!(
+                            "face {nf}: {} vertices; a face needs at least 3 (use 'l' for a line, 'p' \
+                             for points)",
+                            corners.len()
+                        ),
+                    ));
                 }
                 nf += 1;
             }
@@ -193,7 +266,26 @@ fn scan(path: &Path, data: &mut [u8]) -> Result<Scan> {
                 blank = true;
             }
             "vt" | "usemtl" | "mtllib" => blank = true,
-            _ => {}
+            k if k.starts_with('#') || KEYWORDS.contains(&k) => {}
+            // The DOS end-of-file mark (Ctrl-Z), alone after the last statement.
+            "\u{1a}" if text.trim() == "\u{1a}" && data[range.end..].iter().all(u8::is_ascii_whitespace) => {
+                blank = true
+            }
+            k if FREE_FORM.contains(&k) => {
+                First::record(&mut free_form, k, Location { line: line_no, column: 1 })
+            }
+            k if !k.chars().all(|c| c.is_ascii_graphic()) => {
+                return Err(Error::input(
+                    path,
+                    loc(0),
+                    format!(
+                        "'{}' is not an OBJ statement: the line starts with control characters or \
+                         bytes no OBJ keyword has (binary data?)",
+                        one_line(k, 40)
+                    ),
+                ));
+            }
+            k => First::record(&mut unknown, k, Location { line: line_no, column: 1 }),
         }
         if blank {
             data[range].fill(b' ');
@@ -214,7 +306,7 @@ fn scan(path: &Path, data: &mut [u8]) -> Result<Scan> {
             ));
         }
     }
-    Ok(Scan { vertices: nv, skipped })
+    Ok(Scan { vertices: nv, skipped, unknown, free_form })
 }
 
 /// Feeds `tobj` and counts the bytes it has consumed, to name the line it fails on.
@@ -267,6 +359,22 @@ pub(crate) fn read(path: &Path, mut data: Vec<u8>) -> Result<RawMesh> {
 
     let mut raw = RawMesh::default();
     raw.report.skipped_primitives = scan.skipped;
+    if let Some(f) = &scan.unknown {
+        raw.report.warnings.push(warning(
+            path,
+            Some(f.loc),
+            format!(
+                "'{}' is not an OBJ statement: {} such line(s) ignored, this is the first",
+                f.keyword, f.count
+            ),
+        ));
+    }
+    if let Some(f) = &scan.free_form {
+        raw.report.notes.push(format!(
+            "free-form geometry (curves, surfaces) ignored: {} statement(s), the first '{}' on line {}",
+            f.count, f.keyword, f.loc.line
+        ));
+    }
     let all_normals = models.iter().all(|m| m.mesh.normals.len() == m.mesh.positions.len());
     let any_normals = models.iter().any(|m| !m.mesh.normals.is_empty());
     if all_normals {

@@ -12,13 +12,20 @@
 //! ignored. Before anything is allocated the
 //! header's element counts are checked against the bytes that follow the header, so an
 //! absurd count fails at once. In ASCII files each element is one line.
+//!
+//! The header is read strictly: `format` once, with version `1.0` (the only one there
+//! is); no element or property declared twice; nothing after `end_header` on its line.
+//! A header line with an unknown keyword is free text some exporters write (Blender 2.4
+//! wrote "Created by ..."): it is ignored with a warning. A face has at least three
+//! corners. After the last element only white space may follow (in binary files, NUL
+//! padding too, with a warning): anything else means a count in the header is wrong.
 
 use std::path::Path;
 
 use glam::Vec3;
 
 use super::build::{RawMesh, check_vertex_count, non_finite};
-use super::text::Tokens;
+use super::text::{Tokens, one_line, warning};
 use crate::error::{Error, Location, Result};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -134,8 +141,8 @@ struct Header {
     data_start: usize,
     /// Line number of the first data line.
     data_line: usize,
-    /// Remarks for the load report.
-    notes: Vec<String>,
+    /// Tolerated departures from the format, for the load report.
+    warnings: Vec<String>,
 }
 
 fn parse_header(path: &Path, data: &[u8]) -> Result<Header> {
@@ -143,8 +150,9 @@ fn parse_header(path: &Path, data: &[u8]) -> Result<Header> {
     let mut pos = 0usize;
     let mut line_no = 0usize;
     let mut encoding = None;
+    let mut format_line = 0usize;
     let mut elements: Vec<Element> = Vec::new();
-    let mut notes = Vec::new();
+    let mut warnings = Vec::new();
     loop {
         line_no += 1;
         if pos >= data.len() {
@@ -192,10 +200,29 @@ fn parse_header(path: &Path, data: &[u8]) -> Result<Header> {
                         ));
                     }
                 };
-                if encoding.is_some_and(|e| e != enc) {
-                    return Err(err(line_no, "a second, different 'format' line".into()));
+                match words.get(2..) {
+                    Some(["1.0"]) => {}
+                    Some([version]) => {
+                        return Err(err(
+                            line_no,
+                            format!(
+                                "unknown PLY version '{}' (the only version is 1.0)",
+                                one_line(version, 40)
+                            ),
+                        ));
+                    }
+                    _ => {
+                        return Err(err(line_no, format!("expected 'format {} 1.0'", words[1])));
+                    }
+                }
+                if encoding.is_some() {
+                    return Err(err(
+                        line_no,
+                        format!("a second 'format' line (the first is line {format_line})"),
+                    ));
                 }
                 encoding = Some(enc);
+                format_line = line_no;
             }
             "element" => {
                 let [_, name, count] = words[..] else {
@@ -237,17 +264,41 @@ fn parse_header(path: &Path, data: &[u8]) -> Result<Header> {
                         ));
                     }
                 };
+                if element.props.iter().any(|p| p.name == name) {
+                    return Err(err(
+                        line_no,
+                        format!("element '{}': property '{name}' declared twice", element.name),
+                    ));
+                }
                 element.props.push(Property { name: name.to_string(), kind });
             }
-            "end_header" => break,
+            "end_header" => {
+                if words.len() > 1 {
+                    return Err(err(
+                        line_no,
+                        format!("unexpected '{}' after 'end_header'", one_line(words[1], 40)),
+                    ));
+                }
+                break;
+            }
+            other if !other.chars().all(|c| c.is_ascii_graphic()) => {
+                return Err(err(
+                    line_no,
+                    format!("'{}' is not a PLY header keyword (binary data?)", one_line(other, 40)),
+                ));
+            }
             other => {
                 // Not PLY, but some exporters write free text (e.g. "Created by ...").
-                notes.push(format!("header line {line_no} ignored (unknown keyword '{other}')"));
+                warnings.push(warning(
+                    path,
+                    Some(Location { line: line_no, column: 1 }),
+                    format!("header line ignored: '{}' is not a PLY header keyword", one_line(other, 40)),
+                ));
             }
         }
     }
     let encoding = encoding.ok_or_else(|| Error::input(path, None, "the header has no 'format' line"))?;
-    Ok(Header { encoding, elements, notes, data_start: pos, data_line: line_no + 1 })
+    Ok(Header { encoding, elements, warnings, data_start: pos, data_line: line_no + 1 })
 }
 
 /// Where values come from: text tokens (one element per line) or binary bytes.
@@ -446,7 +497,7 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
     let strip_list = strips.map(|e| index_list(path, e)).transpose()?;
 
     let mut raw = RawMesh::default();
-    raw.report.notes.extend(header.notes.iter().cloned());
+    raw.report.warnings.extend(header.warnings.iter().cloned());
     // Both counts were checked against the file size above.
     raw.positions.reserve_exact(n_vertices as usize);
     if nxyz.is_some() {
@@ -554,7 +605,15 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
                         match assembly {
                             Some(Assembly::Fan) => {
                                 if polygon.len() < 3 {
-                                    raw.report.skipped_primitives += 1;
+                                    return Err(Error::input(
+                                        path,
+                                        elem_loc,
+                                        format!(
+                                            "{} {i}: {} vertices; a face needs at least 3",
+                                            e.name,
+                                            polygon.len()
+                                        ),
+                                    ));
                                 }
                                 for j in 2..polygon.len() {
                                     raw.triangles.push([polygon[0], polygon[j - 1], polygon[j]]);
@@ -593,10 +652,42 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
             }
         }
     }
-    if let Source::Binary { data, pos, .. } = src
-        && pos < data.len()
-    {
-        raw.report.notes.push(format!("{} bytes after the last element ignored", data.len() - pos));
+    let last = header.elements.iter().rev().find(|e| e.count > 0 && !e.props.is_empty());
+    let last = last.map_or("the header".to_string(), |e| format!("the last '{}' entry", e.name));
+    match src {
+        Source::Ascii(mut t) => {
+            if let Some(tok) = t.next_token() {
+                return Err(Error::input(
+                    path,
+                    Some(tok.loc),
+                    format!(
+                        "unexpected '{}' after {last}: the data holds more than the header's \
+                         element counts declare",
+                        tok.text()
+                    ),
+                ));
+            }
+        }
+        Source::Binary { data, pos, .. } if pos < data.len() => {
+            let extra = data.len() - pos;
+            if data[pos..].iter().all(|&b| b == 0 || b.is_ascii_whitespace()) {
+                raw.report.warnings.push(warning(
+                    path,
+                    None,
+                    format!("{extra} bytes of padding (white space or NUL) after {last} ignored"),
+                ));
+            } else {
+                return Err(Error::input(
+                    path,
+                    None,
+                    format!(
+                        "{extra} bytes of data after {last} (byte {pos}): the data holds more than \
+                         the header's element counts declare"
+                    ),
+                ));
+            }
+        }
+        Source::Binary { .. } => {}
     }
     Ok(raw)
 }

@@ -3,16 +3,19 @@
 //! A file is binary when its size is exactly `84 + 50 n` bytes for the triangle count
 //! `n` stored at byte 80, even if its 80-byte header starts with `solid` (many binary
 //! exporters write that). Otherwise a file starting with `solid` is read as ASCII; one
-//! that does not is a binary file of the wrong size (truncated, or with trailing bytes,
-//! which are ignored with a note). STL repeats each corner per facet; the shared
-//! clean-up welds identical corners into a connected mesh. Facet normals are ignored.
+//! that does not is a binary file of the wrong size: truncated (an error), or with bytes
+//! after the last triangle. Fewer than one 50-byte record of those is padding some
+//! exporters write (ignored with a warning); a whole record or more means the count in
+//! the header disagrees with the data (an error). An ASCII facet has exactly three
+//! vertices. STL repeats each corner per facet; the shared clean-up welds identical
+//! corners into a connected mesh. Facet normals are ignored.
 
 use std::path::Path;
 
 use glam::Vec3;
 
 use super::build::{RawMesh, check_vertex_count, non_finite};
-use super::text::{Token, Tokens};
+use super::text::{Token, Tokens, warning};
 use crate::error::{Error, Result};
 
 const HEADER: usize = 84;
@@ -47,8 +50,28 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
         let looks_binary = data.iter().take(4096).any(|&b| b == 0 || (b < 0x20 && !b.is_ascii_whitespace()));
         if !starts_solid || looks_binary {
             if len > expected {
-                let note = format!("{} bytes after the last of the {n} triangles ignored", len - expected);
-                return read_binary(path, data, n as usize, Some(note));
+                let extra = len - expected;
+                if extra >= RECORD {
+                    return Err(Error::input(
+                        path,
+                        None,
+                        format!(
+                            "the header declares {n} triangles ({expected} bytes) but the file has \
+                             {len} bytes: {extra} bytes, {} more triangle records, after the last \
+                             declared triangle (corrupt triangle count?)",
+                            extra / RECORD
+                        ),
+                    ));
+                }
+                let padding = warning(
+                    path,
+                    None,
+                    format!(
+                        "{extra} bytes after the last of the {n} triangles ignored (less than one \
+                         50-byte triangle record: padding)"
+                    ),
+                );
+                return read_binary(path, data, n as usize, Some(padding));
             }
             return Err(size_error());
         }
@@ -66,10 +89,10 @@ pub(crate) fn read(path: &Path, data: &[u8]) -> Result<RawMesh> {
     read_ascii(path, data)
 }
 
-fn read_binary(path: &Path, data: &[u8], n: usize, note: Option<String>) -> Result<RawMesh> {
+fn read_binary(path: &Path, data: &[u8], n: usize, warning: Option<String>) -> Result<RawMesh> {
     check_vertex_count(path, n.saturating_mul(3))?;
     let mut raw = RawMesh::default();
-    raw.report.notes.extend(note);
+    raw.report.warnings.extend(warning);
     raw.positions.reserve_exact(n * 3);
     raw.triangles.reserve_exact(n);
     let f = |o: usize| f32::from_le_bytes([data[o], data[o + 1], data[o + 2], data[o + 3]]);
@@ -123,6 +146,7 @@ fn read_ascii(path: &Path, data: &[u8]) -> Result<RawMesh> {
             if !tok.is("facet") {
                 return Err(at(&tok, format!("expected 'facet' or 'endsolid', found '{}'", tok.text())));
             }
+            let facet_tok = tok;
             let expect = |t: &mut Tokens, word: &str| -> Result<()> {
                 let tok = t.next_token().ok_or_else(|| eof(t))?;
                 if tok.is(word) {
@@ -147,7 +171,22 @@ fn read_ascii(path: &Path, data: &[u8]) -> Result<RawMesh> {
             loop {
                 let tok = t.next_token().ok_or_else(|| eof(&t))?;
                 if tok.is("endloop") {
+                    if corners.len() < 3 {
+                        return Err(at(
+                            &facet_tok,
+                            format!(
+                                "facet {facet}: {} vertices; an STL facet is a triangle (3 vertices)",
+                                corners.len()
+                            ),
+                        ));
+                    }
                     break;
+                }
+                if tok.is("vertex") && corners.len() == 3 {
+                    return Err(at(
+                        &tok,
+                        format!("facet {facet}: a 4th vertex; an STL facet is a triangle (3 vertices)"),
+                    ));
                 }
                 if !tok.is("vertex") {
                     return Err(at(
@@ -174,12 +213,7 @@ fn read_ascii(path: &Path, data: &[u8]) -> Result<RawMesh> {
                 raw.positions.push(Vec3::from(p));
             }
             expect(&mut t, "endfacet")?;
-            if corners.len() < 3 {
-                raw.report.skipped_primitives += 1;
-            }
-            for k in 2..corners.len() {
-                raw.triangles.push([corners[0], corners[k - 1], corners[k]]);
-            }
+            raw.triangles.push([corners[0], corners[1], corners[2]]);
             facet += 1;
         }
     }
@@ -217,21 +251,32 @@ mod tests {
         assert_eq!(raw.triangles.len(), 2);
         let raw = read(p, &binary(2, b"plain", 5)).unwrap();
         assert_eq!(raw.triangles.len(), 2);
-        assert!(raw.report.notes[0].contains("5 bytes after the last"));
-        // A "solid" header does not make binary data text: trailing bytes are still
-        // ignored, and missing ones are still an error.
+        assert!(raw.report.warnings[0].starts_with("t.stl: 5 bytes after the last"), "{:?}", raw.report);
+        // A whole record more than the header declares: the count is wrong.
+        let e = read(p, &binary(2, b"plain", 50)).unwrap_err().to_string();
+        assert!(e.starts_with("t.stl: the header declares 2 triangles"), "{e}");
+        assert!(e.contains("1 more triangle records"), "{e}");
+        // A "solid" header does not make binary data text: padding is still ignored,
+        // extra records and missing bytes are still errors.
         assert_eq!(read(p, &binary(2, b"solid x", 5)).unwrap().triangles.len(), 2);
+        assert!(read(p, &binary(2, b"solid x", 120)).is_err());
         let cut = binary(2, b"solid x", 0);
         let e = read(p, &cut[..cut.len() - 10]).unwrap_err().to_string();
         assert!(e.contains("truncated binary STL"), "{e}");
     }
 
     #[test]
-    fn ascii_polygons_and_errors() {
+    fn ascii_facets_are_triangles_and_errors() {
         let p = Path::new("t.stl");
         let quad = "solid q\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n\
                     vertex 1 1 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid q\n";
-        assert_eq!(read(p, quad.as_bytes()).unwrap().triangles.len(), 2);
+        let e = read(p, quad.as_bytes()).unwrap_err().to_string();
+        assert!(e.starts_with("t.stl:7:1: facet 0: a 4th vertex"), "{e}");
+        let tri = quad.replace("vertex 0 1 0\n", "");
+        assert_eq!(read(p, tri.as_bytes()).unwrap().triangles.len(), 1);
+        let two = tri.replace("vertex 1 1 0\n", "");
+        let e = read(p, two.as_bytes()).unwrap_err().to_string();
+        assert!(e.starts_with("t.stl:2:1: facet 0: 2 vertices; an STL facet is a triangle"), "{e}");
         let bad = quad.replace("outer loop", "outer lop");
         let e = read(p, bad.as_bytes()).unwrap_err().to_string();
         assert!(e.starts_with("t.stl:3:7: facet 0: expected 'loop'"), "{e}");

@@ -1,6 +1,9 @@
 //! A byte tokenizer for the text formats (ASCII PLY and STL) that tracks line and column.
 
-use crate::error::Location;
+use std::fmt::Display;
+use std::path::Path;
+
+use crate::error::{Error, Location};
 
 /// A whitespace-separated token and where it starts.
 #[derive(Clone, Copy, Debug)]
@@ -48,6 +51,12 @@ pub(crate) fn one_line(s: &str, max: usize) -> String {
         out.push_str("...");
     }
     out
+}
+
+/// A warning for [`super::LoadReport::warnings`]: one line naming the file, the place
+/// (where known) and the problem, formatted as an input error is.
+pub(crate) fn warning(path: &Path, location: Option<Location>, message: impl Display) -> String {
+    Error::input(path, location, message).to_string()
 }
 
 fn is_space(b: u8) -> bool {

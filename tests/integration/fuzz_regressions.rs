@@ -110,17 +110,17 @@ fn fuzz_seeds_are_valid_inputs() {
 /// fuzz target grid_npy, campaign 1: a `.npy` header without a `'descr'` key. The error
 /// quoted the whole header dictionary, line end and NUL included, so the one-line error
 /// became two lines. Text from the file is now quoted with control characters escaped and
-/// cut after 80 characters.
+/// cut after 80 characters. (The committed header is not even a dictionary, `hape': (2,
+/// ...`: since the header is parsed as a dictionary literal, that is the error.)
 #[test]
 fn npy_error_quoting_the_header_stays_on_one_line() {
     let p = committed("npy_header_newline.npy");
     let msg = fails(
         &p,
         sdfmesh::geometry::grid::io::load_grid(&p),
-        &["has no 'descr' entry: hape': (2, 2,", "..."],
+        &["not a Python dictionary literal: expected '{' at character 1, found 'h'", "hape': (2, 2,", "..."],
     );
-    assert!(msg.len() < p.display().to_string().len() + 150, "{msg}");
-    // Values quoted from the dictionary are escaped too.
+    assert!(msg.len() < p.display().to_string().len() + 200, "{msg}");
     let dir = tempfile::tempdir().unwrap();
     let npy = |dict: &str| {
         let mut b = b"\x93NUMPY\x01\x00".to_vec();
@@ -128,6 +128,16 @@ fn npy_error_quoting_the_header_stays_on_one_line() {
         b.extend_from_slice(dict.as_bytes());
         b
     };
+    // A dictionary without 'descr' and with a line end: quoted on one line, cut.
+    let long = format!("{{'fortran_order': False,\n 'shape': (2, 2, 2), {}}}", " ".repeat(100));
+    let p = put(dir.path(), "n.npy", npy(&long));
+    let msg = fails(
+        &p,
+        sdfmesh::geometry::grid::io::load_grid(&p),
+        &["has no 'descr' entry: {'fortran_order': False,\\n 'shape'", "..."],
+    );
+    assert!(msg.len() < p.display().to_string().len() + 150, "{msg}");
+    // Values quoted from the dictionary are escaped too.
     let p = put(dir.path(), "d.npy", npy("{'descr': '<f\n8', 'fortran_order': False, 'shape': (2, 2, 2), }"));
     fails(&p, sdfmesh::geometry::grid::io::load_grid(&p), &["unsupported .npy dtype '<f\\n8'"]);
     let p = put(dir.path(), "s.npy", npy("{'descr': '<f4', 'fortran_order': False, 'shape': (2,\r2\x0b), }"));

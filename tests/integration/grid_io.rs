@@ -495,3 +495,101 @@ fn save_rejects_inconsistent_grids() {
     check_error(&save_grid(&g, &p).unwrap_err(), &p, "at least 2 samples");
     assert_eq!(others(dir.path(), &[]), Vec::<String>::new());
 }
+
+// ---------------------------------------------------------------- nonsense refused (issue 32)
+
+/// A version 1.0 `.npy` file of a 2x2x2 grid of zeros with header dictionary `dict`.
+fn npy_with(dict: &str) -> Vec<u8> {
+    let mut header = dict.to_owned();
+    while !(10 + header.len() + 1).is_multiple_of(64) {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut v = b"\x93NUMPY\x01\x00".to_vec();
+    v.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    v.extend_from_slice(header.as_bytes());
+    v.extend_from_slice(&[0u8; 32]);
+    v
+}
+
+#[test]
+fn npy_header_holds_numpys_three_keys_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    // What NumPy writes, with and without the trailing commas, loads.
+    for (name, dict) in [
+        ("numpy.npy", "{'descr': '<f4', 'fortran_order': False, 'shape': (2, 2, 2), }"),
+        ("plain.npy", "{\"shape\": (2,2,2,), \"descr\": \"<f4\", \"fortran_order\": False}"),
+    ] {
+        let p = dir.path().join(name);
+        std::fs::write(&p, npy_with(dict)).unwrap();
+        assert_eq!(load_grid(&p).unwrap().dims, UVec3::splat(2), "{dict}");
+    }
+    let cases = [
+        (
+            "unknown.npy",
+            "{'descr': '<f4', 'fortran_order': False, 'shape': (2, 2, 2), 'origin': (0, 0, 0), }",
+            "unknown key 'origin' in the .npy header (the keys are 'descr', 'fortran_order' and 'shape')",
+        ),
+        (
+            "twice.npy",
+            "{'descr': '<f4', 'fortran_order': False, 'shape': (2, 2, 2), 'shape': (9, 9, 9), }",
+            "the .npy header has the key 'shape' twice",
+        ),
+        (
+            "missing.npy",
+            "{'descr': '<f4', 'shape': (2, 2, 2), }",
+            "the .npy header has no 'fortran_order' entry",
+        ),
+        (
+            "after.npy",
+            "{'descr': '<f4', 'fortran_order': False, 'shape': (2, 2, 2), } x",
+            "unexpected text after the closing '}' at character 64",
+        ),
+        (
+            "nodict.npy",
+            "'descr': '<f4'",
+            "not a Python dictionary literal: expected '{' at character 1, found '\\''",
+        ),
+        ("colon.npy", "{'descr' '<f4'}", "expected ':' at character 10, found '\\''"),
+        ("comma.npy", "{'descr': '<f4' 'shape': (2, 2, 2)}", "expected ',' or '}' at character 17"),
+        (
+            "open.npy",
+            "{'descr': '<f4', 'shape': (2, 2, 2}",
+            "expected ')' at character 36, found the end of the header",
+        ),
+        (
+            "hole.npy",
+            "{'descr': '<f4', 'fortran_order': False, 'shape': (2,,2,2), }",
+            "invalid .npy shape (2,,2,2)",
+        ),
+    ];
+    for (name, dict, needle) in cases {
+        load_error(dir.path(), name, &npy_with(dict), needle);
+    }
+    // Only the minor version 0 exists.
+    let mut v = npy_with("{'descr': '<f4', 'fortran_order': False, 'shape': (2, 2, 2), }");
+    v[7] = 1;
+    load_error(dir.path(), "v11.npy", &v, "unknown .npy format version 1.1");
+}
+
+/// `toolkit render` of a `.vti` file (which the toolkit writes but cannot read) said
+/// "stream did not contain valid UTF-8": the scene parser read its bytes. It now says
+/// which file and what is wrong, in one line, and writes nothing.
+#[test]
+fn render_of_a_vti_names_the_file_and_the_problem() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.png");
+    let mut grid = Vec::new();
+    save_grid(&sample_grid(), &dir.path().join("g.vti")).unwrap();
+    grid.extend(std::fs::read(dir.path().join("g.vti")).unwrap());
+    let garbage = dir.path().join("t.vti");
+    std::fs::write(&garbage, [0xffu8, 0xfe, 0, 1, 2, 3]).unwrap();
+    for p in [dir.path().join("g.vti"), garbage] {
+        let o = crate::util::toolkit(&["render", p.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(err.contains(&format!("{}: cannot load .vti grids (write only)", p.display())), "{err}");
+        assert!(!out.exists());
+    }
+}

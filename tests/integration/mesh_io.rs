@@ -703,6 +703,232 @@ fn other_errors() {
 }
 
 // ---------------------------------------------------------------------------------------
+// Nonsense no loader accepts silently (issue 32, class 10): counts that disagree with the
+// data, elements of the wrong size, garbage statements, unknown versions, header entries
+// declared twice. Each is an error naming the file and the element, or, where real
+// exporters write it, a warning naming both (in the report, and on stderr from the CLI).
+
+/// `report` holds exactly one warning with every needle, and it names `path` first.
+#[track_caller]
+fn warns(report: &LoadReport, path: &Path, needles: &[&str]) {
+    let hits: Vec<&String> =
+        report.warnings.iter().filter(|w| needles.iter().all(|n| w.contains(n))).collect();
+    assert_eq!(hits.len(), 1, "expected one warning with {needles:?}: {report:?}");
+    assert!(hits[0].starts_with(&path.display().to_string()), "{hits:?}");
+    assert!(!hits[0].contains('\n'), "{hits:?}");
+}
+
+/// A binary little-endian PLY of the tetrahedron, with `extra` after the last face.
+fn tetra_binary_ply(extra: &[u8]) -> Vec<u8> {
+    let mut b = b"ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\n\
+        property float y\nproperty float z\nelement face 4\nproperty list uchar int vertex_indices\n\
+        end_header\n"
+        .to_vec();
+    b.extend(TETRA.iter().flatten().flat_map(|c| c.to_le_bytes()));
+    for f in TETRA_FACES {
+        b.push(3);
+        b.extend(f.iter().flat_map(|&i| (i as i32).to_le_bytes()));
+    }
+    b.extend_from_slice(extra);
+    b
+}
+
+#[test]
+fn stl_binary_triangle_count_must_match_the_data() {
+    let dir = tmp();
+    // The header says 3, the data holds 4: the fourth used to be dropped without a word.
+    let mut more = stl_binary(b"binary", &TETRA_FACES);
+    more[80..84].copy_from_slice(&3u32.to_le_bytes());
+    fails(
+        &put(dir.path(), "more.stl", &more),
+        &["declares 3 triangles", "50 bytes, 1 more triangle records"],
+    );
+    let mut zero = stl_binary(b"solid but binary", &TETRA_FACES);
+    zero[80..84].copy_from_slice(&0u32.to_le_bytes());
+    fails(&put(dir.path(), "zero_count.stl", &zero), &["declares 0 triangles", "4 more triangle records"]);
+    // The opposite, a count larger than the data, is a truncated file.
+    let mut fewer = stl_binary(b"binary", &TETRA_FACES);
+    fewer[80..84].copy_from_slice(&5u32.to_le_bytes());
+    fails(&put(dir.path(), "fewer.stl", &fewer), &["truncated binary STL", "declares 5 triangles"]);
+    // Less than one record after the data is padding: loaded, with a warning.
+    let mut pad = stl_binary(b"binary", &TETRA_FACES);
+    pad.extend_from_slice(&[0, 0, b'\n']);
+    let p = put(dir.path(), "padded.stl", &pad);
+    let (m, report) = load(&p);
+    assert_tetra(&m);
+    warns(&report, &p, &["3 bytes after the last of the 4 triangles ignored"]);
+}
+
+#[test]
+fn stl_ascii_facet_must_be_a_triangle() {
+    let dir = tmp();
+    let ascii = stl_ascii("t");
+    // Line 7 is the fourth vertex of facet 0.
+    let quad = ascii.replacen("    endloop", "      vertex 1 1 1\n    endloop", 1);
+    fails(
+        &put(dir.path(), "quad.stl", quad),
+        &[":7:7:", "facet 0: a 4th vertex; an STL facet is a triangle"],
+    );
+    let second = ascii.match_indices("    endloop").nth(1).unwrap().0;
+    let mut quad2 = ascii.clone();
+    quad2.insert_str(second, "      vertex 1 1 1\n");
+    fails(&put(dir.path(), "quad2.stl", quad2), &[":14:7:", "facet 1: a 4th vertex"]);
+    let two = ascii.replacen("      vertex 0e0 1 0\n", "", 1);
+    fails(&put(dir.path(), "two.stl", two), &[":2:3:", "facet 0: 2 vertices; an STL facet is a triangle"]);
+    let none = "solid x\nfacet normal 0 0 1\nouter loop\nendloop\nendfacet\nendsolid x\n";
+    fails(&put(dir.path(), "none.stl", none), &[":2:1:", "facet 0: 0 vertices"]);
+}
+
+const TETRA_OBJ_3: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\n";
+
+#[test]
+fn obj_garbage_statements_are_refused_or_reported() {
+    let dir = tmp();
+    let base = TETRA_OBJ_3;
+    // A face behind NUL bytes: tobj skipped the line without a word.
+    let p = put(dir.path(), "nul.obj", format!("{base}\0\0f 2 3 4\n"));
+    fails(&p, &[":8:1:", r"'\u{0}\u{0}f' is not an OBJ statement", "binary data"]);
+    // Other control bytes, a file padded with NULs, a keyword that is not ASCII.
+    fails(
+        &put(dir.path(), "ctrl.obj", format!("{base}\x01\x02junk 1 2\n")),
+        &[":8:1:", "not an OBJ statement"],
+    );
+    fails(
+        &put(dir.path(), "padded.obj", format!("{base}f 2 3 4\n\0\0\0\0")),
+        &[":9:1:", "not an OBJ statement"],
+    );
+    fails(
+        &put(dir.path(), "latin.obj", format!("{base}f\u{e9} 2 3 4\n")),
+        &[":8:1:", "'f\u{e9}' is not an OBJ statement"],
+    );
+    // A printable word that is no OBJ keyword: ignored, with one warning naming the first.
+    let p = put(dir.path(), "unknown.obj", format!("{base}f 2 3 4\nfo 2 3 4\nfoo\n"));
+    let (m, report) = load(&p);
+    assert_eq!(m.triangle_count(), 4);
+    warns(&report, &p, &[":9:1:", "'fo' is not an OBJ statement: 2 such line(s) ignored"]);
+    // Valid statements that carry no triangles give no warning: free-form geometry (a
+    // note), groups, smoothing, comments, the DOS end-of-file mark.
+    let valid = format!("{base}g a\ns 1\nmg 1\n# c\nf 2 3 4\nvp 0.5\ncurv 0 1 1 2\nparm u 0 1\nend\n\x1a\n");
+    let p = put(dir.path(), "valid.obj", valid);
+    let (m, report) = load(&p);
+    assert_eq!(m.triangle_count(), 4);
+    assert!(report.warnings.is_empty(), "{report:?}");
+    assert!(
+        report
+            .notes
+            .iter()
+            .any(|n| n.contains("free-form geometry")
+                && n.contains("4 statement(s), the first 'vp' on line 13")),
+        "{report:?}"
+    );
+    // A normal with more than three numbers.
+    fails(
+        &put(dir.path(), "vn4.obj", format!("{base}vn 0 0 1 1\n")),
+        &[":8:1:", "normal 0: expected 'vn x y z'"],
+    );
+}
+
+#[test]
+fn faces_need_three_vertices() {
+    let dir = tmp();
+    for (name, face, count) in [("two.obj", "f 1 2", 2), ("one.obj", "f 3", 1), ("none.obj", "f", 0)] {
+        let p = put(dir.path(), name, format!("{TETRA_OBJ_3}{face}\nf 2 3 4\n"));
+        fails(&p, &[":8:1:", &format!("face 3: {count} vertices; a face needs at least 3")]);
+    }
+    // Lines and points are valid OBJ: skipped and counted.
+    let p = put(dir.path(), "lines.obj", format!("{TETRA_OBJ_3}f 2 3 4\nl 1 2\np 3\n"));
+    assert_eq!(load(&p).1.skipped_primitives, 2);
+    // PLY: face 0 (line 22) with two corners, ASCII and binary.
+    let ply = prism_ascii_ply().replace("5 4 3 2 1 0", "2 4 3");
+    fails(&put(dir.path(), "two.ply", ply), &[":22:1:", "face 0: 2 vertices; a face needs at least 3"]);
+    let mut bin = tetra_binary_ply(&[]);
+    let faces = bin.len() - 4 * 13;
+    bin.splice(faces + 3 * 13.., [1u8, 0, 0, 0, 0]);
+    fails(&put(dir.path(), "one.ply", bin), &["face 3: 1 vertices"]);
+}
+
+#[test]
+fn ply_header_is_read_strictly() {
+    let dir = tmp();
+    let prism = prism_ascii_ply();
+    let case = |name: &str, from: &str, to: &str, needles: &[&str]| {
+        assert!(prism.contains(from), "{from}");
+        fails(&put(dir.path(), name, prism.replacen(from, to, 1)), needles);
+    };
+    case(
+        "v2.ply",
+        "format ascii 1.0",
+        "format ascii 2.0",
+        &[":2:1:", "unknown PLY version '2.0' (the only version is 1.0)"],
+    );
+    case("v11.ply", "format ascii 1.0", "format ascii 1.1", &[":2:1:", "unknown PLY version '1.1'"]);
+    case("noversion.ply", "format ascii 1.0", "format ascii", &[":2:1:", "expected 'format ascii 1.0'"]);
+    case("extra.ply", "format ascii 1.0", "format ascii 1.0 1.0", &[":2:1:", "expected 'format ascii 1.0'"]);
+    case(
+        "twoformats.ply",
+        "comment a pentagonal prism",
+        "format ascii 1.0",
+        &[":3:1:", "a second 'format' line (the first is line 2)"],
+    );
+    case(
+        "twice.ply",
+        "property float z\n",
+        "property float z\nproperty float y\n",
+        &[":8:1:", "element 'vertex': property 'y' declared twice"],
+    );
+    case("endjunk.ply", "end_header", "end_header 5 4", &[":11:1:", "unexpected '5' after 'end_header'"]);
+    case(
+        "binaryline.ply",
+        "comment a pentagonal prism",
+        "\x01\x02 junk",
+        &[":3:1:", r"'\u{1}\u{2}' is not a PLY header keyword"],
+    );
+    // Free text in the header (Blender 2.4 wrote "Created by ..."): a warning.
+    let p =
+        put(dir.path(), "created.ply", prism.replacen("comment a pentagonal prism", "Created by hand", 1));
+    let (m, report) = load(&p);
+    assert_eq!(m.triangle_count(), 16);
+    warns(&report, &p, &[":3:1:", "header line ignored: 'Created' is not a PLY header keyword"]);
+}
+
+#[test]
+fn ply_data_must_end_with_the_last_element() {
+    let dir = tmp();
+    // ASCII: a face more than the header declares (line 29).
+    let more = prism_ascii_ply() + "3 0 1 2\n";
+    fails(&put(dir.path(), "more.ply", more), &[":29:1:", "unexpected '3' after the last 'face' entry"]);
+    let blank = prism_ascii_ply() + "\n  \n\t\n";
+    assert_eq!(load(&put(dir.path(), "blank.ply", blank)).0.triangle_count(), 16);
+    // Binary: data after the last face is an error; padding is a warning.
+    let data = tetra_binary_ply(&[3, 0, 0, 0, 0]);
+    fails(&put(dir.path(), "more_bin.ply", data), &["5 bytes of data after the last 'face' entry"]);
+    let p = put(dir.path(), "padded.ply", tetra_binary_ply(b"\n\0"));
+    let (m, report) = load(&p);
+    assert_tetra(&m);
+    warns(&report, &p, &["2 bytes of padding (white space or NUL) after the last 'face' entry ignored"]);
+    assert_tetra(&load(&put(dir.path(), "exact.ply", tetra_binary_ply(&[]))).0);
+}
+
+/// The CLI prints a loader's warnings on stderr, one line each, and still succeeds.
+#[test]
+fn warnings_reach_stderr() {
+    let dir = tmp();
+    let p = put(
+        dir.path(),
+        "created.ply",
+        prism_ascii_ply().replacen("comment a pentagonal prism", "Created by hand", 1),
+    );
+    let out = dir.path().join("out.png");
+    let o = crate::util::toolkit(&["render", p.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let want =
+        format!("warning: {}:3:1: header line ignored: 'Created' is not a PLY header keyword\n", p.display());
+    assert!(err.contains(&want), "{err}");
+    assert!(out.is_file());
+}
+
+// ---------------------------------------------------------------------------------------
 // Real data
 
 fn shared_meshes() -> Option<PathBuf> {

@@ -28,14 +28,16 @@
 //! `(nz, ny, nx)`, so that in Python `arr[k, j, i]` is sample `(i, j, k)` (the C order of
 //! that shape is exactly our x-fastest layout). The format has no place for the origin and
 //! voxel size: a loaded `.npy` grid has origin `0` and voxel `1`. Loading accepts format
-//! versions 1.0, 2.0 and 3.0 with dtype `<f4` in C order.
+//! versions 1.0, 2.0 and 3.0 with dtype `<f4` in C order. The header must be a Python
+//! dictionary literal with exactly the keys `'descr'`, `'fortran_order'` and `'shape'`,
+//! each once (as NumPy writes and requires), followed by nothing but white space.
 //!
 //! # `.vti`
 //!
 //! VTK XML ImageData (ParaView, pyvista, `vtkXMLImageDataReader`): `WholeExtent` `0 nx-1
 //! 0 ny-1 0 nz-1`, `Origin` and `Spacing` from the grid, one point-data array `sdf`
 //! (`Float32`), stored raw in the appended data section with a `UInt64` byte count. Write
-//! only.
+//! only: [`load_grid`] refuses a `.vti` file by its extension, before reading it.
 
 use std::fs::File;
 use std::io::{Read, Write};
@@ -359,22 +361,92 @@ fn load_sdf(path: &Path, file: &mut File, len: u64) -> Result<SdfGrid> {
     Ok(SdfGrid { origin, voxel, dims, values })
 }
 
-/// The value text of `key` in a `.npy` header dictionary (up to the next top-level `,` or
-/// `}`), trimmed.
-fn npy_field<'a>(dict: &'a str, key: &str) -> Option<&'a str> {
-    let pat = format!("'{key}'");
-    let start = dict.find(&pat)? + pat.len();
-    let rest = dict[start..].trim_start().strip_prefix(':')?;
-    let mut depth = 0i32;
-    for (i, c) in rest.char_indices() {
-        match c {
-            '(' => depth += 1,
-            ')' => depth -= 1,
-            ',' | '}' if depth == 0 => return Some(rest[..i].trim()),
-            _ => {}
+/// The keys of a `.npy` header dictionary, each exactly once.
+const NPY_KEYS: [&str; 3] = ["descr", "fortran_order", "shape"];
+
+/// The entries of a `.npy` header dictionary, `{'key': value, ...}` with an optional
+/// trailing comma, as (key, value text) pairs in file order. A value is a quoted string,
+/// a word (`True`, `False`, a number) or a parenthesised group; its text is returned
+/// with its quotes and checked by the caller. Anything else, and anything but white
+/// space after the closing brace, is an error naming the character.
+fn npy_entries(dict: &str) -> std::result::Result<Vec<(&str, &str)>, String> {
+    let b = dict.as_bytes();
+    let mut i = 0usize;
+    // Python's white space between tokens.
+    let skip = |i: &mut usize| {
+        while *i < b.len() && matches!(b[*i], b' ' | b'\t' | b'\n' | b'\r' | 0x0b | 0x0c) {
+            *i += 1;
+        }
+    };
+    let expected = |what: &str, i: usize| match dict[i..].chars().next() {
+        Some(c) => format!("expected {what} at character {}, found '{}'", i + 1, c.escape_default()),
+        None => format!("expected {what} at character {}, found the end of the header", i + 1),
+    };
+    // A quoted string starting at `i`: the text between the quotes and the index after.
+    let string = |i: usize| -> Option<(&str, usize)> {
+        let q = *b.get(i).filter(|&&c| c == b'\'' || c == b'"')?;
+        let end = i + 1 + b[i + 1..].iter().position(|&c| c == q)?;
+        Some((&dict[i + 1..end], end + 1))
+    };
+    let word = |c: u8| c.is_ascii_alphanumeric() || matches!(c, b'-' | b'+' | b'_' | b'.');
+    skip(&mut i);
+    if b.get(i) != Some(&b'{') {
+        return Err(expected("'{'", i));
+    }
+    i += 1;
+    let mut entries = Vec::new();
+    loop {
+        skip(&mut i);
+        if b.get(i) == Some(&b'}') {
+            i += 1;
+            break;
+        }
+        let (key, after) = string(i).ok_or_else(|| expected("a quoted key or '}'", i))?;
+        i = after;
+        skip(&mut i);
+        if b.get(i) != Some(&b':') {
+            return Err(expected("':'", i));
+        }
+        i += 1;
+        skip(&mut i);
+        let start = i;
+        match b.get(i) {
+            Some(b'\'' | b'"') => i = string(i).ok_or_else(|| expected("a closing quote", b.len()))?.1,
+            Some(b'(') => {
+                let mut depth = 0usize;
+                loop {
+                    match b.get(i) {
+                        Some(b'(') => depth += 1,
+                        Some(b')') => depth -= 1,
+                        Some(_) => {}
+                        None => return Err(expected("')'", i)),
+                    }
+                    i += 1;
+                    if depth == 0 {
+                        break;
+                    }
+                }
+            }
+            Some(&c) if word(c) => {
+                while b.get(i).is_some_and(|&c| word(c)) {
+                    i += 1;
+                }
+            }
+            _ => return Err(expected("a value", i)),
+        }
+        entries.push((key, &dict[start..i]));
+        skip(&mut i);
+        match b.get(i) {
+            Some(b',') => i += 1,
+            Some(b'}') => {}
+            _ => return Err(expected("',' or '}'", i)),
         }
     }
-    None
+    skip(&mut i);
+    if i < b.len() {
+        return Err(format!("unexpected text after the closing '}}' at character {}", i + 1));
+    }
+    Ok(entries)
 }
 
 /// `s` (text from a file) fit for a one-line message: control characters such as line
@@ -406,9 +478,9 @@ fn load_npy(path: &Path, file: &mut File, len: u64) -> Result<SdfGrid> {
         return Err(bad(path, "truncated: the file ends inside the .npy preamble"));
     }
     let (major, minor) = (pre[6], pre[7]);
-    let len_bytes = match major {
-        1 => 2,
-        2 | 3 => 4,
+    let len_bytes = match (major, minor) {
+        (1, 0) => 2,
+        (2 | 3, 0) => 4,
         _ => {
             return Err(bad(
                 path,
@@ -430,8 +502,29 @@ fn load_npy(path: &Path, file: &mut File, len: u64) -> Result<SdfGrid> {
     file.read_exact(&mut text).map_err(|e| read_err(path, e))?;
     let text = String::from_utf8(text).map_err(|_| bad(path, "the .npy header is not valid text"))?;
     let dict = text.trim();
+    let entries = npy_entries(dict).map_err(|e| {
+        bad(path, format!("the .npy header is not a Python dictionary literal: {e}: {}", one_line(dict)))
+    })?;
+    for (k, (key, _)) in entries.iter().enumerate() {
+        if !NPY_KEYS.contains(key) {
+            return Err(bad(
+                path,
+                format!(
+                    "unknown key '{}' in the .npy header (the keys are 'descr', 'fortran_order' and \
+                     'shape')",
+                    one_line(key)
+                ),
+            ));
+        }
+        if entries[..k].iter().any(|(earlier, _)| earlier == key) {
+            return Err(bad(path, format!("the .npy header has the key '{key}' twice")));
+        }
+    }
     let field = |key: &str| {
-        npy_field(dict, key)
+        entries
+            .iter()
+            .find(|(k, _)| *k == key)
+            .map(|&(_, value)| value)
             .ok_or_else(|| bad(path, format!("the .npy header has no '{key}' entry: {}", one_line(dict))))
     };
     let descr = field("descr")?;
@@ -453,11 +546,13 @@ fn load_npy(path: &Path, file: &mut File, len: u64) -> Result<SdfGrid> {
         .strip_prefix('(')
         .and_then(|s| s.strip_suffix(')'))
         .ok_or_else(|| bad(path, format!("invalid .npy shape {shown}")))?;
-    let shape = inner
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| s.trim_end_matches('L').parse::<u64>())
+    // Integers separated by commas, with an optional trailing comma (`(5,)`).
+    let inner = inner.trim();
+    let items = inner.strip_suffix(',').unwrap_or(inner);
+    let shape = if inner.is_empty() { Vec::new() } else { items.split(',').map(str::trim).collect() };
+    let shape = shape
+        .into_iter()
+        .map(|s| s.strip_suffix('L').unwrap_or(s).parse::<u64>())
         .collect::<std::result::Result<Vec<_>, _>>()
         .map_err(|_| bad(path, format!("invalid .npy shape {shown}")))?;
     if shape.len() != 3 {
