@@ -446,6 +446,9 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
+            if let sdfmesh::error::Error::Batch { output, .. } = &e {
+                print!("{output}");
+            }
             eprintln!("error: {e}");
             ExitCode::from(e.exit_code() as u8)
         }
