@@ -926,6 +926,12 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
             run_order(runs.len(), opts.order_seed, name).into_iter().map(|i| runs[i].clone()).collect()
         })
         .collect();
+    let input_path = |name: &str| {
+        opts.inputs
+            .iter()
+            .find(|p| stem(p) == name)
+            .map_or_else(|| name.to_string(), |p| p.display().to_string())
+    };
     let total: usize = plans.iter().map(Vec::len).sum();
     let bar = progress_bar(total as u64, opts.progress);
     let commit = commit_id();
@@ -962,13 +968,13 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
                     bar.suspend(|| {
                         eprintln!("error: {name}: {}/{} (the reference): {e}", run.repr, run.method)
                     });
-                    failed.push(name.clone());
+                    failed.push(input_path(name));
                     bar.inc((runs.len() - at) as u64);
                     continue 'inputs;
                 }
                 Err(e) => {
                     bar.suspend(|| eprintln!("error: {name}: {}/{}: {e}", run.repr, run.method));
-                    failed.push(name.clone());
+                    failed.push(input_path(name));
                     bar.inc(1);
                     continue;
                 }
