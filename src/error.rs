@@ -111,3 +111,18 @@ pub fn catch_panic<T>(f: impl FnOnce() -> T) -> Result<T> {
         Error::Usage(single_line(format!("internal error (a bug; please report it): {what}")))
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn catch_panic_turns_a_panic_into_one_error_line() {
+        assert_eq!(catch_panic(|| 7).unwrap(), 7);
+        let e = catch_panic(|| -> u32 { panic!("index {} out of\nbounds", 18) }).unwrap_err().to_string();
+        assert!(e.contains("internal error") && e.contains("index 18 out of"), "{e}");
+        assert_eq!(e.lines().count(), 1, "{e}");
+        let e = catch_panic(|| -> u32 { std::panic::panic_any(3u8) }).unwrap_err();
+        assert_eq!(e.exit_code(), 2);
+    }
+}

@@ -845,8 +845,9 @@ fn note(geometry: &SceneGeometry, plans: &[ObjectPlan], repr: RunRepr) -> String
 /// rows to the CSV; returns the summary text.
 ///
 /// # Errors
-/// Unreadable inputs (checked before anything runs), an existing CSV without `--resume` or
-/// `--overwrite`, unwritable outputs.
+/// No input can be loaded (nothing is written), an existing CSV without `--resume` or
+/// `--overwrite`, a CSV another process is writing (without `--resume`), unwritable outputs;
+/// [`Error::Batch`] (with the summary) when some inputs failed and the others ran.
 pub fn compare_command(opts: &CompareOptions) -> Result<String> {
     if opts.frames == 0 || opts.frames > 1000 {
         return Err(Error::Usage(format!("--frames must be between 1 and 1000, got {}", opts.frames)));

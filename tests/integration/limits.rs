@@ -155,7 +155,7 @@ fn tape_compilation_stops_at_its_limit() {
     assert!(Tape::compile_within(&tree, o.bounds(), whole.ops().len() - 1).is_none());
     // Counted in the memory estimate of a sphere traced object, bounded by the limit.
     let bytes = scene_bytes(&scene, reprs()[1]);
-    assert!(bytes >= (whole.ops().len() * size_of::<Op>()) as u64, "{bytes}");
+    assert!(bytes >= std::mem::size_of_val(whole.ops()) as u64, "{bytes}");
     let deep = load_scene(&put(&dir, "deep2.toml", nested_repeats(60, "[1, 1, 1]"))).unwrap();
     assert!(scene_bytes(&deep, reprs()[1]) <= (MAX_TAPE_OPS * size_of::<Op>()) as u64);
 }
