@@ -37,6 +37,16 @@ pub enum Error {
     /// The command line asks for something impossible (e.g. a resolution of 0).
     #[error("{0}")]
     Usage(String),
+    /// Some inputs of a batch command (`compare`, `gallery`) failed, each reported on
+    /// stderr when it did; the others ran, and `output` is their report (printed before
+    /// this error's one line).
+    #[error("{message}")]
+    Batch {
+        /// The report of the inputs that ran.
+        output: String,
+        /// Which inputs failed.
+        message: String,
+    },
 }
 
 fn fmt_input(path: &Path, location: &Option<Location>, message: &str) -> String {
@@ -62,7 +72,7 @@ impl Error {
     pub fn exit_code(&self) -> i32 {
         match self {
             Error::Input { .. } | Error::Usage(_) => 2,
-            Error::Io { .. } => 2,
+            Error::Io { .. } | Error::Batch { .. } => 2,
         }
     }
 }
@@ -87,3 +97,32 @@ fn single_line(message: String) -> String {
 
 /// The library's result type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Runs `f`, turning a panic into an error (`Err` only for a panic): the batch commands
+/// run each input through this, so that a bug one input meets is reported as that input's
+/// failure (the panic message has already gone to stderr) and the inputs after it still run.
+pub fn catch_panic<T>(f: impl FnOnce() -> T) -> Result<T> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).map_err(|p| {
+        let what = p
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| p.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "a panic".into());
+        Error::Usage(single_line(format!("internal error (a bug; please report it): {what}")))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn catch_panic_turns_a_panic_into_one_error_line() {
+        assert_eq!(catch_panic(|| 7).unwrap(), 7);
+        let e = catch_panic(|| -> u32 { panic!("index {} out of\nbounds", 18) }).unwrap_err().to_string();
+        assert!(e.contains("internal error") && e.contains("index 18 out of"), "{e}");
+        assert_eq!(e.lines().count(), 1, "{e}");
+        let e = catch_panic(|| -> u32 { std::panic::panic_any(3u8) }).unwrap_err();
+        assert_eq!(e.exit_code(), 2);
+    }
+}

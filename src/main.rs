@@ -20,7 +20,8 @@ use sdfmesh::scene::shape::Shading;
 struct Cli {
     #[command(subcommand)]
     command: Command,
-    /// Memory a request may use, e.g. 4GiB or 512MB (default: half of physical memory).
+    /// Memory a request may use, e.g. 4GiB or 512MB (default: half of physical memory; at
+    /// most all of it).
     /// Grids, extractions and meshes that would need more fail at once, before any work.
     #[arg(long, global = true, value_name = "SIZE")]
     max_memory: Option<MemoryBudget>,
@@ -96,10 +97,12 @@ enum Command {
         /// Timed frames per run, after one warm-up frame.
         #[arg(long, default_value_t = 5)]
         frames: u32,
-        /// Skip the runs already in the CSV and append the rest.
+        /// Skip the runs already in the CSV and append the rest. The CSV is locked for the
+        /// whole run: with --resume a CSV another compare is writing is waited for, then
+        /// appended to; without it such a CSV is refused at once (exit 2).
         #[arg(long)]
         resume: bool,
-        /// Replace an existing CSV.
+        /// Replace an existing CSV (never one another process is writing).
         #[arg(long, conflicts_with = "resume")]
         overwrite: bool,
         /// Half-width of narrow-band grids, in cells.
@@ -149,7 +152,7 @@ enum Command {
     },
     /// Run the hard-case suite: every case of a manifest (default data/hard/cases.toml) in
     /// every representation against the reference; prints a Markdown table and exits 1
-    /// when an outcome is not the one the manifest expects.
+    /// when an outcome is not the one the manifest expects or a case fails to run.
     Hard {
         /// The manifest.
         #[arg(default_value = "data/hard/cases.toml")]
@@ -477,6 +480,9 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
+            if let sdfmesh::error::Error::Batch { output, .. } = &e {
+                print!("{output}");
+            }
             eprintln!("error: {e}");
             ExitCode::from(e.exit_code() as u8)
         }

@@ -14,14 +14,14 @@ use crate::cli::progress::Stage;
 use crate::convert::extract::{ExtractMethod, extract_object};
 use crate::convert::mesh_to_grid::sample_mesh;
 use crate::convert::mesh_to_grid::voxelize::voxelize_mesh;
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, catch_panic};
 use crate::geometry::Geometry;
 use crate::geometry::grid::band::{BRICK, BandGrid};
 use crate::geometry::grid::io::{load_grid, save_grid};
 use crate::geometry::grid::{DEFAULT_MAX_GRID_BYTES, check_size, grid_layout};
 use crate::mesh::{MeshFormat, TriangleMesh, load_mesh, save_mesh};
 use crate::plan::GridFill;
-use crate::plan::budget::{MemoryBudget, extraction_bytes, mesh_to_grid_bytes, scene_bytes};
+use crate::plan::budget::{MemoryBudget, check_evaluations, extraction_bytes, mesh_to_grid_bytes};
 use crate::plan::{MeshMethod, Representation, build_scene, grid_file_mesh, grid_samples_per_axis};
 use crate::render::{Frame, render, write_png};
 use crate::scene::shape::Shading;
@@ -203,7 +203,7 @@ pub fn render_command(opts: &RenderOptions) -> Result<RenderReport> {
 /// Fails when `scene` in `repr` would need more memory than `budget` allows.
 fn check_budget(budget: &MemoryBudget, scene: &Scene, repr: Representation, path: &Path) -> Result<()> {
     let what = format!("the {} representation of {}", repr.name(), path.display());
-    budget.check(&what, scene_bytes(scene, repr))
+    budget.check_scene(&what, scene, repr)
 }
 
 /// `toolkit gallery`: renders every `*.toml` scene in `scenes` in each of `reprs` into `out`
@@ -227,28 +227,46 @@ pub fn gallery_command(
     if files.is_empty() {
         return Err(Error::io(scenes, "no .toml scene files in this folder"));
     }
-    // Load and check everything before writing anything.
-    let mut loaded = Vec::new();
-    for f in &files {
-        let mut scene = load_scene(f)?;
-        overrides.apply(&mut scene)?;
-        for &repr in reprs {
-            check_budget(&budget, &scene, repr, f)?;
-        }
-        loaded.push((f, scene));
-    }
+    // Each scene on its own: one that cannot be loaded, is refused by the budget, or fails
+    // (a panic included) is reported on stderr and the others still render; the command
+    // fails at the end, naming them. A scene's pictures are written only once all its
+    // representations are checked.
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let mut text = String::new();
-    for (f, scene) in &loaded {
+    let mut failed = Vec::new();
+    for f in &files {
         let stem = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        for &repr in reprs {
-            let report = render_scene(scene, repr);
-            let path = out.join(format!("{stem}.{}.png", repr.name()));
-            write_png(&report.frame.image, &path)?;
-            let _ = write!(text, "{}\n{}", path.display(), report.text);
+        let done = catch_panic(|| -> Result<String> {
+            let mut scene = load_scene(f)?;
+            overrides.apply(&mut scene)?;
+            for &repr in reprs {
+                check_budget(&budget, &scene, repr, f)?;
+            }
+            let mut text = String::new();
+            for &repr in reprs {
+                let report = render_scene(&scene, repr);
+                let path = out.join(format!("{stem}.{}.png", repr.name()));
+                write_png(&report.frame.image, &path)?;
+                let _ = write!(text, "{}\n{}", path.display(), report.text);
+            }
+            Ok(text)
+        })
+        .and_then(|r| r);
+        match done {
+            Ok(t) => text.push_str(&t),
+            Err(e) => {
+                eprintln!("error: {e}");
+                failed.push(f.display().to_string());
+            }
         }
     }
-    Ok(text)
+    if failed.is_empty() {
+        return Ok(text);
+    }
+    Err(Error::Batch {
+        message: format!("{} of {} scenes failed ({})", failed.len(), files.len(), failed.join(", ")),
+        output: text,
+    })
 }
 
 /// What `toolkit convert` produces.
@@ -359,6 +377,10 @@ pub fn convert_command(
             check_size(UVec3::splat(res + 3), DEFAULT_MAX_GRID_BYTES)?;
             budget.check(&format!("extracting at {res} cells"), extraction_bytes(res, method))?;
             let scene = load_scene(input)?;
+            for (i, o) in scene.objects.iter().enumerate() {
+                let n = crate::geometry::sdf::SdfTree::new(o).map_or(0.0, |t| t.evaluations());
+                check_evaluations(&format!("extracting {}", input.display()), i, o, n)?;
+            }
             let mut out = TriangleMesh::default();
             let mut text = String::new();
             // One unit per z-slice sampled; each object has at most res + 3 slices.

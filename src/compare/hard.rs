@@ -33,8 +33,9 @@ use image::RgbImage;
 use serde::Deserialize;
 
 use crate::cli::commands::{load_scene_or_mesh, render_scene};
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, catch_panic};
 use crate::geometry::march::MarchParams;
+use crate::plan::budget::MemoryBudget;
 use crate::plan::{GridFill, GridStorage, MeshMethod, Representation};
 use crate::scene::shape::Shading;
 
@@ -204,6 +205,13 @@ pub fn run_case(case: &Case) -> Result<std::result::Result<Vec<Outcome>, Skipped
         return Ok(Err(Skipped { case: case.name.clone(), why }));
     }
     let scene = load_scene_or_mesh(&case.input, Shading::Smooth)?;
+    // The evaluation and memory budgets, as `render` checks them, before anything is built.
+    let budget = MemoryBudget::machine_default();
+    for name in std::iter::once("analytic").chain(REPRS.into_iter().filter(|n| case.expect.contains_key(*n)))
+    {
+        let what = format!("the {name} representation of {}", case.input.display());
+        budget.check_scene(&what, &scene, representation(name, case.resolution))?;
+    }
     let bg = scene.settings.background.to_array().map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8);
     let reference = render_scene(&scene, representation("analytic", case.resolution));
     let mut out = Vec::new();
@@ -263,13 +271,21 @@ pub fn hard_command(manifest: &Path, table_out: Option<&Path>) -> Result<(String
     let cases = load_cases(manifest)?;
     let mut outcomes = Vec::new();
     let mut skipped = Vec::new();
+    let mut failed = 0;
     for c in &cases {
-        match run_case(c)? {
-            Ok(o) => outcomes.extend(o),
-            Err(s) => skipped.push(s),
+        // A case that cannot be loaded or fails (a panic included) is reported in the table
+        // and on stderr, the others still run, and the suite is not as expected.
+        match catch_panic(|| run_case(c)).and_then(|r| r) {
+            Ok(Ok(o)) => outcomes.extend(o),
+            Ok(Err(s)) => skipped.push(s),
+            Err(e) => {
+                eprintln!("error: case {}: {e}", c.name);
+                skipped.push(Skipped { case: c.name.clone(), why: format!("error: {e}") });
+                failed += 1;
+            }
         }
     }
-    let ok = outcomes.iter().all(Outcome::as_expected);
+    let ok = failed == 0 && outcomes.iter().all(Outcome::as_expected);
     let text = table(&outcomes, &skipped);
     if let Some(path) = table_out {
         crate::files::write_atomic_bytes(path, text.as_bytes())?;

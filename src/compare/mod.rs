@@ -30,14 +30,14 @@ use serde::{Deserialize, Serialize};
 
 use crate::cli::commands::{Overrides, check_repr, load_scene_or_mesh};
 use crate::convert::extract::ExtractMethod;
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, catch_panic};
 use crate::geometry::Geometry;
 use crate::geometry::grid::SdfGrid;
 use crate::geometry::march::MarchParams;
 use crate::geometry::scene::SceneGeometry;
 use crate::mesh::{TriangleMesh, save_mesh};
 use crate::metrics::{self, Probe};
-use crate::plan::budget::{MemoryBudget, reextract_bytes, scene_bytes};
+use crate::plan::budget::{MemoryBudget, reextract_bytes};
 use crate::plan::{
     Fallback, GridFill, GridStorage, MeshMethod, ObjectPlan, Representation, build_scene_with_plans,
     reextract_mesh,
@@ -576,13 +576,13 @@ struct Built {
 }
 
 fn build(scene: &Scene, b: Build, budget: &MemoryBudget) -> Result<Built> {
-    let need = match b {
-        Build::Scene(repr) => scene_bytes(scene, repr),
-        Build::Reextract { fill, resolution } => {
-            reextract_bytes(mesh_input(scene).map_or(0, |m| m.triangles.len()), fill, resolution)
-        }
-    };
-    budget.check("this run", need)?;
+    match b {
+        Build::Scene(repr) => budget.check_scene("this run", scene, repr)?,
+        Build::Reextract { fill, resolution } => budget.check(
+            "this run",
+            reextract_bytes(mesh_input(scene).map_or(0, |m| m.triangles.len()), fill, resolution),
+        )?,
+    }
     let start = Instant::now();
     match b {
         Build::Scene(repr) => {
@@ -729,38 +729,72 @@ pub fn read_rows(path: &Path) -> Result<Vec<Row>> {
     Ok(rows)
 }
 
-/// Opens the CSV for appending rows: new (header written) or, with `resume`, existing
-/// (header checked). Returns the rows already there.
+/// Opens the CSV for appending rows, holding an exclusive advisory lock on it
+/// ([`File::lock`], `flock`) until the returned file is dropped, at the end of the run: of
+/// two `compare` processes on one CSV, one writes at a time, so no row is lost or torn.
+///
+/// A missing CSV is created with exclusive creation (`create_new`, never truncating one
+/// that appeared meanwhile) and gets the header from whoever locks it first while it is
+/// empty. An existing one:
+/// - with `--resume`: a CSV another process is writing is waited for (with a note on
+///   stderr); then an incomplete last row a crash left is cut off and the rows are read
+///   (header checked), and this run appends its own after them;
+/// - with `--overwrite`: truncated under the lock; one another process holds is refused;
+/// - otherwise refused; one another process holds is refused at once as well.
+///
+/// Returns the rows already there.
 fn open_csv(opts: &CompareOptions) -> Result<(File, Vec<Row>)> {
     let path = &opts.csv;
-    let exists = path.exists() && std::fs::metadata(path).map(|m| m.len() > 0).unwrap_or(false);
-    if exists && opts.resume {
-        drop_partial_row(path)?;
-        let rows = read_rows(path)?;
-        let file = OpenOptions::new().append(true).open(path).map_err(|e| Error::io(path, e))?;
-        return Ok((file, rows));
+    let open = |o: &mut OpenOptions| o.read(true).append(true).open(path);
+    let mut file = match open(OpenOptions::new().create_new(true)) {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+            open(&mut OpenOptions::new()).map_err(|e| Error::io(path, format!("cannot write: {e}")))?
+        }
+        Err(e) => return Err(Error::io(path, format!("cannot write: {e}"))),
+    };
+    match file.try_lock() {
+        Ok(()) => {}
+        Err(std::fs::TryLockError::WouldBlock) if opts.resume => {
+            eprintln!("{}: another process is writing it; waiting for it to finish", path.display());
+            file.lock().map_err(|e| Error::io(path, format!("cannot lock: {e}")))?;
+        }
+        Err(std::fs::TryLockError::WouldBlock) => {
+            return Err(Error::io(
+                path,
+                "another process is writing it (it is locked); wait for it to finish, or pass \
+                 --resume to add this run's rows after it",
+            ));
+        }
+        Err(std::fs::TryLockError::Error(e)) => return Err(Error::io(path, format!("cannot lock: {e}"))),
     }
-    if exists && !opts.overwrite {
+    let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+    if len > 0 && opts.resume {
+        drop_partial_row(&file, path)?;
+        return Ok((file, read_rows(path)?));
+    }
+    if len > 0 && !opts.overwrite {
         return Err(Error::io(
             path,
             "already exists; pass --resume to continue it or --overwrite to replace it",
         ));
     }
-    let mut file = File::create(path).map_err(|e| Error::io(path, format!("cannot write: {e}")))?;
+    file.set_len(0).map_err(|e| Error::io(path, format!("cannot write: {e}")))?;
     writeln!(file, "{}", COLUMNS.join(",")).map_err(|e| Error::io(path, e))?;
     file.flush().map_err(|e| Error::io(path, e))?;
     Ok((file, Vec::new()))
 }
 
-/// Cuts a last line left incomplete by a crash (no final newline) off the file.
-fn drop_partial_row(path: &Path) -> Result<()> {
+/// Cuts a last line left incomplete by a crash (no final newline) off `file` (the locked
+/// CSV at `path`); a file without one complete line (not a CSV this wrote) is left as it
+/// is, for [`read_rows`] to refuse.
+fn drop_partial_row(file: &File, path: &Path) -> Result<()> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     if bytes.last().is_none_or(|&b| b == b'\n') {
         return Ok(());
     }
-    let keep = bytes.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
-    let f = OpenOptions::new().write(true).open(path).map_err(|e| Error::io(path, e))?;
-    f.set_len(keep as u64).map_err(|e| Error::io(path, e))?;
+    let Some(keep) = bytes.iter().rposition(|&b| b == b'\n').map(|i| i + 1) else { return Ok(()) };
+    file.set_len(keep as u64).map_err(|e| Error::io(path, e))?;
     eprintln!("{}: dropped an incomplete last row", path.display());
     Ok(())
 }
@@ -811,8 +845,9 @@ fn note(geometry: &SceneGeometry, plans: &[ObjectPlan], repr: RunRepr) -> String
 /// rows to the CSV; returns the summary text.
 ///
 /// # Errors
-/// Unreadable inputs (checked before anything runs), an existing CSV without `--resume` or
-/// `--overwrite`, unwritable outputs.
+/// No input can be loaded (nothing is written), an existing CSV without `--resume` or
+/// `--overwrite`, a CSV another process is writing (without `--resume`), unwritable outputs;
+/// [`Error::Batch`] (with the summary) when some inputs failed and the others ran.
 pub fn compare_command(opts: &CompareOptions) -> Result<String> {
     if opts.frames == 0 || opts.frames > 1000 {
         return Err(Error::Usage(format!("--frames must be between 1 and 1000, got {}", opts.frames)));
@@ -846,8 +881,11 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
     opts.resolutions.sort_unstable();
     opts.resolutions.dedup();
     let opts = &opts;
-    // Load every input first: a bad file fails before any run.
+    // Load every input first. An input that cannot be loaded is reported and left out
+    // (the others run, and the command fails at the end); when none can, nothing is written.
     let mut inputs: Vec<(String, String, Scene)> = Vec::new();
+    let mut failed: Vec<String> = Vec::new();
+    let mut first_error = None;
     for (i, path) in opts.inputs.iter().enumerate() {
         let name = stem(path);
         if let Some(other) = opts.inputs[..i].iter().find(|p| stem(p) == name) {
@@ -857,9 +895,25 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
                 path.display()
             )));
         }
-        let mut scene = load_scene_or_mesh(path, Shading::Smooth)?;
-        opts.overrides.apply(&mut scene)?;
-        inputs.push((name, input_class(path), scene));
+        let loaded = catch_panic(|| {
+            let mut scene = load_scene_or_mesh(path, Shading::Smooth)?;
+            opts.overrides.apply(&mut scene)?;
+            Ok(scene)
+        })
+        .and_then(|r| r);
+        match loaded {
+            Ok(scene) => inputs.push((name, input_class(path), scene)),
+            Err(e) => {
+                eprintln!("error: {e}");
+                failed.push(path.display().to_string());
+                first_error.get_or_insert(e);
+            }
+        }
+    }
+    if inputs.is_empty()
+        && let Some(e) = first_error
+    {
+        return Err(e);
     }
     if let Some(dir) = &opts.artifacts {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
@@ -873,12 +927,18 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
             run_order(runs.len(), opts.order_seed, name).into_iter().map(|i| runs[i].clone()).collect()
         })
         .collect();
+    let input_path = |name: &str| {
+        opts.inputs
+            .iter()
+            .find(|p| stem(p) == name)
+            .map_or_else(|| name.to_string(), |p| p.display().to_string())
+    };
     let total: usize = plans.iter().map(Vec::len).sum();
     let bar = progress_bar(total as u64, opts.progress);
     let commit = commit_id();
-    for ((name, class, scene), runs) in inputs.iter().zip(&plans) {
+    'inputs: for ((name, class, scene), runs) in inputs.iter().zip(&plans) {
         let mut reference: Option<Reference> = None;
-        for run in runs {
+        for (at, run) in runs.iter().enumerate() {
             let key = RowKey {
                 input: name.clone(),
                 replicate: opts.replicate,
@@ -899,11 +959,27 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
                 bar.inc(1);
                 continue;
             }
-            let row = match measure((name, class), scene, run, opts, &commit, &mut reference) {
-                Ok(row) => row,
-                // Without its reference an input cannot be measured at all.
-                Err(e) if is_reference => return Err(e),
+            // A panic (a bug) in one run fails the input, not the batch.
+            let measured = catch_panic(|| measure((name, class), scene, run, opts, &commit, &mut reference));
+            let row = match measured {
+                Ok(Ok(row)) => row,
+                // Without its reference an input cannot be measured at all: it fails, and
+                // the next input runs.
+                Ok(Err(e)) | Err(e) if is_reference => {
+                    bar.suspend(|| {
+                        eprintln!("error: {name}: {}/{} (the reference): {e}", run.repr, run.method)
+                    });
+                    failed.push(input_path(name));
+                    bar.inc((runs.len() - at) as u64);
+                    continue 'inputs;
+                }
                 Err(e) => {
+                    bar.suspend(|| eprintln!("error: {name}: {}/{}: {e}", run.repr, run.method));
+                    failed.push(input_path(name));
+                    bar.inc(1);
+                    continue;
+                }
+                Ok(Err(e)) => {
                     bar.suspend(|| eprintln!("{name}: {}/{} skipped: {e}", run.repr, run.method));
                     bar.inc(1);
                     continue;
@@ -917,12 +993,27 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
         }
     }
     bar.finish_and_clear();
+    drop(file);
     let summary = summary::summarize(&rows);
     if let Some(path) = &opts.summary_json {
         let json = serde_json::to_string_pretty(&summary).map_err(|e| Error::io(path, e))?;
         crate::files::write_atomic_bytes(path, json.as_bytes())?;
     }
-    Ok(summary::to_text(&summary))
+    let text = summary::to_text(&summary);
+    failed.dedup();
+    if failed.is_empty() {
+        return Ok(text);
+    }
+    Err(Error::Batch {
+        output: text,
+        message: format!(
+            "{} of {} inputs failed ({}); the others' rows are in {}",
+            failed.len(),
+            opts.inputs.len(),
+            failed.join(", "),
+            opts.csv.display()
+        ),
+    })
 }
 
 fn progress_bar(total: u64, show: bool) -> indicatif::ProgressBar {

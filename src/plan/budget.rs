@@ -15,6 +15,8 @@ use glam::UVec3;
 
 use crate::convert::extract::ExtractMethod;
 use crate::error::{Error, Result};
+use crate::geometry::sdf::tape::{Op, ops_bound};
+use crate::geometry::sdf::{MAX_TAPE_OPS, SdfTree};
 use crate::plan::{
     Build, GridFill, InstanceMesh, ObjectPlan, Representation, grid_samples_per_axis, plan_object,
 };
@@ -48,6 +50,13 @@ pub const VOXELIZE_BYTES_PER_SAMPLE: u64 = 13;
 /// sampling a mesh exactly (an upper estimate).
 pub const SAMPLE_BYTES_PER_TRIANGLE: u64 = 256;
 
+/// The most primitives one distance evaluation of an object's SDF may evaluate
+/// ([`object_evaluations`]): nested repetitions multiply their copies (40 levels of 2 copies
+/// are 2^40 primitives per distance, a 3 KB scene that would never finish), so an object
+/// above this is refused before anything is built. 2^20 is far above every scene of
+/// `data/` (the most, a Menger sponge of level 3, evaluates a few hundred).
+pub const MAX_EVALUATIONS_PER_DISTANCE: f64 = (1u64 << 20) as f64;
+
 /// How many bytes a request may use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct MemoryBudget {
@@ -59,8 +68,19 @@ impl MemoryBudget {
     /// [`DEFAULT_FRACTION`] of the machine's physical memory (`MemTotal` in
     /// `/proc/meminfo`), or [`FALLBACK_BYTES`] where that cannot be read.
     pub fn machine_default() -> Self {
-        let total = std::fs::read_to_string("/proc/meminfo").ok().and_then(|s| mem_total(&s));
+        let total = machine_total();
         MemoryBudget { bytes: total.map_or(FALLBACK_BYTES, |t| (t as f64 * DEFAULT_FRACTION) as u64) }
+    }
+
+    /// Fails with a clear message when `scene` in `repr` would need more memory than the
+    /// budget ([`scene_bytes`]), or when one of its objects would evaluate more than
+    /// [`MAX_EVALUATIONS_PER_DISTANCE`] primitives per distance (an evaluation budget:
+    /// such an object would not finish building or rendering). `what` names the request.
+    pub fn check_scene(&self, what: &str, scene: &Scene, repr: Representation) -> Result<()> {
+        for (i, o) in scene.objects.iter().enumerate() {
+            check_evaluations(what, i, o, object_evaluations(o, &plan_object(scene, o, repr)))?;
+        }
+        self.check(what, scene_bytes(scene, repr))
     }
 
     /// Fails with a clear message when `what` would need more than the budget.
@@ -86,14 +106,56 @@ impl fmt::Display for MemoryBudget {
 impl FromStr for MemoryBudget {
     type Err = String;
 
-    /// Parses sizes such as `4GiB`, `512 MB`, `1.5G` or a plain byte count.
+    /// Parses sizes such as `4GiB`, `512 MB`, `1.5G` or a plain byte count, refusing more
+    /// than the machine's physical memory ([`MemoryBudget::parse_within`]).
     fn from_str(s: &str) -> std::result::Result<Self, String> {
+        Self::parse_within(s, machine_total())
+    }
+}
+
+impl MemoryBudget {
+    /// Parses a size as [`FromStr`] does, refusing one above `physical` bytes (where
+    /// known): a budget the machine cannot give would let a request through that then
+    /// fails in the middle (or is killed by the operating system), which is what the
+    /// budget is there to prevent. Refused rather than clamped, so that a typo (`1EB` for
+    /// `1GB`) is noticed, not silently replaced.
+    pub fn parse_within(s: &str, physical: Option<u64>) -> std::result::Result<Self, String> {
         let b: ByteSize = s.trim().parse().map_err(|e| format!("not a memory size ({e}): '{s}'"))?;
         if b.as_u64() == 0 {
             return Err(format!("a memory budget must be more than 0 bytes, got '{s}'"));
         }
+        if let Some(total) = physical
+            && b.as_u64() > total
+        {
+            return Err(format!(
+                "'{s}' is more than this machine's physical memory ({}); give at most that",
+                ByteSize::b(total).display().iec()
+            ));
+        }
         Ok(MemoryBudget { bytes: b.as_u64() })
     }
+}
+
+/// Fails when object `index` (0-based) of a scene, `o`, would evaluate `evaluations`
+/// primitives per distance, more than [`MAX_EVALUATIONS_PER_DISTANCE`].
+pub fn check_evaluations(what: &str, index: usize, o: &Object, evaluations: f64) -> Result<()> {
+    if evaluations <= MAX_EVALUATIONS_PER_DISTANCE {
+        return Ok(());
+    }
+    Err(Error::Usage(format!(
+        "{what}: object {} ('{}') would evaluate about 2^{:.0} primitives per distance (nested \
+         repetitions multiply their copies), more than the evaluation budget of 2^{:.0}; reduce \
+         the nesting or the repeated axes",
+        index + 1,
+        o.label,
+        evaluations.log2(),
+        MAX_EVALUATIONS_PER_DISTANCE.log2()
+    )))
+}
+
+/// The machine's physical memory, bytes (`MemTotal` of `/proc/meminfo`), where it can be read.
+pub fn machine_total() -> Option<u64> {
+    std::fs::read_to_string("/proc/meminfo").ok().and_then(|s| mem_total(&s))
 }
 
 /// `MemTotal` of `/proc/meminfo` text, in bytes.
@@ -145,6 +207,39 @@ pub fn scene_bytes(scene: &Scene, repr: Representation) -> u64 {
     total
 }
 
+/// An upper bound on the primitives one distance of `o` evaluates as `plan` builds it
+/// ([`SdfTree::evaluations`]): the marching tree for a sphere traced object, the plain
+/// tree for objects sampled into grids or extracted (which evaluates every neighbouring
+/// cell), 0 for builds that never evaluate an SDF (closed forms, tessellations, meshes,
+/// grid files, shared builds placed from another object's).
+pub fn object_evaluations(o: &Object, plan: &ObjectPlan) -> f64 {
+    match plan.build {
+        Build::ClosedForm
+        | Build::MeshTriangles
+        | Build::Tessellated { .. }
+        | Build::PlaneDisc { .. }
+        | Build::SharedMesh { .. }
+        | Build::SharedGrid { .. }
+        | Build::GridFileMarched { .. }
+        | Build::GridFileExtracted { .. } => 0.0,
+        Build::Marched { .. } => SdfTree::for_marching(o).map_or(0.0, |t| t.evaluations()),
+        _ => SdfTree::new(o).map_or(0.0, |t| t.evaluations()),
+    }
+}
+
+/// An upper estimate of the bytes of a sphere traced object's compiled tape
+/// ([`crate::geometry::sdf::SdfField`]): [`ops_bound`] operations, at most
+/// [`MAX_TAPE_OPS`] (a longer tape is abandoned when it gets there), of `size_of::<Op>()`
+/// each; 0 for a single primitive (no tape).
+pub fn tape_bytes(o: &Object) -> u64 {
+    match SdfTree::for_marching(o) {
+        Some(t) if t.node_count > 1 => {
+            (ops_bound(&t.root).min(MAX_TAPE_OPS as f64) as u64).saturating_mul(size_of::<Op>() as u64)
+        }
+        _ => 0,
+    }
+}
+
 /// An upper estimate of the bytes building `o` as `plan` says, and tracing it, needs: a
 /// grid's samples (each grid has at most [`grid_samples_per_axis`] samples per axis; a
 /// narrow band never holds more than the dense grid) with what sampling or voxelizing a
@@ -152,7 +247,8 @@ pub fn scene_bytes(scene: &Scene, repr: Representation) -> u64 {
 /// `2 res^2`, extracted objects as [`extraction_bytes`]); loaded meshes and grid files
 /// count as what they hold; a shared mesh counts once, where it is built, and every
 /// placement of it [`BYTES_PER_INSTANCE`] (an instanced repetition: its one mesh and
-/// `copies` placements). Sphere tracing and closed forms count nothing.
+/// `copies` placements). Sphere tracing counts its tape ([`tape_bytes`]), closed forms
+/// nothing.
 pub fn object_bytes(o: &Object, plan: &ObjectPlan) -> u64 {
     let triangles = match &o.kind {
         ObjectKind::Mesh { mesh, .. } => mesh.triangles.len(),
@@ -163,7 +259,8 @@ pub fn object_bytes(o: &Object, plan: &ObjectPlan) -> u64 {
         _ => 0,
     };
     match plan.build {
-        Build::ClosedForm | Build::Marched { .. } | Build::PlaneDisc { .. } => 0,
+        Build::ClosedForm | Build::PlaneDisc { .. } => 0,
+        Build::Marched { .. } => tape_bytes(o),
         Build::MeshTriangles => (triangles as u64).saturating_mul(BYTES_PER_TRACED_TRIANGLE),
         Build::Tessellated { resolution, .. } => tessellation_bytes(resolution),
         Build::SharedMesh { .. } | Build::SharedGrid { .. } => BYTES_PER_INSTANCE,
@@ -220,6 +317,21 @@ mod tests {
         assert_eq!("2 GB".parse::<MemoryBudget>().unwrap().bytes, 2_000_000_000);
         for bad in ["", "lots", "-1GiB", "0", "1.5.2G"] {
             assert!(bad.parse::<MemoryBudget>().is_err(), "{bad:?} parsed");
+        }
+    }
+
+    #[test]
+    fn refuses_more_than_physical_memory() {
+        let total = Some(8u64 << 30);
+        assert_eq!(MemoryBudget::parse_within("8GiB", total).unwrap().bytes, 8 << 30);
+        let e = MemoryBudget::parse_within("9GiB", total).unwrap_err();
+        assert!(e.contains("physical memory") && e.contains("8.0 GiB"), "{e}");
+        assert!(MemoryBudget::parse_within("1EB", total).is_err());
+        // Unknown physical memory: only the size itself is checked.
+        assert_eq!(MemoryBudget::parse_within("1EB", None).unwrap().bytes, 1_000_000_000_000_000_000);
+        if let Some(t) = machine_total() {
+            assert!(format!("{}", t + 1).parse::<MemoryBudget>().is_err());
+            assert_eq!(format!("{t}").parse::<MemoryBudget>().unwrap().bytes, t);
         }
     }
 

@@ -831,8 +831,14 @@ mod tests {
     #[test]
     fn estimates_follow_the_plan() {
         let s = scene("showcase.toml");
-        assert_eq!(budget::scene_bytes(&s, Representation::Analytic { march: MarchParams::default() }), 0);
-        assert_eq!(budget::scene_bytes(&s, Representation::Sdf { march: MarchParams::default() }), 0);
+        // Sphere tracing counts the tapes of the compound objects, at most MAX_TAPE_OPS each.
+        let analytic = budget::scene_bytes(&s, Representation::Analytic { march: MarchParams::default() });
+        let sdf = budget::scene_bytes(&s, Representation::Sdf { march: MarchParams::default() });
+        let tapes: u64 = s.objects.iter().map(budget::tape_bytes).sum();
+        assert!(tapes > 0 && analytic == tapes && sdf == tapes, "{analytic} {sdf} {tapes}");
+        let compound = s.objects.iter().filter(|o| budget::tape_bytes(o) > 0).count() as u64;
+        let op = std::mem::size_of::<crate::geometry::sdf::tape::Op>() as u64;
+        assert!(tapes <= compound * crate::geometry::sdf::MAX_TAPE_OPS as u64 * op);
         let plans = plan_scene(&s, grid(GridFill::Sample));
         let gridded = plans.iter().filter(|p| matches!(p.build, Build::Grid { .. })).count() as u64;
         // The repetition's one grid and a placement per copy.

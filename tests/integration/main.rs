@@ -28,6 +28,7 @@ mod grid_voxelize;
 mod hard_cases;
 mod hard_suite;
 mod instancing;
+mod limits;
 mod mesh_io;
 mod mesh_tracing;
 mod representations;

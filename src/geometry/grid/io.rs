@@ -293,7 +293,11 @@ fn check_dims_and_length(path: &Path, dims: UVec3, header: u64, len: u64, what: 
 
 /// Reads `count` little-endian `f32` samples, rejecting NaN.
 fn read_values(path: &Path, r: &mut impl Read, count: usize, dims: UVec3) -> Result<Vec<f32>> {
-    let mut values = Vec::with_capacity(count);
+    // Fallible: a grid the machine cannot hold is an error naming the file, not an abort.
+    let mut values = Vec::new();
+    values.try_reserve_exact(count).map_err(|_| {
+        bad(path, format!("cannot allocate memory for {count} samples ({} bytes)", count as u64 * 4))
+    })?;
     let mut buf = vec![0u8; CHUNK * 4];
     while values.len() < count {
         let n = (count - values.len()).min(CHUNK);

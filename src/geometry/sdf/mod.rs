@@ -215,9 +215,33 @@ impl SdfTree {
         self.root.eval(p)
     }
 
+    /// An upper bound on the primitives one [`SdfTree::distance`] evaluates
+    /// ([`evaluations`]).
+    pub fn evaluations(&self) -> f64 {
+        evaluations(&self.root)
+    }
+
     /// Approximate bytes held by the tree.
     pub fn bytes_used(&self) -> usize {
         std::mem::size_of::<Self>() + self.node_count * std::mem::size_of::<SdfNode>()
+    }
+}
+
+/// An upper bound on the primitives one evaluation of `node` evaluates, in f64 so that it
+/// cannot overflow: a CSG node evaluates all its children, a repetition its child once
+/// per combination of cells ([`eval_repeat`]: two cells along each repeated axis with more
+/// than one copy and no gap), so nested repetitions multiply (40 levels of 2 copies evaluate
+/// 2^40 primitives per distance).
+pub fn evaluations(node: &SdfNode) -> f64 {
+    match node {
+        SdfNode::Primitive { .. } => 1.0,
+        SdfNode::Csg { children, .. } => children.iter().map(evaluations).sum(),
+        SdfNode::Repeat { period, count, child, gaps, .. } => {
+            let axes = (0..3)
+                .filter(|&a| period[a] > 0.0 && gaps[a].is_none() && count.is_none_or(|c| c[a] > 1))
+                .count();
+            (1u32 << axes) as f64 * evaluations(child)
+        }
     }
 }
 
@@ -562,10 +586,11 @@ impl SdfField {
     /// Compiles `object`'s tree and tape, the tape relative to the centre of `bounds`.
     pub fn new(object: &Object, bounds: Option<crate::geometry::Aabb>) -> Option<Self> {
         let tree = SdfTree::for_marching(object)?;
-        let tape = tape::Tape::compile(&tree, bounds);
         // A single primitive is cheaper in the f64 tree (a few operations) than through the
-        // tape's interpreter: the tape pays off for compound objects.
-        let tape = (tree.node_count > 1 && tape.ops().len() <= MAX_TAPE_OPS).then_some(tape);
+        // tape's interpreter: the tape pays off for compound objects. A tape longer than
+        // MAX_TAPE_OPS is abandoned as soon as it gets there, never unrolled whole.
+        let tape =
+            (tree.node_count > 1).then(|| tape::Tape::compile_within(&tree, bounds, MAX_TAPE_OPS)).flatten();
         let uniform_material = uniform_material(&tree.root);
         let regions = match (&tape, bounds) {
             (Some(t), Some(b)) => prune::TapeRegions::build(t, b),

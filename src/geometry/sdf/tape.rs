@@ -606,6 +606,15 @@ impl Tape {
     /// world bounds; `None` for an unbounded object, whose tape is relative to the world
     /// origin).
     pub fn compile(tree: &SdfTree, bounds: Option<Aabb>) -> Tape {
+        Self::compile_within(tree, bounds, usize::MAX).expect("no limit on the tape's length")
+    }
+
+    /// [`Tape::compile`], or `None` as soon as the tape grows past `max_ops` operations:
+    /// nested repetitions unroll `2^k` copies of their child per level, so a small tree can
+    /// have an enormous tape, and this stops after at most about `max_ops` operations of
+    /// work and memory instead of unrolling it all first. A tape of at most `max_ops`
+    /// operations is the same as [`Tape::compile`]'s.
+    pub fn compile_within(tree: &SdfTree, bounds: Option<Aabb>, max_ops: usize) -> Option<Tape> {
         let (origin, reach) = match bounds {
             Some(b) if b.valid() => {
                 let (lo, hi) = (Vec3::from(b.min).as_dvec3(), Vec3::from(b.max).as_dvec3());
@@ -622,10 +631,14 @@ impl Tape {
             once: std::collections::HashMap::new(),
             once_vals: 0,
             once_points: 0,
+            max_ops,
         };
         c.node(&tree.root, 0, DAffine3::from_translation(origin), 1.0, 0.0, 0, 1);
+        if c.ops.len() > max_ops {
+            return None;
+        }
         let (vals, points) = c.finish();
-        Tape {
+        Some(Tape {
             origin,
             reach,
             exact: tree.exact,
@@ -635,7 +648,7 @@ impl Tape {
             vals,
             points,
             magnitude: c.magnitude,
-        }
+        })
     }
 
     /// Compiles an object's tree for marching ([`SdfTree::for_marching`]) relative to the
@@ -825,6 +838,26 @@ struct OnceKey {
     bits: [u32; 12],
 }
 
+/// An upper bound on the number of operations [`Tape::compile`] emits for `node` (no
+/// sharing counted), in f64 so that it cannot overflow: a primitive maps its point, runs
+/// and scales; a CSG node adds a combination per extra child; a repetition emits its cell
+/// lookups and, per combination of cells (`2^k` for the `k` repeated axes without a gap),
+/// an offset, its child and a minimum. Computed without building anything, so that a
+/// memory estimate can count the tape before it exists.
+pub fn ops_bound(node: &SdfNode) -> f64 {
+    match node {
+        SdfNode::Primitive { .. } => 3.0,
+        SdfNode::Csg { children, .. } => {
+            2.0 + children.iter().map(ops_bound).sum::<f64>() + children.len().saturating_sub(1) as f64
+        }
+        SdfNode::Repeat { period, child, gaps, .. } => {
+            let axes = (0..3).filter(|&a| period[a] > 0.0 && gaps[a].is_none()).count();
+            let corners = (1u32 << axes) as f64;
+            8.0 + corners * (2.0 + ops_bound(child))
+        }
+    }
+}
+
 /// The tape compiler's state.
 struct Compiler {
     ops: Vec<Op>,
@@ -846,6 +879,8 @@ struct Compiler {
     once_vals: u32,
     /// Write-once point registers used.
     once_points: u32,
+    /// Past this many operations the compiler stops emitting ([`Tape::compile_within`]).
+    max_ops: usize,
 }
 
 impl Compiler {
@@ -956,6 +991,11 @@ impl Compiler {
         out: u32,
         next_pt: u32,
     ) {
+        // Over the limit: the tape is dropped, so the rest of the tree is not unrolled
+        // (every call below emits at least one operation, so this ends the walk quickly).
+        if self.ops.len() > self.max_ops {
+            return;
+        }
         let t = node.transform();
         let map = if t.identity { frame } else { t.to_local_f64 * frame };
         let mult = mult * t.min_scale as f64;
