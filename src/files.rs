@@ -44,7 +44,12 @@
 //! that are one file), comparing device and inode where the file exists and the canonical
 //! path where it does not, so links and `..` do not hide a match, and an output that is
 //! there but not a regular file. `main.rs` calls it once for every command, where the
-//! command line is turned into options, before any work.
+//! command line is turned into options, before any work. Files an input names (a scene's
+//! meshes and grids, a glTF file's buffers) are known only once it is read: after
+//! [`protect_inputs`] (which `main.rs` calls; a library user's process, which may well save
+//! over a file it loaded earlier, is not affected) every file [`open_regular`] opens is
+//! remembered (device and inode), and [`write_atomic`] and [`check_not_read`] refuse to
+//! replace one of them.
 
 use std::fs::{self, File, FileType, Metadata, OpenOptions};
 use std::io::{self, BufWriter, Read, Write};
@@ -112,7 +117,49 @@ pub fn open_regular(path: &Path) -> io::Result<(File, u64)> {
     let file = options.open(path)?;
     let meta = file.metadata()?;
     require_regular(&meta)?;
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        remember_read(FileId::Inode(meta.dev(), meta.ino()));
+    }
     Ok((file, meta.len()))
+}
+
+/// Every file [`open_regular`] opened since [`protect_inputs`] (few: the inputs of one
+/// command).
+static READ: std::sync::Mutex<Vec<FileId>> = std::sync::Mutex::new(Vec::new());
+static PROTECT: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// From now on, no file this process reads may be written by it (one command's process:
+/// its inputs, including the files they name, are never its outputs).
+pub fn protect_inputs() {
+    PROTECT.store(true, Ordering::Relaxed);
+}
+
+fn remember_read(id: FileId) {
+    if !PROTECT.load(Ordering::Relaxed) {
+        return;
+    }
+    let mut read = READ.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    if !read.contains(&id) {
+        read.push(id);
+    }
+}
+
+/// Refuses `path` as an output when this process has read it as an input (a scene's mesh
+/// or grid file, a glTF buffer: inputs that the command line does not name).
+///
+/// # Errors
+/// [`Error::Usage`] naming `path`.
+pub fn check_not_read(path: &Path) -> Result<()> {
+    let Some(id) = file_id(path) else { return Ok(()) };
+    if READ.lock().unwrap_or_else(std::sync::PoisonError::into_inner).contains(&id) {
+        return Err(Error::Usage(format!(
+            "{}: the output is a file this command read as an input; refusing to overwrite an input",
+            path.display()
+        )));
+    }
+    Ok(())
 }
 
 /// [`open_regular`], with errors naming `path` ("PATH: cannot read: ...").
@@ -259,6 +306,7 @@ pub fn write_atomic(path: &Path, body: impl FnOnce(&mut BufWriter<File>) -> io::
     let fail = |e: &dyn std::fmt::Display| Error::io(path, format!("cannot write: {e}"));
     let target = resolve_links(path).map_err(|e| fail(&e))?;
     require_replaceable(&target).map_err(|e| fail(&e))?;
+    check_not_read(&target)?;
     let name = target.file_name().ok_or_else(|| fail(&"the path names no file"))?;
     let dir = folder_of(&target);
     if !dir.is_dir() {

@@ -363,7 +363,18 @@ impl Command {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        // Help and version go to stdout as clap writes them; a usage error is one line, as
+        // every other error (clap's own adds the usage and a hint on further lines).
+        Err(e) if !e.use_stderr() => e.exit(),
+        Err(e) => {
+            let text = e.to_string();
+            let first = text.lines().next().unwrap_or("error: invalid command line").trim_end();
+            eprintln!("{first} (see --help)");
+            return ExitCode::from(2);
+        }
+    };
     let budget = cli.max_memory.unwrap_or_else(MemoryBudget::machine_default);
     // No output may be one of the command's inputs: checked once, before any work.
     let (inputs, outputs) = cli.command.files();
@@ -372,6 +383,8 @@ fn main() -> ExitCode {
         eprintln!("error: {e}");
         return ExitCode::from(e.exit_code() as u8);
     }
+    // And none of the files the inputs name (a scene's meshes, a glTF file's buffers).
+    sdfmesh::files::protect_inputs();
     let result = match cli.command {
         Command::Render { scene, output, repr, mesh, settings, march } => {
             let opts = commands::RenderOptions {
@@ -458,7 +471,7 @@ fn main() -> ExitCode {
             }
         }
         Command::Hard { manifest, table } => {
-            match sdfmesh::compare::hard::hard_command(&manifest, table.as_deref()) {
+            match sdfmesh::compare::hard::hard_command(&manifest, table.as_deref(), &budget) {
                 Ok((text, as_expected)) => {
                     print!("{text}");
                     if !as_expected {

@@ -199,14 +199,13 @@ pub fn agreement(metric: Metric, a: &RgbImage, b: &RgbImage, background: [u8; 3]
 
 /// Runs one case in the reference and every representation its `expect` names; `Err`
 /// when its input cannot be loaded, `Ok(Err(skipped))` when the input file is missing.
-pub fn run_case(case: &Case) -> Result<std::result::Result<Vec<Outcome>, Skipped>> {
+pub fn run_case(case: &Case, budget: &MemoryBudget) -> Result<std::result::Result<Vec<Outcome>, Skipped>> {
     if !case.input.exists() {
         let why = format!("{} not found", case.input.display());
         return Ok(Err(Skipped { case: case.name.clone(), why }));
     }
     let scene = load_scene_or_mesh(&case.input, Shading::Smooth)?;
     // The evaluation and memory budgets, as `render` checks them, before anything is built.
-    let budget = MemoryBudget::machine_default();
     for name in std::iter::once("analytic").chain(REPRS.into_iter().filter(|n| case.expect.contains_key(*n)))
     {
         let what = format!("the {name} representation of {}", case.input.display());
@@ -262,12 +261,16 @@ pub fn table(outcomes: &[Outcome], skipped: &[Skipped]) -> String {
     t
 }
 
-/// `toolkit hard`: runs every case of `manifest` and returns the table (also written to
-/// `table_out` when given), and whether every outcome was the expected one.
+/// `toolkit hard`: runs every case of `manifest` within `budget` and returns the table (also
+/// written to `table_out` when given), and whether every outcome was the expected one.
 ///
 /// # Errors
 /// When the manifest or a present input cannot be read, or the table cannot be written.
-pub fn hard_command(manifest: &Path, table_out: Option<&Path>) -> Result<(String, bool)> {
+pub fn hard_command(
+    manifest: &Path,
+    table_out: Option<&Path>,
+    budget: &MemoryBudget,
+) -> Result<(String, bool)> {
     let cases = load_cases(manifest)?;
     let mut outcomes = Vec::new();
     let mut skipped = Vec::new();
@@ -275,7 +278,7 @@ pub fn hard_command(manifest: &Path, table_out: Option<&Path>) -> Result<(String
     for c in &cases {
         // A case that cannot be loaded or fails (a panic included) is reported in the table
         // and on stderr, the others still run, and the suite is not as expected.
-        match catch_panic(|| run_case(c)).and_then(|r| r) {
+        match catch_panic(|| run_case(c, budget)).and_then(|r| r) {
             Ok(Ok(o)) => outcomes.extend(o),
             Ok(Err(s)) => skipped.push(s),
             Err(e) => {

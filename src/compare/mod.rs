@@ -745,6 +745,7 @@ pub fn read_rows(path: &Path) -> Result<Vec<Row>> {
 /// Returns the rows already there.
 fn open_csv(opts: &CompareOptions) -> Result<(File, Vec<Row>)> {
     let path = &opts.csv;
+    crate::files::check_not_read(path)?;
     let open = |o: &mut OpenOptions| o.read(true).append(true).open(path);
     let mut file = match open(OpenOptions::new().create_new(true)) {
         Ok(f) => f,
@@ -885,7 +886,6 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
     // (the others run, and the command fails at the end); when none can, nothing is written.
     let mut inputs: Vec<(String, String, Scene)> = Vec::new();
     let mut failed: Vec<String> = Vec::new();
-    let mut first_error = None;
     for (i, path) in opts.inputs.iter().enumerate() {
         let name = stem(path);
         if let Some(other) = opts.inputs[..i].iter().find(|p| stem(p) == name) {
@@ -903,17 +903,17 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
         .and_then(|r| r);
         match loaded {
             Ok(scene) => inputs.push((name, input_class(path), scene)),
+            // With one input its error is the command's one line; with several, each
+            // failed input gets its line here and the command's line counts them.
+            Err(e) if opts.inputs.len() == 1 => return Err(e),
             Err(e) => {
                 eprintln!("error: {e}");
                 failed.push(path.display().to_string());
-                first_error.get_or_insert(e);
             }
         }
     }
-    if inputs.is_empty()
-        && let Some(e) = first_error
-    {
-        return Err(e);
+    if inputs.is_empty() {
+        return Err(Error::Usage(format!("all {} inputs failed to load; nothing was written", failed.len())));
     }
     if let Some(dir) = &opts.artifacts {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;

@@ -72,10 +72,9 @@ fn fails(args: &[&str], needles: &[&str], out: &Path, what: &str) {
     assert_eq!(o.status.code(), Some(2), "{what}: {args:?}: exit {:?}: {err}", o.status.code());
     assert!(!err.contains("panicked"), "{what}: {err}");
     let line = err.trim();
-    // clap's usage errors add a usage block; our own errors are exactly one line.
-    if line.starts_with("error: ") && !line.contains("\n\nUsage") && !line.contains("For more information") {
-        assert_eq!(line.lines().count(), 1, "{what}: one line: {err}");
-    }
+    // Every error, clap's usage errors included, is exactly one line.
+    assert_eq!(line.lines().count(), 1, "{what}: one line: {err}");
+    assert!(line.starts_with("error: "), "{what}: {err}");
     for n in needles {
         assert!(err.contains(n), "{what}: expected {n:?} in: {err}");
     }

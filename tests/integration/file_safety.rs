@@ -407,6 +407,25 @@ fn an_output_that_is_an_input_is_refused() {
     assert_eq!(hidden(&dir), Vec::<String>::new());
 }
 
+/// A file the input names (a scene's mesh, a glTF file's buffer) is an input too: the
+/// command line does not show it, so it is refused when the write comes, and left as it was.
+#[test]
+fn an_output_that_an_input_names_is_refused() {
+    let dir = temp_dir("named");
+    let mesh = put(&dir, "m.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n");
+    let bytes = std::fs::read(&mesh).unwrap();
+    let scene = put(&dir, "s.toml", &format!("{SCENE}\n[[objects]]\ntype = \"mesh\"\npath = \"m.obj\"\n"));
+    let (s, m) = (scene.to_str().unwrap(), mesh.to_str().unwrap());
+    refused(&["render", s, "-o", m], &["m.obj", "read as an input"]);
+    refused(&["compare", s, "--csv", m, "--overwrite", "--res", "8", "--frames", "1"], &["read as an input"]);
+    assert_eq!(std::fs::read(&mesh).unwrap(), bytes);
+    assert_eq!(hidden(&dir), Vec::<String>::new());
+    // The library alone does not refuse: a program may save over a file it loaded.
+    let loaded = sdfmesh::mesh::load_mesh(&mesh).unwrap();
+    drop(loaded);
+    sdfmesh::files::write_atomic_bytes(&dir.join("m.obj"), &bytes).unwrap();
+}
+
 /// An output that is not a regular file (`/dev/null`, a folder, a FIFO) is refused by
 /// name before a temporary file is made, and nothing is left behind; renaming over it
 /// used to replace a device node (as root) with the PNG.

@@ -6,13 +6,14 @@
 use std::path::Path;
 
 use sdfmesh::compare::hard::{Expect, hard_command, load_cases};
+use sdfmesh::plan::budget::MemoryBudget;
 
 use crate::util::toolkit;
 
 #[test]
 fn every_hard_case_has_its_expected_outcome() {
     let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/hard/cases.toml");
-    let (table, as_expected) = hard_command(&manifest, None).unwrap();
+    let (table, as_expected) = hard_command(&manifest, None, &MemoryBudget::machine_default()).unwrap();
     println!("{table}");
     assert!(as_expected, "outcomes differ from data/hard/cases.toml:\n{table}");
     // Every case ran or was skipped for a missing shared mesh, and the table has a row per
