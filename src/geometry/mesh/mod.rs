@@ -21,6 +21,7 @@ use glam::{DVec3, Vec3};
 use obvhs::BvhBuildParams;
 
 use crate::geometry::bvh2;
+use crate::geometry::mesh::instance::compose;
 use crate::geometry::mesh::triangle::{ShearedRay, closest_point_on_triangle};
 #[cfg(target_arch = "x86_64")]
 use crate::geometry::mesh::wide_bvh::WideBoxRayAvx2;
@@ -30,7 +31,15 @@ use crate::geometry::{
 };
 use crate::mesh::TriangleMesh;
 pub use crate::scene::shape::Shading;
-use crate::scene::transform::Transform;
+use crate::scene::transform::{Transform, TransformDesc};
+
+/// The extents (longest side of the box, scene units) of the meshes traced in the frame
+/// they are given in: 2^-20 to 2^20 (about 1e-6 to 1e6). Beyond, a mesh is traced in a
+/// frame scaled by a power of two ([`MeshShape::unit`]): the triangle test multiplies
+/// three coordinates and the closest point four, and `f32` products of a mesh 2^32
+/// across overflow (2^128), those of one 2^-32 across lose digits to subnormals. Every
+/// mesh of the example scenes and `shared/meshes` lies within.
+pub const ORDINARY_EXTENT: std::ops::RangeInclusive<f64> = 9.5367431640625e-7..=1048576.0;
 
 /// The part of a traced mesh that instances share: positions, triangles, normals and the
 /// BVH, in the mesh's own frame.
@@ -42,6 +51,13 @@ pub struct MeshShape {
     bvh: WideBvh,
     /// The box of the triangles (padded as the BVH's leaves), `None` without triangles.
     local_bounds: Option<Aabb>,
+    /// For a mesh whose extent lies outside [`ORDINARY_EXTENT`] (1e19 or 1e-30 across, say),
+    /// the scale by a power of two from the shape's frame, in which `positions`
+    /// are of ordinary size (see [`MeshGeometry::with_params`]), to the mesh's: the
+    /// triangle test and the closest point multiply coordinates (squares and cubes of the
+    /// extent overflow or underflow `f32` there). Exact both ways. `None` for every other
+    /// mesh, stored as given.
+    unit: Option<Transform>,
 }
 
 impl MeshShape {
@@ -69,16 +85,30 @@ impl MeshShape {
         self.triangles.len()
     }
 
-    /// The box of the triangles in the mesh's frame, `None` without triangles.
+    /// The box of the triangles in the shape's frame (the mesh's, unless
+    /// [`MeshShape::unit`] scales it), `None` without triangles.
     pub fn local_bounds(&self) -> Option<Aabb> {
         self.local_bounds
+    }
+
+    /// The transform from the shape's frame to the world for a mesh placed by
+    /// `placement` (mesh frame to world), and the placement where the two differ.
+    fn frame(&self, placement: Transform) -> (Transform, Option<Box<Transform>>) {
+        match &self.unit {
+            None => (placement, None),
+            Some(unit) => (compose(&placement, Vec3::ZERO, unit), Some(Box::new(placement))),
+        }
     }
 }
 
 /// A triangle mesh ready for tracing: a shared [`MeshShape`] placed under a transform.
 pub struct MeshGeometry {
     shape: Arc<MeshShape>,
+    /// From the shape's frame to the world: the placement, composed with the shape's
+    /// [`MeshShape::unit`] scale where it has one.
     transform: Transform,
+    /// The placement (mesh frame to world) where it differs from `transform`.
+    placement: Option<Box<Transform>>,
     material: MaterialId,
     world_bounds: Option<Aabb>,
     label: String,
@@ -126,7 +156,38 @@ impl MeshGeometry {
         params: BvhBuildParams,
     ) -> Self {
         let start = Instant::now();
-        let TriangleMesh { positions, triangles, mut normals } = mesh;
+        let TriangleMesh { mut positions, triangles, mut normals } = mesh;
+        // Outside the ordinary range of extents, to the unit frame (see `MeshShape::unit`)
+        // by a power of two (2^-120 to 2^120, normal f32 numbers): the one nearest the
+        // geometric mean of the mesh's extent and its smallest triangle's, so that a mesh
+        // whose triangles span many orders of magnitude (a plane disc 1e20 in radius,
+        // whose rings grow from a fraction of the camera's height) keeps both its small
+        // triangles and its large ones within the range of the triangle test.
+        let unit = {
+            let (lo, hi) = positions
+                .iter()
+                .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(l, h), &p| (l.min(p), h.max(p)));
+            let size = (hi.as_dvec3() - lo.as_dvec3()).max(DVec3::ZERO).max_element();
+            if triangles.is_empty() || size == 0.0 || ORDINARY_EXTENT.contains(&size) {
+                None
+            } else {
+                let smallest = triangles
+                    .iter()
+                    .map(|t| {
+                        let [a, b, c] = t.map(|i| positions[i as usize].as_dvec3());
+                        (a.max(b).max(c) - a.min(b).min(c)).max_element()
+                    })
+                    .filter(|&e| e > 0.0)
+                    .fold(size, f64::min);
+                let k = ((0.5 * (smallest.log2() + size.log2())).floor() as i32).clamp(-120, 120);
+                let down = 2f32.powi(-k);
+                for p in &mut positions {
+                    *p *= down;
+                }
+                let desc = TransformDesc { scale: Vec3::splat(2f32.powi(k)), ..TransformDesc::default() };
+                Some(Transform::new(&desc))
+            }
+        };
         // Triangles in axis-aligned planes have flat boxes, which the PLOC builder clusters
         // badly (measured: a cylinder's flat caps cost 326 leaf triangles per ray against 5
         // with padding); pad every box by a millionth of the mesh's size.
@@ -136,12 +197,20 @@ impl MeshGeometry {
                 .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(l, h), &p| (l.min(p), h.max(p)));
             Vec3::splat(1e-6 * (hi - lo).length().max(f32::MIN_POSITIVE))
         };
+        // A mesh brought to the unit frame gets a box's pad of at most a thousandth of
+        // the box's own longest side too: such a mesh may span many orders of magnitude
+        // (the geometric rings of a plane disc 1e20 in radius), and the mesh's pad would
+        // give all its small triangles the same padded box, which the builder pairs into
+        // a chain.
         let boxes: Vec<Aabb> = triangles
             .iter()
             .map(|t| {
                 let (a, b, c) =
                     (positions[t[0] as usize], positions[t[1] as usize], positions[t[2] as usize]);
-                aabb(a.min(b).min(c) - pad, a.max(b).max(c) + pad)
+                let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+                let pad =
+                    if unit.is_none() { pad } else { pad.min(Vec3::splat(1e-3 * (hi - lo).max_element())) };
+                aabb(lo - pad, hi + pad)
             })
             .collect();
         let mut bvh2 = bvh2::build(&boxes, params);
@@ -171,18 +240,29 @@ impl MeshGeometry {
             Shading::Smooth => {}
         }
         let local_bounds = boxes.iter().copied().reduce(|a, b| a.union(&b));
+        let shape = Arc::new(MeshShape { positions, triangles, normals, bvh, local_bounds, unit });
+        let (transform, placement) = shape.frame(transform);
         let world_bounds = local_bounds.map(|b| transform.box_to_world(&b));
-        let shape = Arc::new(MeshShape { positions, triangles, normals, bvh, local_bounds });
-        MeshGeometry { shape, transform, material, world_bounds, label, build_time: start.elapsed() }
+        MeshGeometry {
+            shape,
+            transform,
+            placement,
+            material,
+            world_bounds,
+            label,
+            build_time: start.elapsed(),
+        }
     }
 
     /// Another instance of this geometry's mesh and BVH (shared, not copied) under
     /// `transform` (mesh frame to world) with `material`.
     pub fn placed(&self, transform: Transform, material: MaterialId, label: String) -> MeshGeometry {
+        let (transform, placement) = self.shape.frame(transform);
         let world_bounds = self.shape.local_bounds.map(|b| transform.box_to_world(&b));
         MeshGeometry {
             shape: Arc::clone(&self.shape),
             transform,
+            placement,
             material,
             world_bounds,
             label,
@@ -195,9 +275,9 @@ impl MeshGeometry {
         &self.shape
     }
 
-    /// The transform from the mesh's frame to the world.
+    /// The transform from the mesh's frame to the world (as placed).
     pub fn transform(&self) -> &Transform {
-        &self.transform
+        self.placement.as_deref().unwrap_or(&self.transform)
     }
 
     /// The triangles in world space (positions transformed; no normals).
@@ -221,7 +301,9 @@ impl MeshGeometry {
 
     /// Bytes of this instance alone: its struct and label, without the shared shape.
     pub fn instance_bytes(&self) -> usize {
-        std::mem::size_of::<Self>() + self.label.capacity()
+        std::mem::size_of::<Self>()
+            + self.label.capacity()
+            + self.placement.as_ref().map_or(0, |_| std::mem::size_of::<Transform>())
     }
 
     /// Makes the BVH walks use the portable box test even where the CPU has AVX2 (for
@@ -273,9 +355,18 @@ impl MeshGeometry {
         t_max: f32,
         stats: &mut RayStats,
     ) -> Option<Hit> {
-        let local = if self.transform.identity { *ray } else { self.transform.ray_to_local(ray) };
+        let (local, f) = if self.transform.identity { (*ray, None) } else { self.local_ray(ray) };
+        let (t0, t1) = match f {
+            None => (t_min, t_max),
+            Some(f) => (t_min * f, t_max * f),
+        };
         let LeafHit { triangle: i, t, corners: [a, b, c] } =
-            closest_walk::<B>(&self.shape.bvh, local.origin, local.dir, t_min, t_max, stats)?;
+            closest_walk::<B>(&self.shape.bvh, local.origin, local.dir, t0, t1, stats)?;
+        // `t` along the local ray; `t_world` along `ray`.
+        let t_world = match f {
+            None => t,
+            Some(f) => t / f,
+        };
         let geometric = (b - a).cross(c - a);
         let normal = self.transform.normal_to_world(geometric);
         let mut shading_normal = normal;
@@ -293,10 +384,29 @@ impl MeshGeometry {
                 shading_normal = self.transform.normal_to_world(s);
             }
         }
-        let point = ray.at(t);
+        let point = ray.at(t_world);
         let local_point = local.at(t);
         let m = max_abs(point).max(max_abs(ray.origin)).max(max_abs(local_point) * self.transform.max_scale);
-        Some(Hit { t, point, normal, shading_normal, material: self.material, error: f32_error(m) })
+        Some(Hit { t: t_world, point, normal, shading_normal, material: self.material, error: f32_error(m) })
+    }
+
+    /// `ray` in the shape's frame. Where the transform scales directions far from unit
+    /// length (by less than 2^-8 or more than 2^8: a placement's scale of 1e30, or the
+    /// shape's [`MeshShape::unit`] scale), the local direction is also multiplied by the
+    /// power of two `1 / f` that brings it back to about unit length, and `Some(f)`
+    /// returned: a `t` along `ray` is `t * f` along the local ray (exactly). The box
+    /// tests' safe reciprocal treats direction components below `f32::EPSILON` as about
+    /// zero, which for a direction 2^-30 long would be all of them.
+    #[inline(always)]
+    fn local_ray(&self, ray: &Ray) -> (Ray, Option<f32>) {
+        const LOW: f32 = 1.0 / 256.0;
+        let local = self.transform.ray_to_local(ray);
+        let m = max_abs(local.dir);
+        if (LOW..=256.0).contains(&m) || !m.is_normal() {
+            return (local, None);
+        }
+        let f = 2f32.powi(m.log2().floor() as i32);
+        (Ray::spawned(local.origin, local.dir / f, local.spread), Some(f))
     }
 
     #[inline]
@@ -323,8 +433,12 @@ impl Geometry for MeshGeometry {
     }
 
     fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
-        let local = self.transform.ray_to_local(ray);
-        self.shape.bvh.any_hit(local.origin, local.dir, t_min, t_max, stats)
+        let (local, f) = self.local_ray(ray);
+        let (t0, t1) = match f {
+            None => (t_min, t_max),
+            Some(f) => (t_min * f, t_max * f),
+        };
+        self.shape.bvh.any_hit(local.origin, local.dir, t0, t1, stats)
     }
 
     fn bytes_used(&self) -> usize {
