@@ -236,3 +236,28 @@ fn tiny_csg_renders_in_time() {
     let s = scene("", objects).replace("position = [0, 1, -5]", "position = [0, 1e-30, -5e-30]");
     render_mesh("tiny-csg", &s, &["--res=64"], Duration::from_secs(60));
 }
+
+/// A mesh sphere renders the same image 1e-30 and 1e19 across as 1 across (camera and
+/// light scaled alike): the BVH, the triangle test (in the shape's unit frame) and the
+/// normals (through the placement, not the unit scale's f32 inverse, which is NaN there)
+/// are exact under the scale. Before, the tiny sphere's BVH was a chain and both showed
+/// nothing.
+#[test]
+fn sphere_images_equal_across_scales() {
+    let image = |r: &str| {
+        let s = format!(
+            "[camera]\nposition = [0, 0, -3{e}]\nlook_at = [0, 0, 0]\nwidth = 24\nheight = 24\n\
+             [settings]\nmax_distance = 1e38\n\
+             [[lights]]\ntype = \"ambient\"\nintensity = 0.3\n\
+             [[lights]]\ntype = \"directional\"\ndirection = [1, -1, 1]\nintensity = 0.7\n\
+             [[objects]]\ntype = \"sphere\"\nradius = 1{e}\n",
+            e = r
+        );
+        render_mesh(&format!("sphere{r}"), &s, &["--res=48"], Duration::from_secs(60))
+    };
+    let unit = image("");
+    assert!(covered(&unit, [0, 0, 0]) > 24 * 24 / 4);
+    for e in ["e-30", "e19"] {
+        assert!(image(e) == unit, "sphere 1{e} across renders differently");
+    }
+}
