@@ -55,7 +55,7 @@ use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
 use glam::{DVec2, DVec3, Vec3};
 
-use crate::geometry::Aabb;
+use crate::geometry::{Aabb, max_abs};
 use crate::mesh::TriangleMesh;
 use crate::scene::shape::{Object, ObjectKind, Primitive};
 
@@ -668,6 +668,13 @@ pub fn plane_view_mesh(normal: Vec3, offset: f32, eye: Vec3, radius: f32) -> Tri
     let n = normal.normalize();
     let height = n.dot(eye) - offset;
     let foot = eye - n * height;
+    if !foot.is_finite() {
+        // The plane lies beyond the f32 range seen from the eye: nothing to draw.
+        return TriangleMesh::default();
+    }
+    // The rim stays within the f32 range (a `max_distance` near f32::MAX would put it at
+    // infinity): no ray reaches farther from the eye than that anyway.
+    let radius = radius.min(0.9 * (f32::MAX - max_abs(foot)));
     let (u, v) = n.any_orthonormal_pair();
     // u x v = n keeps the winding counter-clockwise seen from +n.
     let (u, v) = if u.cross(v).dot(n) > 0.0 { (u, v) } else { (v, u) };

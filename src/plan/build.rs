@@ -431,10 +431,11 @@ fn mesh_geometry(scene: &Scene, o: &Object, build: Build) -> Option<(MeshGeometr
             let prim = prim();
             let Primitive::Plane { normal, offset } = prim else { unreachable!("discs of planes only") };
             let label = format!("{} '{}' tessellated at {resolution}", prim.kind_name(), o.label);
-            let t = o.compiled_transform();
-            let n = t.normal_to_world(normal);
-            let p0 = t.to_world.transform_point3(normal * offset);
-            let mesh = plane_view_mesh(n, n.dot(p0), scene.camera.position, scene.settings.max_distance);
+            let (n, d) = world_plane(&o.compiled_transform(), normal, offset)?;
+            let mesh = plane_view_mesh(n, d, scene.camera.position, scene.settings.max_distance);
+            if mesh.triangles.is_empty() {
+                return None;
+            }
             Some((MeshGeometry::new(mesh, Shading::Flat, Transform::IDENTITY, o.material, label), build))
         }
         Build::Tessellated { resolution, shading } => {
@@ -449,6 +450,27 @@ fn mesh_geometry(scene: &Scene, o: &Object, build: Build) -> Option<(MeshGeometr
         }
         _ => unreachable!("not a triangle plan"),
     }
+}
+
+/// The world plane `n . p = d` (unit `n`) of the local plane `normal . p = offset` under
+/// `t`. The normal is [`Transform::normal_to_world`]'s where that is a unit vector; under
+/// scales far from 1 (`scale = [1, 1e30, 1]`) its `f32` length underflows or overflows
+/// and the normal comes out NaN or zero, so then it is computed in `f64` (the transpose
+/// of the inverse). `None` where the plane lies beyond the `f32` range.
+fn world_plane(t: &Transform, normal: Vec3, offset: f32) -> Option<(Vec3, f32)> {
+    let n = t.normal_to_world(normal);
+    let n = if n.is_finite() && (n.length() - 1.0).abs() <= 1e-4 {
+        n
+    } else {
+        let n = (t.to_local_f64.matrix3.transpose() * normal.as_dvec3()).normalize_or_zero().as_vec3();
+        if n == Vec3::ZERO {
+            return None;
+        }
+        n.normalize()
+    };
+    let p0 = t.to_world.transform_point3(normal * offset);
+    let d = n.dot(p0);
+    (p0.is_finite() && d.is_finite()).then_some((n, d))
 }
 
 /// Whether `o` holds a repetition below itself.

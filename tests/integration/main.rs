@@ -8,6 +8,7 @@
 mod util;
 
 mod bad_requests;
+mod bvh_extremes;
 mod cli;
 mod compare;
 mod compare_metrics;

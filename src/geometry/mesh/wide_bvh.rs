@@ -350,7 +350,9 @@ impl WideBvh {
     }
 
     /// Fills wide node `at` (already pushed) with the children `plan` gives the inner BVH2
-    /// node `node`, recursing.
+    /// node `node`, and their subtrees, depth first and in lane order (the order a
+    /// recursion would take), with a stack on the heap: a BVH2 may be as deep as it has
+    /// triangles.
     #[allow(clippy::too_many_arguments)]
     fn fill(
         &mut self,
@@ -362,23 +364,40 @@ impl WideBvh {
         node: usize,
         depth: usize,
     ) {
-        self.depth = self.depth.max(depth);
-        let mut kids = Vec::with_capacity(WIDTH);
-        plan.wide_children(bvh, node, &mut kids);
+        /// A wide node being filled: its index, its children, the next lane, its level.
+        struct Frame {
+            at: usize,
+            kids: Vec<(usize, bool)>,
+            lane: usize,
+            depth: usize,
+        }
+        let frame = |at: usize, node: usize, depth: usize| {
+            let mut kids = Vec::with_capacity(WIDTH);
+            plan.wide_children(bvh, node, &mut kids);
+            Frame { at, kids, lane: 0, depth }
+        };
+        let mut stack = vec![frame(at, node, depth)];
         let mut prims = Vec::new();
-        for (lane, (c, packet)) in kids.into_iter().enumerate() {
+        while let Some(f) = stack.last_mut() {
+            let Some(&(c, packet)) = f.kids.get(f.lane) else {
+                stack.pop();
+                continue;
+            };
+            let (at, lane, depth) = (f.at, f.lane, f.depth);
+            f.lane += 1;
+            self.depth = self.depth.max(depth);
             let b = *bvh.nodes[c].aabb();
-            let reference = if packet {
+            if packet {
                 prims.clear();
                 bvh2::subtree_primitives(bvh, c, &mut prims);
-                self.leaf(boxes, corners, &prims, depth + 1)
+                let reference = self.leaf(boxes, corners, &prims, depth + 1);
+                set_lane(&mut self.nodes[at], lane, &b, reference);
             } else {
                 let index = self.nodes.len();
                 self.nodes.push(empty_node());
-                self.fill(bvh, plan, boxes, corners, index, c, depth + 1);
-                node_ref(index)
-            };
-            set_lane(&mut self.nodes[at], lane, &b, reference);
+                set_lane(&mut self.nodes[at], lane, &b, node_ref(index));
+                stack.push(frame(index, c, depth + 1));
+            }
         }
     }
 
@@ -903,10 +922,11 @@ impl SahPlan {
         let mut wide = vec![0u8; count];
         let mut prims = vec![0u32; count];
         // Children before parents.
+        let area = SahArea::for_root(bvh.nodes[0].aabb());
         for &i in bvh2::parents_first(bvh).iter().rev() {
             let i = i as usize;
             let n = &bvh.nodes[i];
-            let area = n.aabb().half_area();
+            let area = area.of(n.aabb());
             if n.is_leaf() {
                 prims[i] = n.prim_count;
                 // A leaf over LEAF_MAX * LEAF_PACKETS becomes a node of leaves (see
@@ -924,7 +944,9 @@ impl SahPlan {
             for (j, best) in split.iter_mut().enumerate().skip(1) {
                 for kl in 1..=j {
                     let c = cost[l][kl - 1] + cost[r][j - kl];
-                    if c < best.0 {
+                    // The first candidate is taken whatever its cost (an infinite or NaN
+                    // cost must not leave the split without slots).
+                    if c < best.0 || kl == 1 {
                         *best = (c, ((kl as u8) << 3) | (j + 1 - kl) as u8);
                     }
                 }
@@ -964,6 +986,44 @@ impl SahPlan {
                 let first = bvh.nodes[node].first_index as usize;
                 self.cover(bvh, first, ((c >> 3) & 7) as usize, out);
                 self.cover(bvh, first + 1, (c & 7) as usize, out);
+            }
+        }
+    }
+}
+
+/// The half areas the SAH plan of [`SahPlan::new`] compares: `f32` half areas of the
+/// BVH2's boxes as they are where the root's largest extent lies within
+/// [`bvh2::SAFE_EXTENT`] (every ordinary mesh), else of the boxes scaled by the power of
+/// two that makes the root about 1 across, computed in `f64` (where `f32` areas of a
+/// mesh 1e19 across overflow to infinity, and those of one 1e-30 across are zero).
+#[derive(Clone, Copy, Debug)]
+struct SahArea {
+    scale: Option<f64>,
+}
+
+impl SahArea {
+    fn for_root(root: &Aabb) -> Self {
+        let d = (Vec3::from(root.max).as_dvec3() - Vec3::from(root.min).as_dvec3()).max_element();
+        let scale = if d.is_finite() && bvh2::SAFE_EXTENT.contains(&d) {
+            None
+        } else if d.is_finite() && d > 0.0 {
+            Some(2f64.powi(-d.log2().floor() as i32))
+        } else {
+            // Infinite or empty: no scale to take; areas are capped below.
+            Some(1.0)
+        };
+        SahArea { scale }
+    }
+
+    #[inline]
+    fn of(&self, b: &Aabb) -> f32 {
+        match self.scale {
+            None => b.half_area(),
+            Some(s) => {
+                let d = (Vec3::from(b.max).as_dvec3() - Vec3::from(b.min).as_dvec3()) * s;
+                // Sides capped at 2^20 roots (an infinite one too); a NaN side counts as 0.
+                let d = d.max(DVec3::ZERO).min(DVec3::splat(1048576.0));
+                ((d.x + d.y) * d.z + d.x * d.y) as f32
             }
         }
     }
@@ -1076,5 +1136,33 @@ mod tests {
                 (stats.bvh_nodes, stats.prim_tests)
             );
         }
+    }
+    /// Boxes whose half areas are infinite in f32 (a BVH2 refitted to boxes 1e38 across
+    /// and infinite ones): the grouping never leaves a split without slots, and every
+    /// triangle ends up in one packet lane.
+    #[test]
+    fn grouping_survives_infinite_areas() {
+        let tris: Vec<[Vec3; 3]> = (0..300)
+            .map(|i| {
+                let c = Vec3::new((i % 7) as f32, (i / 7 % 7) as f32, (i / 49) as f32) * 3e37 - 1e38;
+                [c, c + Vec3::X * 1e37, c + Vec3::Y * 1e37]
+            })
+            .collect();
+        let mut boxes: Vec<Aabb> =
+            tris.iter().map(|[a, b, c]| aabb(a.min(*b).min(*c), a.max(*b).max(*c))).collect();
+        boxes[7] = aabb(Vec3::splat(f32::NEG_INFINITY), Vec3::splat(f32::INFINITY));
+        let bvh2 = crate::geometry::bvh2::build(&boxes, BvhBuildParams::fast_build());
+        let order = bvh2.primitive_indices.clone();
+        let mut bvh2 = bvh2;
+        for (i, p) in bvh2.primitive_indices.iter_mut().enumerate() {
+            *p = i as u32;
+        }
+        let leaf_boxes: Vec<Aabb> = order.iter().map(|&i| boxes[i as usize]).collect();
+        crate::geometry::bvh2::refit(&mut bvh2, &leaf_boxes);
+        assert!(bvh2.nodes[0].aabb().half_area().is_infinite());
+        let w = WideBvh::from_bvh2(&bvh2, &leaf_boxes, |i| tris[order[i as usize] as usize]);
+        let mut ids: Vec<u32> = w.packets.iter().flat_map(|p| p.ids).filter(|&i| i != u32::MAX).collect();
+        ids.sort_unstable();
+        assert_eq!(ids, (0..tris.len() as u32).collect::<Vec<_>>());
     }
 }
