@@ -303,6 +303,7 @@ fn build_object(
         Build::Tessellated { .. } | Build::PlaneDisc { .. } | Build::Extracted { .. } => {
             match mesh_geometry(scene, o, plan.build) {
                 Some((g, build)) => (Box::new(g), ObjectPlan { build, ..plan }),
+                None if matches!(plan.build, Build::PlaneDisc { .. }) => marched(Fallback::NoPlaneDisc),
                 None => marched(Fallback::EmptyExtraction),
             }
         }

@@ -380,6 +380,10 @@ pub enum Fallback {
     /// Mesh: extracting the surface gave no triangles; the object is sphere traced (known
     /// while building).
     EmptyExtraction,
+    /// Mesh: a plane's view disc could not be made (the plane lies beyond the `f32` range
+    /// under its transform, or no part of it is within the view distance); it is sphere
+    /// traced (known while building).
+    NoPlaneDisc,
     /// Grid: the grid could not be built (see the grid builders' errors); an analytic
     /// object is sphere traced, a mesh traced as triangles (known while building).
     GridNotBuilt,
@@ -406,6 +410,7 @@ impl fmt::Display for Fallback {
             }
             Fallback::OpenMeshSampled => f.write_str("voxelizing found the mesh open: sampled"),
             Fallback::EmptyExtraction => f.write_str("extraction gave no triangles: sphere traced"),
+            Fallback::NoPlaneDisc => f.write_str("the plane has no disc in f32 range: sphere traced"),
             Fallback::GridNotBuilt => f.write_str("the grid could not be built"),
             Fallback::OwnGrid => f.write_str("the scene grid could not be built: a grid of its own"),
             Fallback::NoSurfaceInGridFile => f.write_str("no surface in the grid: ray marched"),

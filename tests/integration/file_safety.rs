@@ -414,7 +414,7 @@ fn an_output_that_an_input_names_is_refused() {
     let dir = temp_dir("named");
     let mesh = put(&dir, "m.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n");
     let bytes = std::fs::read(&mesh).unwrap();
-    let scene = put(&dir, "s.toml", &format!("{SCENE}\n[[objects]]\ntype = \"mesh\"\npath = \"m.obj\"\n"));
+    let scene = put(&dir, "s.toml", format!("{SCENE}\n[[objects]]\ntype = \"mesh\"\npath = \"m.obj\"\n"));
     let (s, m) = (scene.to_str().unwrap(), mesh.to_str().unwrap());
     refused(&["render", s, "-o", m], &["m.obj", "read as an input"]);
     refused(&["compare", s, "--csv", m, "--overwrite", "--res", "8", "--frames", "1"], &["read as an input"]);
