@@ -33,6 +33,7 @@ fuzz_target!(|data: &[u8]| {
             let named = match &e {
                 Error::Input { path: p, .. } | Error::Io { path: p, .. } => p.clone(),
                 Error::Usage(m) => panic!("usage error from a scene file: {m}"),
+                Error::Batch { message, .. } => panic!("batch error from a scene file: {message}"),
             };
             sdfmesh_fuzz::check_error(&named, &e);
         }
