@@ -305,13 +305,20 @@ pub const COMPARE_EPSILON: f64 = 0.5;
 /// # Errors
 /// When `data/scenes` or a folder in it cannot be read.
 pub fn default_inputs() -> Result<Vec<PathBuf>> {
-    fn collect(dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
+    /// Every `.toml` below `dir`; a folder reached twice (a link back up the tree) is
+    /// walked once, so a link loop cannot recurse forever.
+    fn collect(dir: &Path, out: &mut Vec<PathBuf>, seen: &mut Vec<PathBuf>) -> Result<()> {
+        let real = dir.canonicalize().map_err(|e| Error::io(dir, e))?;
+        if seen.contains(&real) {
+            return Ok(());
+        }
+        seen.push(real);
         let entries = std::fs::read_dir(dir)
             .map_err(|e| Error::io(dir, format!("{e} (run from the repository root or name the inputs)")))?;
         for entry in entries {
             let path = entry.map_err(|e| Error::io(dir, e))?.path();
             if path.is_dir() {
-                collect(&path, out)?;
+                collect(&path, out, seen)?;
             } else if path.extension().is_some_and(|e| e == "toml") {
                 out.push(path);
             }
@@ -319,7 +326,11 @@ pub fn default_inputs() -> Result<Vec<PathBuf>> {
         Ok(())
     }
     let mut inputs = Vec::new();
-    collect(Path::new("data/scenes"), &mut inputs)?;
+    let scenes = Path::new("data/scenes");
+    if !scenes.is_dir() {
+        return Err(Error::io(scenes, "not a folder (run from the repository root or name the inputs)"));
+    }
+    collect(scenes, &mut inputs, &mut Vec::new())?;
     inputs.sort();
     let bunny = Path::new("../shared/meshes/stanford-bunny.obj");
     if bunny.exists() {

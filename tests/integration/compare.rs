@@ -407,8 +407,8 @@ fn scaling_experiment_writes_a_row_per_primitive_count_and_representation() {
 }
 
 /// Without inputs, compare runs every scene under `data/scenes` (relative to the working
-/// folder), class folders included, each row naming its class; two scenes of one stem in
-/// different folders are refused.
+/// folder), class folders included (a link loop among them walked once), each row naming
+/// its class; two scenes of one stem in different folders are refused.
 #[test]
 fn default_inputs_are_searched_recursively_with_their_class() {
     // One level down, so that `../shared` (where compare also looks for the bunny) is the
@@ -418,6 +418,8 @@ fn default_inputs_are_searched_recursively_with_their_class() {
     std::fs::create_dir_all(scenes.join("blend")).unwrap();
     std::fs::write(scenes.join("top.toml"), SCENE).unwrap();
     std::fs::write(scenes.join("blend/inner.toml"), SCENE).unwrap();
+    // A link back up the tree is walked once, not followed round and round.
+    std::os::unix::fs::symlink(&scenes, scenes.join("blend/loop")).unwrap();
     let run = |csv: &str| {
         Command::new(env!("CARGO_BIN_EXE_toolkit"))
             .current_dir(&dir)
