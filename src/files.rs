@@ -55,6 +55,7 @@ use std::fs::{self, File, FileType, Metadata, OpenOptions};
 use std::io::{self, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Mutex, PoisonError};
 
 use crate::error::{Error, Result};
 
@@ -126,22 +127,24 @@ pub fn open_regular(path: &Path) -> io::Result<(File, u64)> {
 }
 
 /// Every file [`open_regular`] opened since [`protect_inputs`] (few: the inputs of one
-/// command).
-static READ: std::sync::Mutex<Vec<FileId>> = std::sync::Mutex::new(Vec::new());
-static PROTECT: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+/// command); `None` before it, when nothing is remembered.
+static READ: Mutex<Option<Vec<FileId>>> = Mutex::new(None);
+
+/// The files read, locked (a panic while it was held leaves it as usable as before).
+fn read_files() -> std::sync::MutexGuard<'static, Option<Vec<FileId>>> {
+    READ.lock().unwrap_or_else(PoisonError::into_inner)
+}
 
 /// From now on, no file this process reads may be written by it (one command's process:
 /// its inputs, including the files they name, are never its outputs).
 pub fn protect_inputs() {
-    PROTECT.store(true, Ordering::Relaxed);
+    read_files().get_or_insert_with(Vec::new);
 }
 
 fn remember_read(id: FileId) {
-    if !PROTECT.load(Ordering::Relaxed) {
-        return;
-    }
-    let mut read = READ.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-    if !read.contains(&id) {
+    if let Some(read) = read_files().as_mut()
+        && !read.contains(&id)
+    {
         read.push(id);
     }
 }
@@ -152,8 +155,11 @@ fn remember_read(id: FileId) {
 /// # Errors
 /// [`Error::Usage`] naming `path`.
 pub fn check_not_read(path: &Path) -> Result<()> {
+    if read_files().is_none() {
+        return Ok(());
+    }
     let Some(id) = file_id(path) else { return Ok(()) };
-    if READ.lock().unwrap_or_else(std::sync::PoisonError::into_inner).contains(&id) {
+    if read_files().as_ref().is_some_and(|read| read.contains(&id)) {
         return Err(Error::Usage(format!(
             "{}: the output is a file this command read as an input; refusing to overwrite an input",
             path.display()

@@ -346,13 +346,8 @@ impl Command {
         match self {
             Command::Render { scene, output, .. } => (vec![scene.clone()], vec![output]),
             Command::Convert { input, output, .. } => (vec![input.clone()], vec![output]),
-            Command::Compare { inputs, csv, summary_json, scaling, .. } => {
-                let inputs = match (inputs.is_empty(), scaling) {
-                    // An error here is reported when the command runs.
-                    (true, false) => sdfmesh::compare::default_inputs().unwrap_or_default(),
-                    _ => inputs.clone(),
-                };
-                (inputs, std::iter::once(csv).chain(summary_json).map(PathBuf::as_path).collect())
+            Command::Compare { inputs, csv, summary_json, .. } => {
+                (inputs.clone(), std::iter::once(csv).chain(summary_json).map(PathBuf::as_path).collect())
             }
             Command::Hard { manifest, table } => {
                 (vec![manifest.clone()], table.iter().map(PathBuf::as_path).collect())
@@ -363,7 +358,7 @@ impl Command {
 }
 
 fn main() -> ExitCode {
-    let cli = match Cli::try_parse() {
+    let mut cli = match Cli::try_parse() {
         Ok(cli) => cli,
         // Help and version go to stdout as clap writes them; a usage error is one line, as
         // every other error (clap's own adds the usage and a hint on further lines).
@@ -376,6 +371,19 @@ fn main() -> ExitCode {
         }
     };
     let budget = cli.max_memory.unwrap_or_else(MemoryBudget::machine_default);
+    // `compare` without inputs (and without --scaling) runs every bundled scene: found once,
+    // here, so that the checks below see them.
+    if let Command::Compare { inputs, scaling: false, .. } = &mut cli.command
+        && inputs.is_empty()
+    {
+        match sdfmesh::compare::default_inputs() {
+            Ok(found) => *inputs = found,
+            Err(e) => {
+                eprintln!("error: {e}");
+                return ExitCode::from(e.exit_code() as u8);
+            }
+        }
+    }
     // No output may be one of the command's inputs: checked once, before any work.
     let (inputs, outputs) = cli.command.files();
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
@@ -443,31 +451,27 @@ fn main() -> ExitCode {
                 };
                 sdfmesh::compare::scaling::scaling_command(&opts, &csv).map(|t| print!("{t}"))
             } else {
-                let inputs = if inputs.is_empty() { sdfmesh::compare::default_inputs() } else { Ok(inputs) };
-                inputs
-                    .and_then(|inputs| {
-                        sdfmesh::compare::compare_command(&sdfmesh::compare::CompareOptions {
-                            inputs,
-                            csv,
-                            resolutions: res,
-                            frames,
-                            resume,
-                            overwrite,
-                            overrides: settings.overrides(),
-                            march: march.params_or_epsilon(sdfmesh::compare::COMPARE_EPSILON),
-                            sdf_tolerances_px: sdf_tolerance_px,
-                            sdf_relaxations: sdf_relax,
-                            replicate,
-                            order_seed,
-                            band_cells: band,
-                            summary_json,
-                            artifacts,
-                            surface_samples,
-                            progress: !quiet,
-                            budget,
-                        })
-                    })
-                    .map(|t| print!("{t}"))
+                sdfmesh::compare::compare_command(&sdfmesh::compare::CompareOptions {
+                    inputs,
+                    csv,
+                    resolutions: res,
+                    frames,
+                    resume,
+                    overwrite,
+                    overrides: settings.overrides(),
+                    march: march.params_or_epsilon(sdfmesh::compare::COMPARE_EPSILON),
+                    sdf_tolerances_px: sdf_tolerance_px,
+                    sdf_relaxations: sdf_relax,
+                    replicate,
+                    order_seed,
+                    band_cells: band,
+                    summary_json,
+                    artifacts,
+                    surface_samples,
+                    progress: !quiet,
+                    budget,
+                })
+                .map(|t| print!("{t}"))
             }
         }
         Command::Hard { manifest, table } => {
