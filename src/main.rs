@@ -370,6 +370,11 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    // The SIMD backend switch (SDFMESH_SIMD) is read once; an unknown value is refused.
+    if let Err(e) = sdfmesh::simd::check_env() {
+        eprintln!("error: {e}");
+        return ExitCode::from(2);
+    }
     let budget = cli.max_memory.unwrap_or_else(MemoryBudget::machine_default);
     // `compare` without inputs (and without --scaling) runs every bundled scene: found once,
     // here, so that the checks below see them.

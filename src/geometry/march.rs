@@ -349,7 +349,7 @@ impl<const W: usize> MarchLanes<W> {
     #[inline]
     fn plain_steps(&mut self, raw: &[f64; W], lanes: u32) -> u32 {
         #[cfg(target_arch = "x86_64")]
-        if W.is_multiple_of(4) && crate::simd::avx2() {
+        if W.is_multiple_of(4) && crate::simd::avx2().is_some() {
             // SAFETY: the CPU has AVX2 (checked above).
             return unsafe { avx2::plain_steps(self, raw, lanes) };
         }

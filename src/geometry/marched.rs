@@ -285,7 +285,7 @@ impl<F: DistanceField> Marched<F> {
             return Segments8 { t0: [t_min; PACKET], t1: *t_max, some: first_n };
         }
         #[cfg(target_arch = "x86_64")]
-        if crate::simd::avx2() {
+        if crate::simd::avx2().is_some() {
             // Lanes past the packet's end clip a copy of its first ray (not used).
             let eight = std::array::from_fn(|k| rays.get(k).unwrap_or(&rays[0]));
             // SAFETY: the CPU has AVX2, so AVX (checked just above).
@@ -728,7 +728,7 @@ mod tests {
             }
             rays.push(Ray::new(o, d));
         }
-        if !crate::simd::avx2() {
+        if !crate::simd::avx2().is_some() {
             return;
         }
         for (q, chunk) in rays.chunks(8).enumerate() {

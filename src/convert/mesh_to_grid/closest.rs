@@ -883,7 +883,7 @@ impl TriangleBvh {
         let corners: Vec<[Vec3A; 3]> = original.iter().map(|&i| tri(&mesh.triangles[i as usize])).collect();
         bvh.primitive_indices = (0..original.len() as u32).collect();
         let (wide, packets) = collapse(&bvh, &corners);
-        let avx2 = crate::simd::avx2();
+        let avx2 = crate::simd::avx2().is_some();
         TriangleBvh { bvh, corners, original, wide, packets, avx2 }
     }
 

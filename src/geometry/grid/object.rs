@@ -56,7 +56,7 @@ impl GridStore {
     #[inline]
     pub fn march_distance(&self, p: Vec3) -> f32 {
         #[cfg(target_arch = "x86_64")]
-        if crate::simd::avx2() {
+        if crate::simd::avx2().is_some() {
             // SAFETY: the CPU has AVX2 and FMA (checked just above).
             return unsafe { self.march_distance_avx2(p) };
         }

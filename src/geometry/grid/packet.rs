@@ -24,7 +24,7 @@ impl SdfGrid {
     #[inline]
     pub fn trilinear8(&self, xs: &[f32; 8], ys: &[f32; 8], zs: &[f32; 8]) -> [f32; 8] {
         #[cfg(target_arch = "x86_64")]
-        if crate::simd::avx2()
+        if crate::simd::avx2().is_some()
             && self.values.len() <= i32::MAX as usize
             && self.dims.max_element() <= MAX_AVX2_DIM
         {
@@ -50,7 +50,7 @@ impl SdfGrid {
     ) -> [f32; 8] {
         assert!(at + 8 <= N, "lanes {at}..{} of {N}", at + 8);
         #[cfg(target_arch = "x86_64")]
-        if crate::simd::avx2()
+        if crate::simd::avx2().is_some()
             && self.values.len() <= i32::MAX as usize
             && self.dims.max_element() <= MAX_AVX2_DIM
         {
@@ -76,7 +76,7 @@ impl BandGrid {
     #[inline]
     pub fn march_distance8(&self, xs: &[f32; 8], ys: &[f32; 8], zs: &[f32; 8]) -> [f32; 8] {
         #[cfg(target_arch = "x86_64")]
-        if crate::simd::avx2() && self.fits_avx2() {
+        if crate::simd::avx2().is_some() && self.fits_avx2() {
             // SAFETY: the CPU has AVX2 and FMA (checked just above), and every slot, range
             // and sample index fits the gathers' `i32` offsets.
             return unsafe { avx2::band(self, xs, ys, zs) };

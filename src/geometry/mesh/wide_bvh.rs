@@ -345,7 +345,7 @@ impl WideBvh {
         }
         w.nodes.shrink_to_fit();
         w.packets.shrink_to_fit();
-        w.avx2 = crate::simd::avx2();
+        w.avx2 = crate::simd::avx2().is_some();
         w
     }
 

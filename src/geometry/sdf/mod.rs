@@ -735,7 +735,7 @@ impl SdfField {
         SCRATCH.with(|s| {
             let mut s = s.borrow_mut();
             s.fit(tape);
-            if crate::simd::avx2() {
+            if crate::simd::avx2().is_some() {
                 tape.eval8_ops(ops, &[rel.x; 8], &[rel.y; 8], &[rel.z; 8], &mut s)[0] as f64
             } else {
                 tape.eval_ops(ops, rel, &mut s) as f64
@@ -883,7 +883,7 @@ fn tape_inputs32(
     tol: &Lanes32,
 ) -> ([tape::X32; 3], u32) {
     #[cfg(target_arch = "x86_64")]
-    if crate::simd::avx2() {
+    if crate::simd::avx2().is_some() {
         // SAFETY: the CPU has AVX2 (checked just above).
         return unsafe { inputs_avx2::tape_inputs32(tape, (o, d, t, tol)) };
     }

@@ -757,7 +757,7 @@ impl Tape {
         scratch: &mut TapeScratch,
     ) -> [f32; 8] {
         #[cfg(target_arch = "x86_64")]
-        if crate::simd::avx2() {
+        if crate::simd::avx2().is_some() {
             // SAFETY: the CPU has AVX2 and FMA (checked just above).
             return unsafe { self.eval8_avx2(ops, xs, ys, zs, scratch) };
         }
@@ -771,7 +771,7 @@ impl Tape {
     #[inline]
     pub fn eval32_ops(&self, ops: Ops, xs: &X32, ys: &X32, zs: &X32, scratch: &mut TapeScratch) -> X32 {
         #[cfg(target_arch = "x86_64")]
-        if crate::simd::avx2() {
+        if crate::simd::avx2().is_some() {
             // SAFETY: the CPU has AVX2 and FMA (checked just above).
             return unsafe { self.eval32_avx2(ops, xs, ys, zs, scratch) };
         }

@@ -1,31 +1,5 @@
-//! SIMD helpers shared by the kernels: [`F4`], a four-lane `f32` vector (SSE on x86_64,
-//! plain arrays elsewhere) used by the mesh tracer's box and triangle tests, and
-//! [`avx2`], the one run-time check of the CPU features that every AVX2 kernel is
-//! compiled for (the mesh BVH walks of [`crate::geometry::mesh`], the nearest-triangle
-//! group walks of [`crate::convert::mesh_to_grid::closest`]).
-
-use std::sync::OnceLock;
-
-/// Whether the CPU has AVX2, FMA, POPCNT and BMI1, the one feature level of the crate's
-/// AVX2 kernels (each compiled with `#[target_feature]` for these features or a subset:
-/// the nearest-triangle walks need no FMA, but every CPU with AVX2 has it, so one level
-/// serves all). Detected once and cached.
-pub fn avx2() -> bool {
-    static AVX2: OnceLock<bool> = OnceLock::new();
-    *AVX2.get_or_init(|| {
-        #[cfg(target_arch = "x86_64")]
-        {
-            std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("fma")
-                && std::arch::is_x86_feature_detected!("popcnt")
-                && std::arch::is_x86_feature_detected!("bmi1")
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        {
-            false
-        }
-    })
-}
+//! [`F4`], four `f32` lanes: SSE on x86_64 (part of its baseline), a plain array elsewhere.
+//! Used by the mesh tracer's box and triangle tests.
 
 /// Four f32 lanes: SSE on x86_64 (part of its baseline, so the intrinsics are safe to
 /// call), a plain array elsewhere. Arithmetic is IEEE single precision lane by lane, so
@@ -37,7 +11,7 @@ pub struct F4(
 );
 
 #[cfg(target_arch = "x86_64")]
-mod f4 {
+mod imp {
     use super::F4;
     use core::arch::x86_64::*;
 
@@ -128,7 +102,7 @@ mod f4 {
 }
 
 #[cfg(not(target_arch = "x86_64"))]
-mod f4 {
+mod imp {
     use super::F4;
 
     fn zip(a: F4, b: F4, f: impl Fn(f32, f32) -> f32) -> F4 {
