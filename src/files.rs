@@ -15,8 +15,8 @@
 //! states, before reading, and reads at most the file's size at open plus one byte, so a
 //! file that grows while it is read is refused rather than followed. The limits are
 //! constants ([`MAX_INPUT_BYTES`] for mesh files, [`MAX_TEXT_BYTES`] for scene files and
-//! manifests) rather than `--max-memory`: the loaders ([`crate::mesh::load_mesh`],
-//! [`crate::scene::load_scene`]) are called from scene parsing and from every command
+//! manifests) rather than `--max-memory`: the loaders (the mesh module's `load_mesh`, the
+//! scene module's `load_scene`) are called from scene parsing and from every command
 //! without a budget, and a file's bytes are a small part of what loading it builds (that
 //! is what the budget's estimates count). Grid files are streamed, not read whole: their
 //! header states the size, checked against the file's length before anything is read.

@@ -32,12 +32,14 @@
 // `!(x >= 0.0)` is the NaN-rejecting form used on purpose in the numerical code.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod base;
 pub mod cli;
 pub mod compare;
 pub mod convert;
 pub mod error;
 pub mod files;
 pub mod geometry;
+pub mod grid;
 pub mod mesh;
 pub mod metrics;
 pub mod plan;

@@ -5,7 +5,6 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::time::Instant;
 
 use glam::UVec3;
@@ -17,15 +16,15 @@ use crate::convert::mesh_to_grid::voxelize::voxelize_mesh;
 use crate::error::{Error, Result, catch_panic};
 use crate::geometry::Geometry;
 use crate::geometry::grid::band::{BRICK, BandGrid};
-use crate::geometry::grid::io::{load_grid, save_grid};
+use crate::geometry::grid::io::save_grid;
 use crate::geometry::grid::{DEFAULT_MAX_GRID_BYTES, check_size, grid_layout};
-use crate::mesh::{MeshFormat, TriangleMesh, load_mesh, save_mesh};
+use crate::mesh::{TriangleMesh, load_mesh, save_mesh};
 use crate::plan::GridFill;
 use crate::plan::budget::{MemoryBudget, check_evaluations, extraction_bytes, mesh_to_grid_bytes};
 use crate::plan::{MeshMethod, Representation, build_scene, grid_file_mesh, grid_samples_per_axis};
 use crate::render::{Frame, render, write_png};
 use crate::scene::shape::Shading;
-use crate::scene::{Scene, grid_preview_scene, load_scene, mesh_preview_scene};
+use crate::scene::{Scene, load_input, load_scene};
 
 /// Overrides of a scene's settings from the command line.
 #[derive(Clone, Copy, Debug, Default)]
@@ -170,29 +169,10 @@ pub fn render_scene(scene: &Scene, repr: Representation) -> RenderReport {
     RenderReport { geometry_bytes: geometry.bytes_used(), frame, text }
 }
 
-/// Loads a scene file, or a mesh file or a signed distance grid file (`.sdf`, `.npy`) into
-/// a preview scene, by the file's extension. A `.vti` grid goes to the grid loader too,
-/// which says that it cannot read one (rather than the scene parser failing on its bytes).
-pub fn load_scene_or_mesh(path: &Path, shading: Shading) -> Result<Scene> {
-    let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
-    if matches!(ext.as_deref(), Some("sdf" | "npy" | "vti")) {
-        let grid = load_grid(path)?;
-        return Ok(grid_preview_scene(Arc::new(grid), path.to_path_buf()));
-    }
-    if MeshFormat::from_path(path).is_some() {
-        let (mesh, report) = load_mesh(path)?;
-        if report.degenerate_dropped > 0 {
-            eprintln!("{}: dropped {} degenerate triangles", path.display(), report.degenerate_dropped);
-        }
-        return Ok(mesh_preview_scene(Arc::new(mesh), path.to_path_buf(), shading));
-    }
-    load_scene(path)
-}
-
 /// `toolkit render`: loads, renders and writes one PNG.
 pub fn render_command(opts: &RenderOptions) -> Result<RenderReport> {
     check_repr(&opts.repr)?;
-    let mut scene = load_scene_or_mesh(&opts.scene, opts.shading)?;
+    let mut scene = load_input(&opts.scene, opts.shading)?;
     opts.overrides.apply(&mut scene)?;
     check_budget(&opts.budget, &scene, opts.repr, &opts.scene)?;
     let report = render_scene(&scene, opts.repr);

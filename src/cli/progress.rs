@@ -2,20 +2,30 @@
 //! a command is in, shown only when the command asked for it ([`Stage::start`] with
 //! `show`) and stderr is a terminal; nothing otherwise.
 //!
-//! Work loops deep in the library report with [`advance`] (a few calls per z-slice or
-//! chunk, never per sample), so they need no progress parameter: while no stage is shown,
-//! [`advance`] is a relaxed atomic load and a return.
+//! Work loops deep in the library report with [`crate::base::progress::advance`] (a few
+//! calls per z-slice or chunk, never per sample), so they need no progress parameter: a
+//! shown stage installs its bar as the [`progress::Sink`] they report to; while none is
+//! shown, their reports are a relaxed atomic load and a return.
 
 use std::io::IsTerminal;
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 
 use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::base::progress;
 
 /// Whether a bar is shown (checked before taking the lock).
 static ACTIVE: AtomicBool = AtomicBool::new(false);
 /// The bar of the current stage.
 static BAR: Mutex<Option<ProgressBar>> = Mutex::new(None);
+
+/// The bar receives the library's reports of work done.
+impl progress::Sink for ProgressBar {
+    fn advance(&self, n: u64) {
+        self.inc(n);
+    }
+}
 
 /// A stage of a command whose progress is shown while it lives; the bar is cleared when it
 /// is dropped.
@@ -37,6 +47,7 @@ impl Stage {
         }
         bar.set_message(label.to_owned());
         if let Ok(mut b) = BAR.lock() {
+            progress::install(Arc::new(bar.clone()));
             *b = Some(bar);
             ACTIVE.store(true, Ordering::Release);
         }
@@ -50,24 +61,12 @@ impl Drop for Stage {
             return;
         }
         ACTIVE.store(false, Ordering::Release);
+        progress::remove();
         if let Ok(mut b) = BAR.lock()
             && let Some(bar) = b.take()
         {
             bar.finish_and_clear();
         }
-    }
-}
-
-/// Records `n` more units of the current stage's work (no-op when no bar is shown).
-#[inline]
-pub fn advance(n: u64) {
-    if !ACTIVE.load(Ordering::Relaxed) {
-        return;
-    }
-    if let Ok(b) = BAR.lock()
-        && let Some(bar) = b.as_ref()
-    {
-        bar.inc(n);
     }
 }
 
@@ -94,7 +93,7 @@ mod tests {
         let stage = Stage::start("sampling", 10, true);
         assert!(!stage.shown);
         assert!(!ACTIVE.load(Ordering::Relaxed));
-        advance(5);
+        progress::advance(5);
         set(7);
         drop(stage);
         assert!(BAR.lock().unwrap().is_none());

@@ -32,11 +32,12 @@ use std::path::{Path, PathBuf};
 use image::RgbImage;
 use serde::Deserialize;
 
-use crate::cli::commands::{load_scene_or_mesh, render_scene};
+use crate::cli::commands::render_scene;
 use crate::error::{Error, Result, catch_panic};
 use crate::geometry::march::MarchParams;
 use crate::plan::budget::MemoryBudget;
 use crate::plan::{GridFill, GridStorage, MeshMethod, Representation};
+use crate::scene::load_input;
 use crate::scene::shape::Shading;
 
 /// Largest difference per channel (0..255) for a pixel to agree under the `pixels` metric.
@@ -204,7 +205,7 @@ pub fn run_case(case: &Case, budget: &MemoryBudget) -> Result<std::result::Resul
         let why = format!("{} not found", case.input.display());
         return Ok(Err(Skipped { case: case.name.clone(), why }));
     }
-    let scene = load_scene_or_mesh(&case.input, Shading::Smooth)?;
+    let scene = load_input(&case.input, Shading::Smooth)?;
     // The evaluation and memory budgets, as `render` checks them, before anything is built.
     for name in std::iter::once("analytic").chain(REPRS.into_iter().filter(|n| case.expect.contains_key(*n)))
     {

@@ -28,7 +28,7 @@ use glam::DVec3;
 use image::RgbImage;
 use serde::{Deserialize, Serialize};
 
-use crate::cli::commands::{Overrides, check_repr, load_scene_or_mesh};
+use crate::cli::commands::{Overrides, check_repr};
 use crate::convert::extract::ExtractMethod;
 use crate::error::{Error, Result, catch_panic};
 use crate::geometry::Geometry;
@@ -43,8 +43,8 @@ use crate::plan::{
     reextract_mesh,
 };
 use crate::render::{Frame, render, write_png};
-use crate::scene::Scene;
 use crate::scene::shape::{ObjectKind, Shading};
+use crate::scene::{Scene, load_input};
 
 /// Version of the CSV schema; bumped whenever a column changes meaning or order.
 pub const SCHEMA_VERSION: u32 = 2;
@@ -907,7 +907,7 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
             )));
         }
         let loaded = catch_panic(|| {
-            let mut scene = load_scene_or_mesh(path, Shading::Smooth)?;
+            let mut scene = load_input(path, Shading::Smooth)?;
             opts.overrides.apply(&mut scene)?;
             Ok(scene)
         })

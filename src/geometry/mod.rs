@@ -1,6 +1,7 @@
-//! The one geometry interface the tracer sees: rays, hits, work counters and the
-//! [`Geometry`] trait that every representation (closed form, analytic SDF, SDF grid,
-//! triangle mesh) implements. The tracer never learns which representation it traces.
+//! The one geometry interface the tracer sees: hits, work counters and the [`Geometry`]
+//! trait that every representation (closed form, analytic SDF, SDF grid, triangle mesh)
+//! implements, over the rays and boxes of [`crate::base`] (re-exported here). The tracer
+//! never learns which representation it traces.
 
 pub mod analytic;
 pub mod bvh2;
@@ -11,85 +12,9 @@ pub mod mesh;
 pub mod scene;
 pub mod sdf;
 
-use glam::{DVec3, Vec3, Vec3A};
-pub use obvhs::aabb::Aabb;
+use glam::{DVec3, Vec3};
 
-/// Index of a material in [`crate::scene::Scene::materials`].
-pub type MaterialId = u32;
-
-/// A ray `origin + t * dir`. World-space rays have a unit `dir`, so `t` is a distance in
-/// scene units; rays transformed into an object's local frame keep the same `t`
-/// (their direction is not renormalised).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Ray {
-    /// Start point, scene units.
-    pub origin: Vec3,
-    /// Direction; unit length for world-space rays.
-    pub dir: Vec3,
-    /// Length of the path from the camera to `origin` (scene units, >= 0): 0 for a camera
-    /// ray, the parent's `spread` plus its hit distance for a shadow, reflection or
-    /// refraction ray. A pixel's footprint at parameter `t` is that of `spread + t` from
-    /// the camera (the ray cone of a flat mirror), so a marcher's hit tolerance, which
-    /// scales with the footprint ([`march::MarchParams::tolerance`]), uses `spread + t`:
-    /// a shadow ray need not resolve its occluder more finely than the pixel it shades.
-    pub spread: f32,
-}
-
-impl Ray {
-    /// A camera ray from `origin` along `dir` (not normalised here), `spread` 0.
-    #[inline]
-    pub fn new(origin: Vec3, dir: Vec3) -> Self {
-        Ray { origin, dir, spread: 0.0 }
-    }
-
-    /// A ray spawned at the end of a path of length `spread` (see [`Ray::spread`]).
-    #[inline]
-    pub fn spawned(origin: Vec3, dir: Vec3, spread: f32) -> Self {
-        Ray { origin, dir, spread }
-    }
-
-    /// The point at parameter `t`.
-    #[inline]
-    pub fn at(&self, t: f32) -> Vec3 {
-        self.origin + self.dir * t
-    }
-
-    /// The parametric interval `[t0, t1]` in which the ray is inside `b` (clipped to
-    /// `[t_min, t_max]`), or `None`. Robust to zero direction components: a ray parallel
-    /// to a slab is inside it for all `t` or for none, never NaN.
-    #[inline]
-    pub fn clip_to_box(&self, b: &Aabb, t_min: f32, t_max: f32) -> Option<(f32, f32)> {
-        let mut t0 = t_min;
-        let mut t1 = t_max;
-        for axis in 0..3 {
-            let o = self.origin[axis];
-            let d = self.dir[axis];
-            let (lo, hi) = (b.min[axis], b.max[axis]);
-            if d == 0.0 {
-                if o < lo || o > hi {
-                    return None;
-                }
-                continue;
-            }
-            let inv = 1.0 / d;
-            let (mut ta, mut tb) = ((lo - o) * inv, (hi - o) * inv);
-            if ta > tb {
-                std::mem::swap(&mut ta, &mut tb);
-            }
-            // max/min written so that a NaN (inf * 0 cannot occur here, but be safe) never widens.
-            if ta > t0 {
-                t0 = ta;
-            }
-            if tb < t1 {
-                t1 = tb;
-            }
-            if t0 > t1 {
-                return None;
-            }
-        }
-        Some((t0, t1))
-    }
-}
+pub use crate::base::{Aabb, MaterialId, Ray, aabb, box_distance, to_a};
 
 /// Rays per packet: the width of an 8-wide f32 evaluation, the lanes a marched field runs
 /// side by side in [`Geometry::closest_hits`].
@@ -341,26 +266,6 @@ pub fn distance_by_projection(f: &dyn Fn(DVec3) -> f64, p: DVec3, h: f64, tol: f
         q -= g * (d / g2);
     }
     f(p).abs()
-}
-
-/// Distance from `p` to the box `b` (0 inside).
-#[inline]
-pub fn box_distance(b: &Aabb, p: DVec3) -> f64 {
-    let lo = DVec3::new(b.min.x as f64, b.min.y as f64, b.min.z as f64);
-    let hi = DVec3::new(b.max.x as f64, b.max.y as f64, b.max.z as f64);
-    (lo - p).max(p - hi).max(DVec3::ZERO).length()
-}
-
-/// Converts a glam `Vec3` into obvhs's `Vec3A`.
-#[inline]
-pub fn to_a(v: Vec3) -> Vec3A {
-    Vec3A::from(v)
-}
-
-/// An empty-or-not box from two corners.
-#[inline]
-pub fn aabb(min: Vec3, max: Vec3) -> Aabb {
-    Aabb::new(to_a(min), to_a(max))
 }
 
 /// The largest absolute coordinate of `p`: the magnitude that f32 rounding error scales with.

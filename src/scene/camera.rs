@@ -2,7 +2,7 @@
 
 use glam::Vec3;
 
-use crate::geometry::Ray;
+use crate::base::Ray;
 use crate::scene::Camera;
 
 /// A camera prepared for generating rays.

@@ -23,10 +23,10 @@ use toml::Spanned;
 use toml::de::{DeTable, DeValue};
 
 use super::{Camera, Light, Material, Scene, Settings};
+use crate::base::MaterialId;
+use crate::base::transform::{Transform, TransformDesc};
 use crate::error::{Error, Location, Result};
-use crate::geometry::MaterialId;
 use crate::scene::shape::{CsgOp, Object, ObjectKind, Primitive, Shading};
-use crate::scene::transform::{Transform, TransformDesc};
 
 /// Largest accepted image width or height, pixels.
 pub const MAX_IMAGE_SIZE: u32 = 16384;
@@ -944,7 +944,7 @@ impl Cx<'_> {
             }
             // Relative to the scene file's folder.
             let source = self.path.parent().unwrap_or(Path::new("")).join(file.get_ref());
-            let grid = crate::geometry::grid::io::load_grid(&source)?;
+            let grid = crate::grid::io::load_grid(&source)?;
             let material = material.unwrap_or_else(|| materials.default_id());
             return Ok(Object {
                 kind: ObjectKind::Grid { grid: Arc::new(grid), source },

@@ -4,14 +4,17 @@
 
 pub mod camera;
 pub mod file;
+pub mod input;
 pub mod shape;
-pub mod transform;
+
+pub use crate::base::transform;
 
 use glam::Vec3;
 
 use crate::scene::shape::Object;
 
 pub use file::{load_scene, parse_scene};
+pub use input::{grid_preview_scene, load_input, mesh_preview_scene};
 
 /// A pinhole camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -123,75 +126,4 @@ pub struct Scene {
     pub materials: Vec<Material>,
     /// Top-level objects.
     pub objects: Vec<Object>,
-}
-
-/// A scene that shows one mesh: a camera framing its bounding box from the front and a
-/// little above (+z towards the viewer, +y up), an ambient light, a key point light near the
-/// camera and a directional fill light, and one grey Phong material. Used by
-/// `toolkit render MESH_FILE` so a mesh can be seen without writing a scene file.
-pub fn mesh_preview_scene(
-    mesh: std::sync::Arc<crate::mesh::TriangleMesh>,
-    source: std::path::PathBuf,
-    shading: crate::scene::shape::Shading,
-) -> Scene {
-    let (lo, hi) = mesh.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::ONE));
-    preview_scene(crate::scene::shape::ObjectKind::Mesh { mesh, source, shading }, lo, hi)
-}
-
-/// The preview scene of [`mesh_preview_scene`] for a signed distance grid file (`toolkit
-/// render GRID_FILE`), framing the grid's box.
-pub fn grid_preview_scene(
-    grid: std::sync::Arc<crate::geometry::grid::SdfGrid>,
-    source: std::path::PathBuf,
-) -> Scene {
-    let (lo, hi) = grid.bounds();
-    preview_scene(crate::scene::shape::ObjectKind::Grid { grid, source }, lo, hi)
-}
-
-/// One object of `kind` within `lo..hi`, seen by the preview camera and lights.
-fn preview_scene(kind: crate::scene::shape::ObjectKind, lo: Vec3, hi: Vec3) -> Scene {
-    let centre = 0.5 * (lo + hi);
-    let radius = (0.5 * (hi - lo).length()).max(1e-6);
-    let fov_y_deg: f32 = 40.0;
-    let distance = radius / (0.5 * fov_y_deg).to_radians().sin() * 1.05;
-    let view = Vec3::new(0.35, 0.3, 1.0).normalize();
-    let position = centre + view * distance;
-    let source = match &kind {
-        crate::scene::shape::ObjectKind::Mesh { source, .. }
-        | crate::scene::shape::ObjectKind::Grid { source, .. } => Some(source),
-        _ => None,
-    };
-    let label = source
-        .and_then(|s| s.file_name())
-        .map_or_else(|| "preview".into(), |n| n.to_string_lossy().into_owned());
-    Scene {
-        camera: Camera { position, forward: -view, up: Vec3::Y, fov_y_deg, width: 500, height: 500 },
-        settings: Settings { max_distance: 4.0 * distance + 4.0 * radius, ..Settings::default() },
-        lights: vec![
-            Light::Ambient { intensity: 0.15 },
-            Light::Point {
-                position: centre + Vec3::new(-0.6, 0.9, 0.8).normalize() * distance,
-                intensity: 0.7,
-                color: Vec3::ONE,
-            },
-            Light::Directional {
-                direction: Vec3::new(0.5, -0.3, -0.6).normalize(),
-                intensity: 0.25,
-                color: Vec3::ONE,
-            },
-        ],
-        materials: vec![Material {
-            name: "preview".into(),
-            color: Vec3::new(0.75, 0.72, 0.68),
-            ks: 0.3,
-            shininess: Some(40.0),
-            ..Material::default()
-        }],
-        objects: vec![Object {
-            kind,
-            transform: crate::scene::transform::TransformDesc::default(),
-            material: 0,
-            label,
-        }],
-    }
 }

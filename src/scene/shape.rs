@@ -7,10 +7,10 @@ use std::sync::Arc;
 
 use glam::{UVec3, Vec3};
 
-use crate::geometry::grid::SdfGrid;
-use crate::geometry::{Aabb, MaterialId, aabb};
+use crate::base::transform::{Transform, TransformDesc};
+use crate::base::{Aabb, MaterialId, aabb};
+use crate::grid::SdfGrid;
 use crate::mesh::TriangleMesh;
-use crate::scene::transform::{Transform, TransformDesc};
 
 /// A primitive in its local frame. All lengths are scene units, finite and > 0 unless
 /// stated. Axis-symmetric shapes use the local y axis.

@@ -102,7 +102,7 @@ impl SampleGrid {
                         outside(&mut row[nn[0] - 1]);
                     }
                 }
-                crate::cli::progress::advance(1);
+                crate::base::progress::advance(1);
             },
         );
         Some(grid)

@@ -143,7 +143,7 @@ fn fill(grid: &mut SdfGrid, tree: &TriangleBvh, wind: &FastWinding, closed: bool
                     out[i as usize + nx as usize * j as usize] = sampler.sample(p);
                 }
             }
-            crate::cli::progress::advance(1);
+            crate::base::progress::advance(1);
             sampler.stats
         })
         .reduce(SampleStats::default, |a, b| SampleStats {
@@ -205,7 +205,7 @@ fn fill_by_regions(grid: &mut SdfGrid, tree: &TriangleBvh, wind: &FastWinding, c
         .enumerate()
         .map_init(GroupStack::default, |stack, (k, out)| {
             let mut stats = unsigned_slice(tree, out, nx, ny, |i, j| position(i, j, k), stack);
-            crate::cli::progress::advance(1);
+            crate::base::progress::advance(1);
             stats.samples = slice as u64;
             stats
         })

@@ -27,7 +27,7 @@
 //! in the low bits of the empty brick's `slots` entry (no extra memory).
 //!
 //! The builders live with the conversions
-//! ([`crate::convert::mesh_to_grid::band`]), and never allocate the dense grid where they
+//! (`convert::mesh_to_grid::band`), and never allocate the dense grid where they
 //! can avoid it: `band_from_function` and `band_from_mesh` first evaluate each brick's centre and
 //! skip the brick when `|d(centre)|` exceeds the brick's half diagonal plus the band
 //! (the bound is then `|d(centre)| -` half diagonal); the remaining bricks are sampled
@@ -83,7 +83,7 @@ pub struct BandGrid {
 
 impl BandGrid {
     /// A band grid from its parts, as the builders of
-    /// [`crate::convert::mesh_to_grid::band`] make them: the lattice (`origin`, `voxel`,
+    /// `convert::mesh_to_grid::band` make them: the lattice (`origin`, `voxel`,
     /// `dims`), `bricks` per axis (`ceil((dims - 1) / BRICK)`), the band's half-width
     /// `band_cells`, and per brick (x fastest) its slot in `ranges` and `data` (or
     /// [`NONE`]) and its bound; per stored brick its `(offset, scale)` and its

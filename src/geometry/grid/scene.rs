@@ -15,7 +15,7 @@
 //! The grid is counted once in a scene's bytes ([`Geometry::shared`](crate::geometry::Geometry::shared)).
 //!
 //! The builder, which samples the objects' distances into the bricks, is a conversion:
-//! [`crate::convert::mesh_to_grid::band::band_from_members`].
+//! `convert::mesh_to_grid::band::band_from_members`.
 
 use std::sync::Arc;
 

@@ -4,7 +4,7 @@
 
 use glam::{Affine3A, DAffine3, DMat3, DVec3, Mat3, Mat3A, Vec3, Vec3A};
 
-use crate::geometry::{Aabb, Ray};
+use crate::base::{Aabb, Ray};
 
 /// A transform as written in a scene file. Applied to an object as
 /// `world = translate + rotate(scale * local)`, where the rotation turns first about x,
