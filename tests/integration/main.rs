@@ -29,6 +29,7 @@ mod grid_voxelize;
 mod hard_cases;
 mod hard_suite;
 mod instancing;
+mod layering;
 mod limits;
 mod mesh_io;
 mod mesh_tracing;
