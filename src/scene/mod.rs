@@ -67,11 +67,28 @@ impl Default for Settings {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Light {
     /// Uniform ambient light.
-    Ambient { intensity: f32 },
+    Ambient {
+        /// Intensity, >= 0.
+        intensity: f32,
+    },
     /// A point light at `position` with RGB `color` in [0, 1].
-    Point { position: Vec3, intensity: f32, color: Vec3 },
+    Point {
+        /// Position, scene units.
+        position: Vec3,
+        /// Intensity, >= 0.
+        intensity: f32,
+        /// RGB colour, each channel in [0, 1].
+        color: Vec3,
+    },
     /// A light at infinity shining along `direction` (unit; from the light into the scene).
-    Directional { direction: Vec3, intensity: f32, color: Vec3 },
+    Directional {
+        /// Unit direction the light travels in (from the light into the scene).
+        direction: Vec3,
+        /// Intensity, >= 0.
+        intensity: f32,
+        /// RGB colour, each channel in [0, 1].
+        color: Vec3,
+    },
 }
 
 /// A Phong material with mirror reflection and refraction.

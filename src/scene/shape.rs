@@ -17,24 +17,69 @@ use crate::mesh::TriangleMesh;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Primitive {
     /// Sphere of `radius` at the origin.
-    Sphere { radius: f32 },
+    Sphere {
+        /// Radius.
+        radius: f32,
+    },
     /// The infinite plane `normal . p = offset`; `normal` is unit length. Solid below.
-    Plane { normal: Vec3, offset: f32 },
+    Plane {
+        /// Unit normal, pointing out of the solid.
+        normal: Vec3,
+        /// Signed distance of the plane from the origin along `normal`.
+        offset: f32,
+    },
     /// Axis-aligned box with half extents `half` (all > 0), centred at the origin.
-    Box { half: Vec3 },
+    Box {
+        /// Half extents per axis.
+        half: Vec3,
+    },
     /// Axis-aligned ellipsoid with semi-axes `radii` (all > 0), centred at the origin.
-    Ellipsoid { radii: Vec3 },
+    Ellipsoid {
+        /// Semi-axes per axis.
+        radii: Vec3,
+    },
     /// Capped cylinder around y from `-half_height` to `half_height`.
-    Cylinder { radius: f32, half_height: f32 },
+    Cylinder {
+        /// Radius.
+        radius: f32,
+        /// Half the height along y.
+        half_height: f32,
+    },
     /// Capped cone (frustum) around y: radius `radius_bottom` at `y = -half_height`,
     /// `radius_top` at `y = half_height`; radii >= 0, not both 0. A radius of 0 is an apex.
-    Cone { radius_bottom: f32, radius_top: f32, half_height: f32 },
+    Cone {
+        /// Radius at the bottom cap (`y = -half_height`), >= 0.
+        radius_bottom: f32,
+        /// Radius at the top cap (`y = half_height`), >= 0.
+        radius_top: f32,
+        /// Half the height along y.
+        half_height: f32,
+    },
     /// Torus in the xz plane: ring radius `major`, tube radius `minor` (`0 < minor`).
-    Torus { major: f32, minor: f32 },
+    Torus {
+        /// Radius of the ring (from the origin to the tube's centre line).
+        major: f32,
+        /// Radius of the tube.
+        minor: f32,
+    },
     /// A single two-sided triangle (zero thickness); vertices are not collinear.
-    Triangle { a: Vec3, b: Vec3, c: Vec3 },
+    Triangle {
+        /// First vertex.
+        a: Vec3,
+        /// Second vertex.
+        b: Vec3,
+        /// Third vertex.
+        c: Vec3,
+    },
     /// Segment `a`..`b` swept by a sphere of `radius`.
-    Capsule { a: Vec3, b: Vec3, radius: f32 },
+    Capsule {
+        /// One end of the segment.
+        a: Vec3,
+        /// The other end of the segment.
+        b: Vec3,
+        /// Radius of the swept sphere.
+        radius: f32,
+    },
 }
 
 impl Primitive {
@@ -91,11 +136,20 @@ pub enum CsgOp {
     /// Inside every child.
     Intersection,
     /// Union with a rounded blend of radius `k`.
-    SmoothUnion { k: f32 },
+    SmoothUnion {
+        /// Blend radius, scene units, > 0.
+        k: f32,
+    },
     /// Subtraction with a rounded blend of radius `k`.
-    SmoothSubtraction { k: f32 },
+    SmoothSubtraction {
+        /// Blend radius, scene units, > 0.
+        k: f32,
+    },
     /// Intersection with a rounded blend of radius `k`.
-    SmoothIntersection { k: f32 },
+    SmoothIntersection {
+        /// Blend radius, scene units, > 0.
+        k: f32,
+    },
 }
 
 impl CsgOp {
@@ -118,11 +172,23 @@ pub enum ObjectKind {
     /// A single primitive.
     Primitive(Primitive),
     /// A CSG node over at least one child (subtraction needs two or more).
-    Csg { op: CsgOp, children: Vec<Object> },
+    Csg {
+        /// The operation.
+        op: CsgOp,
+        /// The operands, in file order (the first is what a subtraction subtracts from).
+        children: Vec<Object>,
+    },
     /// Domain repetition of `child`: copies every `period` along each axis whose period
     /// is > 0 (an axis with period 0 is not repeated). With `count`, only `count` copies per
     /// repeated axis (>= 1), centred on the origin; without, infinitely many.
-    Repeat { period: Vec3, count: Option<UVec3>, child: Box<Object> },
+    Repeat {
+        /// Spacing of the copies per axis, scene units; 0 for an axis not repeated.
+        period: Vec3,
+        /// Copies per repeated axis (each >= 1); `None` for infinitely many.
+        count: Option<UVec3>,
+        /// The repeated object.
+        child: Box<Object>,
+    },
     /// A triangle mesh loaded from a file (top level only: meshes have no analytic SDF).
     Mesh {
         /// The loaded, validated mesh (shared, never copied per representation).
