@@ -2,21 +2,33 @@
 //! render than ray tracing polygon meshes. One Whitted tracer renders every
 //! representation through the [`geometry::Geometry`] interface.
 //!
-//! The pipeline, one module (folder) per stage:
+//! One module (folder) per concept, in layers: each names only modules below it
+//! (`tests/integration/layering.rs` checks that no chain of `crate::` paths comes back to
+//! where it started). A run flows down once: an input is loaded into a scene, planned into
+//! geometries (converted where asked), rendered, measured and compared.
 //!
 //! ```text
-//!  scene ──► plan ──────────────► geometry ─────────► render ──► metrics ──► compare ──► report
-//!  (TOML,    (one decision per    (one trait:          (Whitted   (image and   (CSV rows,   (tools/,
-//!   meshes,   object and repr:     closed form,         tracer,    geometric    summary,     Python)
-//!   grids)    how it is built,     marched SDF/grid,    frames)    error)       hard cases)
-//!             and why not)         mesh BVH, scene BVH)
-//!                  │                    ▲
-//!                  └──► convert ────────┘
-//!                       (tessellate, mesh → grid, SDF → mesh)
+//!  compare                  the study's runs, CSV rows, summaries, hard cases
+//!  cli                      the toolkit's commands (main.rs parses their arguments)
+//!  metrics                  image and geometric error
+//!  plan        render       one decision per object and repr; the Whitted tracer
+//!  convert                  tessellate, mesh -> grid, SDF -> mesh
+//!  geometry                 the Geometry trait: closed form, marched SDF/grid, mesh BVH
+//!  scene                    scene file, objects, camera; load_input for any input file
+//!  mesh        grid         triangle meshes and SDF grids, with their file formats
+//!  files                    reading inputs and writing outputs (atomically)
+//!  base  error  simd        boxes, rays, transforms, progress; errors; SIMD backend
 //! ```
 //!
-//! - [`scene`]: the scene file, objects, transforms, camera; [`mesh`]: triangle meshes and
+//! - [`base`]: the vocabulary every layer speaks: [`base::Aabb`], [`base::Ray`],
+//!   [`base::MaterialId`], [`base::transform`], and the [`base::progress`] sink that long
+//!   loops report to (the command line's bar implements it).
+//! - [`files`]: how every input file is read and every output file written (atomic
+//!   replacement included); [`error`]: the error type; [`simd`]: the SIMD backend.
+//! - [`mesh`]: triangle meshes and their file formats; [`grid`]: signed distance grids and
 //!   their file formats.
+//! - [`scene`]: the scene file, objects, camera, and [`scene::load_input`], the one
+//!   function that loads any input (scene, mesh or grid file) into a scene.
 //! - [`plan`]: for each object and [`plan::Representation`], how it becomes a geometry
 //!   (and the memory budget estimated from the same decision).
 //! - [`geometry`]: the [`geometry::Geometry`] trait and its implementations: closed-form
@@ -26,8 +38,6 @@
 //! - [`convert`]: conversions between representations.
 //! - [`render`]: the tracer and frame loop; [`metrics`]: error measures.
 //! - [`compare`]: the study's runs, CSV and summaries; [`cli`]: the `toolkit` subcommands.
-//! - [`files`]: how every input file is read and every output file written; [`error`]:
-//!   the error type.
 
 // `!(x >= 0.0)` is the NaN-rejecting form used on purpose in the numerical code.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]

@@ -1,6 +1,7 @@
 //! A scene as the tracer uses it: camera, render settings, lights, materials and the
-//! object trees. Built from a TOML scene file by [`file`]; independent of the
-//! representation each object is rendered with.
+//! object trees. Built from a TOML scene file by [`file`], or from any input file (scene,
+//! mesh or grid) by [`load_input`]; independent of the representation each object is
+//! rendered with.
 
 pub mod camera;
 pub mod file;
