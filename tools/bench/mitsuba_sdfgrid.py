@@ -43,7 +43,7 @@ def KINDS(intersect, preliminary, render):
 
 
 def read_sdf(path):
-    """Our `.sdf` format (src/geometry/grid/io.rs): 44-byte header, f32 samples x fastest."""
+    """Our `.sdf` format (src/grid/io.rs): 44-byte header, f32 samples x fastest."""
     with open(path, "rb") as f:
         head = f.read(44)
         magic, version = head[:8], struct.unpack("<I", head[8:12])[0]
