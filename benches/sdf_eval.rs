@@ -243,9 +243,9 @@ fn main() {
         out.line("smoke mode (run with `cargo bench --bench sdf_eval` for the benchmark)");
     }
     out.line(format!(
-        "analytic SDF evaluation, 1 thread: f64 tree vs f32 tape, scalar and 8-wide ({}); {} points per \
+        "analytic SDF evaluation, 1 thread: f64 tree vs f32 tape, scalar and 8-wide ({} backend); {} points per \
          object, {} timed rounds of >= {} s per evaluator, interleaved",
-        if sdfmesh::simd::avx2() { "AVX2" } else { "portable, no AVX2" },
+        sdfmesh::simd::backend().name(),
         plan.points,
         plan.rounds,
         plan.secs
