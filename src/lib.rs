@@ -26,6 +26,8 @@
 //! - [`convert`]: conversions between representations.
 //! - [`render`]: the tracer and frame loop; [`metrics`]: error measures.
 //! - [`compare`]: the study's runs, CSV and summaries; [`cli`]: the `toolkit` subcommands.
+//! - [`config`]: the command line validated once (every flag's range stated there) into
+//!   the options the commands take.
 //! - [`files`]: how every input file is read and every output file written; [`error`]:
 //!   the error type.
 
@@ -34,6 +36,7 @@
 
 pub mod cli;
 pub mod compare;
+pub mod config;
 pub mod convert;
 pub mod error;
 pub mod files;

@@ -32,11 +32,13 @@ use std::path::{Path, PathBuf};
 use image::RgbImage;
 use serde::Deserialize;
 
-use crate::cli::commands::{load_scene_or_mesh, render_scene};
+use crate::cli::commands::load_scene_or_mesh;
+use crate::config::CASE_RESOLUTION;
 use crate::error::{Error, Result, catch_panic};
 use crate::geometry::march::MarchParams;
 use crate::plan::budget::MemoryBudget;
 use crate::plan::{GridFill, GridStorage, MeshMethod, Representation};
+use crate::render::report::render_scene;
 use crate::scene::shape::Shading;
 
 /// Largest difference per channel (0..255) for a pixel to agree under the `pixels` metric.
@@ -137,8 +139,8 @@ pub struct Skipped {
 ///
 /// # Errors
 /// When the file cannot be read, is not valid TOML of the documented shape, or a case has
-/// a tolerance outside (0, 1], a resolution outside 3..=512, or an `expect` naming an
-/// unknown representation or missing one.
+/// a tolerance outside (0, 1], a resolution outside [`CASE_RESOLUTION`] (3..=512), or an
+/// `expect` naming an unknown representation or missing one.
 pub fn load_cases(manifest: &Path) -> Result<Vec<Case>> {
     let text = crate::files::read_input_text(manifest, crate::files::MAX_TEXT_BYTES)?;
     let m: Manifest = toml::from_str(&text).map_err(|e| Error::input(manifest, None, e.message()))?;
@@ -149,9 +151,7 @@ pub fn load_cases(manifest: &Path) -> Result<Vec<Case>> {
         if !(c.tolerance > 0.0 && c.tolerance <= 1.0) {
             return Err(bad(format!("tolerance must be in (0, 1], got {}", c.tolerance)));
         }
-        if !(3..=512).contains(&c.resolution) {
-            return Err(bad(format!("resolution must be between 3 and 512, got {}", c.resolution)));
-        }
+        CASE_RESOLUTION.check("resolution", c.resolution).map_err(|e| bad(e.to_string()))?;
         for k in c.expect.keys() {
             if !REPRS.contains(&k.as_str()) {
                 return Err(bad(format!(
