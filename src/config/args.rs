@@ -19,8 +19,8 @@ use crate::plan::{GridFill, ReprKind};
     about = "Ray marching SDFs versus ray tracing meshes: render, convert, compare"
 )]
 pub struct Cli {
+    /// The subcommand and its arguments.
     #[command(subcommand)]
-    #[allow(missing_docs)]
     pub command: Command,
     /// Memory a request may use, e.g. 4GiB or 512MB (default: half of physical memory; at
     /// most all of it).
@@ -31,7 +31,6 @@ pub struct Cli {
 
 /// A subcommand and its raw arguments (each variant's doc comment is its `--help`).
 #[derive(Subcommand)]
-#[allow(missing_docs)]
 pub enum Command {
     /// Render a scene file, or a mesh file (OBJ, glTF, GLB, PLY, STL) or a signed distance
     /// grid file (.sdf, .npy) framed by a default camera and lights, to a PNG with one
@@ -46,10 +45,13 @@ pub enum Command {
         /// Representation of the objects.
         #[arg(long, value_enum, default_value_t = ReprKind::Analytic)]
         repr: ReprKind,
+        /// The mesh and grid representations' flags.
         #[command(flatten)]
         mesh: MeshArgs,
+        /// Overrides of the scene's settings.
         #[command(flatten)]
         settings: SettingArgs,
+        /// Sphere tracing flags.
         #[command(flatten)]
         march: MarchArgs,
     },
@@ -149,8 +151,10 @@ pub enum Command {
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
+        /// Overrides of the scene's settings.
         #[command(flatten)]
         settings: SettingArgs,
+        /// Sphere tracing flags.
         #[command(flatten)]
         march: MarchArgs,
     },
@@ -174,10 +178,13 @@ pub enum Command {
         /// Output folder.
         #[arg(short, long, default_value = "reports/gallery")]
         output: PathBuf,
+        /// The mesh and grid representations' flags.
         #[command(flatten)]
         mesh: MeshArgs,
+        /// Overrides of the scene's settings.
         #[command(flatten)]
         settings: SettingArgs,
+        /// Sphere tracing flags.
         #[command(flatten)]
         march: MarchArgs,
     },
