@@ -37,7 +37,7 @@ use crate::config::CASE_RESOLUTION;
 use crate::error::{Error, Result, catch_panic};
 use crate::geometry::march::MarchParams;
 use crate::plan::budget::MemoryBudget;
-use crate::plan::{GridFill, GridStorage, MeshMethod, Representation};
+use crate::plan::{GridFill, GridStorage, MeshMethod, ReprKind, Representation};
 use crate::render::report::render_scene;
 use crate::scene::shape::Shading;
 
@@ -45,7 +45,7 @@ use crate::scene::shape::Shading;
 pub const PIXEL_TOLERANCE: u8 = 16;
 
 /// The representations every case is run in (besides the reference).
-pub const REPRS: [&str; 3] = ["sdf", "mesh", "grid"];
+pub const REPRS: [ReprKind; 3] = [ReprKind::Sdf, ReprKind::Mesh, ReprKind::Grid];
 
 /// How a case compares a render with the reference.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
@@ -153,10 +153,10 @@ pub fn load_cases(manifest: &Path) -> Result<Vec<Case>> {
         }
         CASE_RESOLUTION.check("resolution", c.resolution).map_err(|e| bad(e.to_string()))?;
         for k in c.expect.keys() {
-            if !REPRS.contains(&k.as_str()) {
+            if !REPRS.iter().any(|r| r.name() == k) {
                 return Err(bad(format!(
                     "expect: unknown representation '{k}'; valid: {}",
-                    REPRS.join(", ")
+                    REPRS.map(ReprKind::name).join(", ")
                 )));
             }
         }
@@ -165,21 +165,21 @@ pub fn load_cases(manifest: &Path) -> Result<Vec<Case>> {
     Ok(cases)
 }
 
-/// The representation called `name` at `resolution`.
-fn representation(name: &str, resolution: u32) -> Representation {
+/// The representation `kind` at `resolution`.
+fn representation(kind: ReprKind, resolution: u32) -> Representation {
     let march = MarchParams::default();
-    match name {
-        "sdf" => Representation::Sdf { march },
-        "mesh" => Representation::Mesh {
+    match kind {
+        ReprKind::Sdf => Representation::Sdf { march },
+        ReprKind::Mesh => Representation::Mesh {
             resolution,
             shading: Shading::Smooth,
             method: MeshMethod::Parametric,
             march,
         },
-        "grid" => {
+        ReprKind::Grid => {
             Representation::Grid { resolution, fill: GridFill::Sample, storage: GridStorage::Dense, march }
         }
-        _ => Representation::Analytic { march },
+        ReprKind::Analytic => Representation::Analytic { march },
     }
 }
 
@@ -206,23 +206,24 @@ pub fn run_case(case: &Case, budget: &MemoryBudget) -> Result<std::result::Resul
     }
     let scene = load_scene_or_mesh(&case.input, Shading::Smooth)?;
     // The evaluation and memory budgets, as `render` checks them, before anything is built.
-    for name in std::iter::once("analytic").chain(REPRS.into_iter().filter(|n| case.expect.contains_key(*n)))
+    for kind in std::iter::once(ReprKind::Analytic)
+        .chain(REPRS.into_iter().filter(|k| case.expect.contains_key(k.name())))
     {
-        let what = format!("the {name} representation of {}", case.input.display());
-        budget.check_scene(&what, &scene, representation(name, case.resolution))?;
+        let what = format!("the {kind} representation of {}", case.input.display());
+        budget.check_scene(&what, &scene, representation(kind, case.resolution))?;
     }
     let bg = scene.settings.background.to_array().map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8);
-    let reference = render_scene(&scene, representation("analytic", case.resolution));
+    let reference = render_scene(&scene, representation(ReprKind::Analytic, case.resolution));
     let mut out = Vec::new();
-    for name in REPRS {
-        let Some(&expected) = case.expect.get(name) else { continue };
-        let r = render_scene(&scene, representation(name, case.resolution));
+    for kind in REPRS {
+        let Some(&expected) = case.expect.get(kind.name()) else { continue };
+        let r = render_scene(&scene, representation(kind, case.resolution));
         let value = agreement(case.metric, &reference.frame.image, &r.frame.image, bg);
         let how =
             r.text.lines().filter(|l| l.starts_with("  ")).map(str::trim).collect::<Vec<_>>().join("; ");
         out.push(Outcome {
             case: case.name.clone(),
-            repr: name,
+            repr: kind.name(),
             value,
             tolerance: case.tolerance,
             passed: value >= case.tolerance,
