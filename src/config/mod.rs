@@ -322,7 +322,7 @@ pub struct CompareOptions {
     /// Written to every row's `replicate` column (and part of the resume key).
     pub replicate: u32,
     /// Shuffle each input's runs after the reference with this seed
-    /// ([`crate::compare::run_order`]); `None`: the planned order.
+    /// (compare's `run_order`); `None`: the planned order.
     pub order_seed: Option<u64>,
     /// Half-width of narrow-band grids, cells, in [`BAND_CELLS`].
     pub band_cells: u32,

@@ -261,7 +261,7 @@ pub const MAX_EXTRACT_RESOLUTION: u32 = 512;
 /// `resolution` (the one rule, stated here): `resolution`, at most
 /// [`MAX_EXTRACT_RESOLUTION`]. The mesh representation's `resolution` also counts the
 /// segments of tessellated primitives, which may go higher
-/// ([`crate::config::MESH_RESOLUTION`]); an extraction's sample grid is held in memory, so
+/// (the command line's `MESH_RESOLUTION`); an extraction's sample grid is held in memory, so
 /// the objects extracted from their SDFs (CSG, repetition, grid files, and every object
 /// under [`MeshMethod::Extracted`]) stop at this cap. The render report names the
 /// resolution each object was extracted at.
