@@ -38,6 +38,8 @@
 //! - [`convert`]: conversions between representations.
 //! - [`render`]: the tracer and frame loop; [`metrics`]: error measures.
 //! - [`compare`]: the study's runs, CSV and summaries; [`cli`]: the `toolkit` subcommands.
+//! - [`config`]: the command line validated once (every flag's range stated there) into
+//!   the options the commands take.
 
 // `!(x >= 0.0)` is the NaN-rejecting form used on purpose in the numerical code.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -45,6 +47,7 @@
 pub mod base;
 pub mod cli;
 pub mod compare;
+pub mod config;
 pub mod convert;
 pub mod error;
 pub mod files;

@@ -32,11 +32,12 @@ use std::path::{Path, PathBuf};
 use image::RgbImage;
 use serde::Deserialize;
 
-use crate::cli::commands::render_scene;
+use crate::config::CASE_RESOLUTION;
 use crate::error::{Error, Result, catch_panic};
 use crate::geometry::march::MarchParams;
 use crate::plan::budget::MemoryBudget;
-use crate::plan::{GridFill, GridStorage, MeshMethod, Representation};
+use crate::plan::{GridFill, GridStorage, MeshMethod, ReprKind, Representation};
+use crate::render::report::render_scene;
 use crate::scene::load_input;
 use crate::scene::shape::Shading;
 
@@ -44,7 +45,7 @@ use crate::scene::shape::Shading;
 pub const PIXEL_TOLERANCE: u8 = 16;
 
 /// The representations every case is run in (besides the reference).
-pub const REPRS: [&str; 3] = ["sdf", "mesh", "grid"];
+pub const REPRS: [ReprKind; 3] = [ReprKind::Sdf, ReprKind::Mesh, ReprKind::Grid];
 
 /// How a case compares a render with the reference.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
@@ -138,8 +139,8 @@ pub struct Skipped {
 ///
 /// # Errors
 /// When the file cannot be read, is not valid TOML of the documented shape, or a case has
-/// a tolerance outside (0, 1], a resolution outside 3..=512, or an `expect` naming an
-/// unknown representation or missing one.
+/// a tolerance outside (0, 1], a resolution outside [`CASE_RESOLUTION`] (3..=512), or an
+/// `expect` naming an unknown representation or missing one.
 pub fn load_cases(manifest: &Path) -> Result<Vec<Case>> {
     let text = crate::files::read_input_text(manifest, crate::files::MAX_TEXT_BYTES)?;
     let m: Manifest = toml::from_str(&text).map_err(|e| Error::input(manifest, None, e.message()))?;
@@ -150,14 +151,12 @@ pub fn load_cases(manifest: &Path) -> Result<Vec<Case>> {
         if !(c.tolerance > 0.0 && c.tolerance <= 1.0) {
             return Err(bad(format!("tolerance must be in (0, 1], got {}", c.tolerance)));
         }
-        if !(3..=512).contains(&c.resolution) {
-            return Err(bad(format!("resolution must be between 3 and 512, got {}", c.resolution)));
-        }
+        CASE_RESOLUTION.check("resolution", c.resolution).map_err(|e| bad(e.to_string()))?;
         for k in c.expect.keys() {
-            if !REPRS.contains(&k.as_str()) {
+            if !REPRS.iter().any(|r| r.name() == k) {
                 return Err(bad(format!(
                     "expect: unknown representation '{k}'; valid: {}",
-                    REPRS.join(", ")
+                    REPRS.map(ReprKind::name).join(", ")
                 )));
             }
         }
@@ -166,21 +165,21 @@ pub fn load_cases(manifest: &Path) -> Result<Vec<Case>> {
     Ok(cases)
 }
 
-/// The representation called `name` at `resolution`.
-fn representation(name: &str, resolution: u32) -> Representation {
+/// The representation `kind` at `resolution`.
+fn representation(kind: ReprKind, resolution: u32) -> Representation {
     let march = MarchParams::default();
-    match name {
-        "sdf" => Representation::Sdf { march },
-        "mesh" => Representation::Mesh {
+    match kind {
+        ReprKind::Sdf => Representation::Sdf { march },
+        ReprKind::Mesh => Representation::Mesh {
             resolution,
             shading: Shading::Smooth,
             method: MeshMethod::Parametric,
             march,
         },
-        "grid" => {
+        ReprKind::Grid => {
             Representation::Grid { resolution, fill: GridFill::Sample, storage: GridStorage::Dense, march }
         }
-        _ => Representation::Analytic { march },
+        ReprKind::Analytic => Representation::Analytic { march },
     }
 }
 
@@ -207,23 +206,24 @@ pub fn run_case(case: &Case, budget: &MemoryBudget) -> Result<std::result::Resul
     }
     let scene = load_input(&case.input, Shading::Smooth)?;
     // The evaluation and memory budgets, as `render` checks them, before anything is built.
-    for name in std::iter::once("analytic").chain(REPRS.into_iter().filter(|n| case.expect.contains_key(*n)))
+    for kind in std::iter::once(ReprKind::Analytic)
+        .chain(REPRS.into_iter().filter(|k| case.expect.contains_key(k.name())))
     {
-        let what = format!("the {name} representation of {}", case.input.display());
-        budget.check_scene(&what, &scene, representation(name, case.resolution))?;
+        let what = format!("the {kind} representation of {}", case.input.display());
+        budget.check_scene(&what, &scene, representation(kind, case.resolution))?;
     }
     let bg = scene.settings.background.to_array().map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8);
-    let reference = render_scene(&scene, representation("analytic", case.resolution));
+    let reference = render_scene(&scene, representation(ReprKind::Analytic, case.resolution));
     let mut out = Vec::new();
-    for name in REPRS {
-        let Some(&expected) = case.expect.get(name) else { continue };
-        let r = render_scene(&scene, representation(name, case.resolution));
+    for kind in REPRS {
+        let Some(&expected) = case.expect.get(kind.name()) else { continue };
+        let r = render_scene(&scene, representation(kind, case.resolution));
         let value = agreement(case.metric, &reference.frame.image, &r.frame.image, bg);
         let how =
             r.text.lines().filter(|l| l.starts_with("  ")).map(str::trim).collect::<Vec<_>>().join("; ");
         out.push(Outcome {
             case: case.name.clone(),
-            repr: name,
+            repr: kind.name(),
             value,
             tolerance: case.tolerance,
             passed: value >= case.tolerance,

@@ -17,7 +17,6 @@ pub mod scaling;
 pub mod summary;
 
 use std::collections::HashSet;
-use std::fmt;
 use std::fs::{File, OpenOptions};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -28,7 +27,7 @@ use glam::DVec3;
 use image::RgbImage;
 use serde::{Deserialize, Serialize};
 
-use crate::cli::commands::{Overrides, check_repr};
+use crate::config::{CompareOptions, sweep_mesh_resolution};
 use crate::convert::extract::ExtractMethod;
 use crate::error::{Error, Result, catch_panic};
 use crate::geometry::Geometry;
@@ -39,8 +38,8 @@ use crate::mesh::{TriangleMesh, save_mesh};
 use crate::metrics::{self, Probe};
 use crate::plan::budget::{MemoryBudget, reextract_bytes};
 use crate::plan::{
-    Fallback, GridFill, GridStorage, MeshMethod, ObjectPlan, Representation, build_scene_with_plans,
-    reextract_mesh,
+    Fallback, GridFill, GridStorage, MeshMethod, ObjectPlan, ReprKind, Representation,
+    build_scene_with_plans, reextract_mesh,
 };
 use crate::render::{Frame, render, write_png};
 use crate::scene::shape::{ObjectKind, Shading};
@@ -236,67 +235,9 @@ impl RowKey {
     }
 }
 
-/// Options of `toolkit compare`.
-#[derive(Clone, Debug)]
-pub struct CompareOptions {
-    /// Scene files and mesh files.
-    pub inputs: Vec<PathBuf>,
-    /// Output CSV.
-    pub csv: PathBuf,
-    /// Resolution sweep.
-    pub resolutions: Vec<u32>,
-    /// Timed frames per run (after one warm-up frame), `>= 1`.
-    pub frames: u32,
-    /// Skip runs already in the CSV.
-    pub resume: bool,
-    /// Replace an existing CSV.
-    pub overwrite: bool,
-    /// Image size and depth overrides (the same for every run of an input).
-    pub overrides: Overrides,
-    /// Sphere tracing parameters of the grid and mesh runs (and the defaults of the others:
-    /// the reference and the SDF sweep change only `tolerance_px` and `relaxation`).
-    pub march: MarchParams,
-    /// The SDF sweep's hit tolerances, pixels: one `sdf/sphere-trace` run per pair of these
-    /// and `sdf_relaxations`.
-    pub sdf_tolerances_px: Vec<f64>,
-    /// The SDF sweep's over-relaxation factors.
-    pub sdf_relaxations: Vec<f64>,
-    /// Written to every row's `replicate` column (and part of the resume key).
-    pub replicate: u32,
-    /// Shuffle each input's runs after the reference with this seed ([`run_order`]);
-    /// `None`: the planned order.
-    pub order_seed: Option<u64>,
-    /// Half-width of narrow-band grids, cells.
-    pub band_cells: u32,
-    /// Also write the summary as JSON here.
-    pub summary_json: Option<PathBuf>,
-    /// Write renders, meshes and grids of the runs here.
-    pub artifacts: Option<PathBuf>,
-    /// Largest number of surface samples per side for Chamfer and Hausdorff distances.
-    pub surface_samples: usize,
-    /// Show a progress bar on stderr.
-    pub progress: bool,
-    /// Runs whose estimated memory exceeds this are skipped with a message.
-    pub budget: MemoryBudget,
-}
-
-/// The default hit tolerances of the SDF sweep, pixels.
-pub const DEFAULT_SDF_TOLERANCES_PX: [f64; 3] = [0.25, 1.0, 2.0];
-
-/// The default over-relaxation factors of the SDF sweep.
-pub const DEFAULT_SDF_RELAXATIONS: [f64; 2] = [1.0, 1.6];
-
 /// The reference's hit tolerance, pixels (or the sweep's smallest, if that is smaller), so
 /// that the reference marches (CSG, repetition) finer than every run.
 pub const REFERENCE_TOLERANCE_PX: f64 = 0.05;
-
-/// `MarchParams::epsilon` of every compare run unless `--epsilon` says otherwise: large
-/// enough that the hit tolerance `min(epsilon, tolerance_px * pixel_footprint) * t` is
-/// `tolerance_px` pixels for any camera (the pixel term exceeds 0.5 only for a footprint
-/// over 0.5 / tolerance_px radians), so `tolerance_px` alone is the knob. With `render`'s
-/// 1e-4 the relative cap binds first at usual image sizes (0.25 px of a 45-degree, 128-pixel
-/// camera is 1.6e-3) and the sweep would change nothing.
-pub const COMPARE_EPSILON: f64 = 0.5;
 
 /// The default inputs: every scene under `data/scenes`, searched recursively (sorted by
 /// path), and the Stanford bunny from `../shared/meshes` where it exists, relative to the
@@ -339,52 +280,17 @@ pub fn default_inputs() -> Result<Vec<PathBuf>> {
     Ok(inputs)
 }
 
-/// The default resolution sweep.
-pub const DEFAULT_RESOLUTIONS: [u32; 6] = [8, 16, 32, 64, 128, 256];
-
 /// Largest resolution written as a mesh or grid artifact.
 const ARTIFACT_MAX_RES: u32 = 64;
 
-/// How one run's geometry is made.
+/// How one run's geometry is made (not [`crate::plan::Build`], how one object is built).
 #[derive(Clone, Copy, Debug)]
-enum Build {
+enum RunGeometry {
     /// `build_scene` in a representation.
     Scene(Representation),
     /// The input mesh sampled or voxelized into a grid at a resolution and re-extracted
     /// with marching cubes.
     Reextract { fill: GridFill, resolution: u32 },
-}
-
-/// The `repr` column: which representation a run stands for (a mesh input's original
-/// mesh and its re-extractions are `mesh` runs although the mesh is traced as it is).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum RunRepr {
-    /// Closed-form intersection (sphere tracing where there is none).
-    Analytic,
-    /// Sphere tracing of the analytic SDFs.
-    Sdf,
-    /// Triangle meshes.
-    Mesh,
-    /// SDF grids.
-    Grid,
-}
-
-impl RunRepr {
-    /// The column value: `analytic`, `sdf`, `mesh` or `grid`.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            RunRepr::Analytic => "analytic",
-            RunRepr::Sdf => "sdf",
-            RunRepr::Mesh => "mesh",
-            RunRepr::Grid => "grid",
-        }
-    }
-}
-
-impl fmt::Display for RunRepr {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
-    }
 }
 
 /// The `class` column of an input: for a scene file under a `data/scenes` folder, its
@@ -434,10 +340,10 @@ pub fn run_order(n: usize, seed: Option<u64>, input: &str) -> Vec<usize> {
 /// One planned run.
 #[derive(Clone, Debug)]
 struct Run {
-    repr: RunRepr,
+    repr: ReprKind,
     method: &'static str,
     resolution: Option<u32>,
-    build: Build,
+    build: RunGeometry,
 }
 
 impl Run {
@@ -445,8 +351,8 @@ impl Run {
     /// meshes, which march nothing.
     fn knob(&self) -> Option<(f64, f64)> {
         match self.build {
-            Build::Scene(r) => Some((r.march().tolerance_px, r.march().relaxation)),
-            Build::Reextract { .. } => None,
+            RunGeometry::Scene(r) => Some((r.march().tolerance_px, r.march().relaxation)),
+            RunGeometry::Reextract { .. } => None,
         }
     }
 }
@@ -467,63 +373,64 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
     let finest = opts.sdf_tolerances_px.iter().copied().fold(REFERENCE_TOLERANCE_PX, f64::min);
     let reference_march = MarchParams { tolerance_px: finest, relaxation: 1.0, ..march };
     let band = GridStorage::Band { cells: opts.band_cells };
-    let grid =
-        |resolution, fill, storage| Build::Scene(Representation::Grid { resolution, fill, storage, march });
+    let grid = |resolution, fill, storage| {
+        RunGeometry::Scene(Representation::Grid { resolution, fill, storage, march })
+    };
     let mut runs = Vec::new();
     if mesh_input(scene).is_some() {
         runs.push(Run {
-            repr: RunRepr::Mesh,
+            repr: ReprKind::Mesh,
             method: "original",
             resolution: None,
-            build: Build::Scene(Representation::Analytic { march: reference_march }),
+            build: RunGeometry::Scene(Representation::Analytic { march: reference_march }),
         });
         for &r in &opts.resolutions {
             let res = Some(r);
             runs.push(Run {
-                repr: RunRepr::Grid,
+                repr: ReprKind::Grid,
                 method: "sample",
                 resolution: res,
                 build: grid(r, GridFill::Sample, GridStorage::Dense),
             });
             runs.push(Run {
-                repr: RunRepr::Grid,
+                repr: ReprKind::Grid,
                 method: "voxelize",
                 resolution: res,
                 build: grid(r, GridFill::Voxelize, GridStorage::Dense),
             });
             runs.push(Run {
-                repr: RunRepr::Grid,
+                repr: ReprKind::Grid,
                 method: "sample-band",
                 resolution: res,
                 build: grid(r, GridFill::Sample, band),
             });
             runs.push(Run {
-                repr: RunRepr::Mesh,
+                repr: ReprKind::Mesh,
                 method: "from-sample",
                 resolution: res,
-                build: Build::Reextract { fill: GridFill::Sample, resolution: r },
+                build: RunGeometry::Reextract { fill: GridFill::Sample, resolution: r },
             });
             runs.push(Run {
-                repr: RunRepr::Mesh,
+                repr: ReprKind::Mesh,
                 method: "from-voxelize",
                 resolution: res,
-                build: Build::Reextract { fill: GridFill::Voxelize, resolution: r },
+                build: RunGeometry::Reextract { fill: GridFill::Voxelize, resolution: r },
             });
         }
     } else {
         runs.push(Run {
-            repr: RunRepr::Analytic,
+            repr: ReprKind::Analytic,
             method: "closed-form",
             resolution: None,
-            build: Build::Scene(Representation::Analytic { march: reference_march }),
+            build: RunGeometry::Scene(Representation::Analytic { march: reference_march }),
         });
         for &tolerance_px in &opts.sdf_tolerances_px {
             for &relaxation in &opts.sdf_relaxations {
                 runs.push(Run {
-                    repr: RunRepr::Sdf,
+                    repr: ReprKind::Sdf,
                     method: "sphere-trace",
                     resolution: None,
-                    build: Build::Scene(Representation::Sdf {
+                    build: RunGeometry::Scene(Representation::Sdf {
                         march: MarchParams { tolerance_px, relaxation, ..march },
                     }),
                 });
@@ -532,40 +439,40 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
         for &r in &opts.resolutions {
             let res = Some(r);
             let mesh = |method| {
-                Build::Scene(Representation::Mesh {
-                    resolution: r.max(3),
+                RunGeometry::Scene(Representation::Mesh {
+                    resolution: sweep_mesh_resolution(r),
                     shading: Shading::Smooth,
                     method,
                     march,
                 })
             };
             runs.push(Run {
-                repr: RunRepr::Mesh,
+                repr: ReprKind::Mesh,
                 method: "parametric",
                 resolution: res,
                 build: mesh(MeshMethod::Parametric),
             });
             runs.push(Run {
-                repr: RunRepr::Mesh,
+                repr: ReprKind::Mesh,
                 method: "extracted",
                 resolution: res,
                 build: mesh(MeshMethod::Extracted(ExtractMethod::MarchingCubes)),
             });
             runs.push(Run {
-                repr: RunRepr::Grid,
+                repr: ReprKind::Grid,
                 method: "dense",
                 resolution: res,
                 build: grid(r, GridFill::Sample, GridStorage::Dense),
             });
             runs.push(Run {
-                repr: RunRepr::Grid,
+                repr: ReprKind::Grid,
                 method: "band",
                 resolution: res,
                 build: grid(r, GridFill::Sample, band),
             });
             if scene.objects.len() > 1 {
                 runs.push(Run {
-                    repr: RunRepr::Grid,
+                    repr: ReprKind::Grid,
                     method: "scene-band",
                     resolution: res,
                     build: grid(r, GridFill::Sample, GridStorage::Scene { cells: opts.band_cells }),
@@ -586,21 +493,21 @@ struct Built {
     grid: Option<SdfGrid>,
 }
 
-fn build(scene: &Scene, b: Build, budget: &MemoryBudget) -> Result<Built> {
+fn build(scene: &Scene, b: RunGeometry, budget: &MemoryBudget) -> Result<Built> {
     match b {
-        Build::Scene(repr) => budget.check_scene("this run", scene, repr)?,
-        Build::Reextract { fill, resolution } => budget.check(
+        RunGeometry::Scene(repr) => budget.check_scene("this run", scene, repr)?,
+        RunGeometry::Reextract { fill, resolution } => budget.check(
             "this run",
             reextract_bytes(mesh_input(scene).map_or(0, |m| m.triangles.len()), fill, resolution),
         )?,
     }
     let start = Instant::now();
     match b {
-        Build::Scene(repr) => {
+        RunGeometry::Scene(repr) => {
             let (geometry, plans) = build_scene_with_plans(scene, repr);
             Ok(Built { geometry, plans, build_ms: ms(start), mesh: None, grid: None })
         }
-        Build::Reextract { fill, resolution } => {
+        RunGeometry::Reextract { fill, resolution } => {
             let original = mesh_input(scene).ok_or_else(|| Error::Usage("not a mesh input".into()))?;
             let (grid, mesh) = reextract_mesh(original, fill, resolution)?;
             let mut s = scene.clone();
@@ -828,8 +735,8 @@ fn stem(path: &Path) -> String {
 /// the description of every object with a fallback that sphere traces it (entirely or
 /// outside a view-region clip) or that sampled a mesh voxelizing found open; empty for
 /// other runs.
-fn note(geometry: &SceneGeometry, plans: &[ObjectPlan], repr: RunRepr) -> String {
-    if !matches!(repr, RunRepr::Mesh | RunRepr::Grid) {
+fn note(geometry: &SceneGeometry, plans: &[ObjectPlan], repr: ReprKind) -> String {
+    if !matches!(repr, ReprKind::Mesh | ReprKind::Grid) {
         return String::new();
     }
     let fallbacks: Vec<String> = geometry
@@ -861,34 +768,6 @@ fn note(geometry: &SceneGeometry, plans: &[ObjectPlan], repr: RunRepr) -> String
 /// `--overwrite`, a CSV another process is writing (without `--resume`), unwritable outputs;
 /// [`Error::Batch`] (with the summary) when some inputs failed and the others ran.
 pub fn compare_command(opts: &CompareOptions) -> Result<String> {
-    if opts.frames == 0 || opts.frames > 1000 {
-        return Err(Error::Usage(format!("--frames must be between 1 and 1000, got {}", opts.frames)));
-    }
-    if opts.resolutions.is_empty() {
-        return Err(Error::Usage("--res needs at least one resolution".into()));
-    }
-    for &r in &opts.resolutions {
-        check_repr(&Representation::Grid {
-            resolution: r,
-            fill: GridFill::Sample,
-            storage: GridStorage::Dense,
-            march: opts.march,
-        })?;
-    }
-    if opts.band_cells == 0 {
-        return Err(Error::Usage("--band must be at least 1 cell".into()));
-    }
-    if opts.sdf_tolerances_px.is_empty() || opts.sdf_relaxations.is_empty() {
-        return Err(Error::Usage("--sdf-tolerance-px and --sdf-relax need at least one value each".into()));
-    }
-    for &tolerance_px in &opts.sdf_tolerances_px {
-        for &relaxation in &opts.sdf_relaxations {
-            check_repr(&Representation::Sdf {
-                march: MarchParams { tolerance_px, relaxation, ..opts.march },
-            })
-            .map_err(|e| Error::Usage(format!("--sdf-tolerance-px/--sdf-relax: {e}")))?;
-        }
-    }
     let mut opts = opts.clone();
     opts.resolutions.sort_unstable();
     opts.resolutions.dedup();
@@ -908,7 +787,7 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
         }
         let loaded = catch_panic(|| {
             let mut scene = load_input(path, Shading::Smooth)?;
-            opts.overrides.apply(&mut scene)?;
+            opts.overrides.apply(&mut scene);
             Ok(scene)
         })
         .and_then(|r| r);
@@ -1171,7 +1050,7 @@ fn save_artifacts(
         None => format!("{}-{}", run.repr, run.method),
     };
     // The SDF sweep's runs differ only in their knob.
-    if let (RunRepr::Sdf, Some((t, r))) = (run.repr, run.knob()) {
+    if let (ReprKind::Sdf, Some((t, r))) = (run.repr, run.knob()) {
         base = format!("{base}-tol{t}-relax{r}");
     }
     write_png(image, &dir.join(format!("{base}.png")))?;
@@ -1180,7 +1059,9 @@ fn save_artifacts(
     }
     if run.resolution.is_some_and(|r| r <= ARTIFACT_MAX_RES) {
         let mesh = built.mesh.clone().or_else(|| {
-            (run.repr == RunRepr::Mesh).then(|| crate::plan::scene_mesh(scene, representation(run))).flatten()
+            (run.repr == ReprKind::Mesh)
+                .then(|| crate::plan::scene_mesh(scene, representation(run)))
+                .flatten()
         });
         if let Some(mesh) = mesh.filter(|m| !m.triangles.is_empty()) {
             save_mesh(&mesh, &dir.join(format!("{base}.ply")))?;
@@ -1198,7 +1079,7 @@ fn save_artifacts(
 /// The representation a run's [`crate::plan::scene_mesh`] artifact is made in.
 fn representation(run: &Run) -> Representation {
     match run.build {
-        Build::Scene(r) => r,
-        Build::Reextract { .. } => Representation::Analytic { march: MarchParams::default() },
+        RunGeometry::Scene(r) => r,
+        RunGeometry::Reextract { .. } => Representation::Analytic { march: MarchParams::default() },
     }
 }

@@ -12,10 +12,9 @@ use std::time::Instant;
 use glam::Vec3;
 use serde::Serialize;
 
-use crate::cli::commands::Overrides;
+use crate::config::ScalingOptions;
 use crate::error::{Error, Result};
 use crate::geometry::Geometry;
-use crate::geometry::march::MarchParams;
 use crate::plan::{GridFill, GridStorage, MeshMethod, Representation, build_scene};
 use crate::scene::shape::{CsgOp, Object, ObjectKind, Primitive, Shading};
 use crate::scene::transform::TransformDesc;
@@ -205,32 +204,11 @@ pub fn scaling_scene(kind: &str, count: u32, width: u32, height: u32) -> Scene {
     }
 }
 
-/// Options of `toolkit compare --scaling`.
-#[derive(Clone, Debug)]
-pub struct ScalingOptions {
-    /// Primitive counts.
-    pub counts: Vec<u32>,
-    /// Timed frames per run.
-    pub frames: u32,
-    /// Resolution of the mesh and grid representations.
-    pub resolution: u32,
-    /// Image size and depth overrides (default 320 x 240, depth 1).
-    pub overrides: Overrides,
-    /// Sphere tracing parameters.
-    pub march: MarchParams,
-}
-
 /// Runs the experiment and writes the CSV (through a temporary file: all rows or none).
 ///
 /// # Errors
 /// Bad options, an unwritable CSV.
 pub fn scaling_command(opts: &ScalingOptions, csv_path: &Path) -> Result<String> {
-    if opts.counts.is_empty() || opts.counts.iter().any(|&c| c == 0 || c > 10_000) {
-        return Err(Error::Usage("--counts must be between 1 and 10000".into()));
-    }
-    if opts.frames == 0 || opts.frames > 1000 {
-        return Err(Error::Usage(format!("--frames must be between 1 and 1000, got {}", opts.frames)));
-    }
     let march = opts.march;
     let res = opts.resolution;
     let reprs: [(String, Representation); 4] = [
@@ -255,9 +233,6 @@ pub fn scaling_command(opts: &ScalingOptions, csv_path: &Path) -> Result<String>
             },
         ),
     ];
-    for (_, r) in &reprs {
-        crate::cli::commands::check_repr(r)?;
-    }
     let commit = commit_id();
     let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(Vec::new());
     w.write_record(SCALING_COLUMNS).map_err(|e| Error::io(csv_path, e))?;
@@ -266,7 +241,7 @@ pub fn scaling_command(opts: &ScalingOptions, csv_path: &Path) -> Result<String>
         for &count in &opts.counts {
             for layout in [Layout::Objects, Layout::Union] {
                 let mut scene = scaling_scene_as(kind, count, 320, 240, layout);
-                opts.overrides.apply(&mut scene)?;
+                opts.overrides.apply(&mut scene);
                 for (method, r) in &reprs {
                     let repr = r.name();
                     let method = match layout {

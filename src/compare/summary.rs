@@ -11,8 +11,9 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
-use super::{Row, RunRepr};
+use super::Row;
 use crate::metrics::{QUALITY_LEVELS, median};
+use crate::plan::ReprKind;
 
 /// A run named in the summary.
 #[derive(Clone, Debug, Serialize, PartialEq)]
@@ -114,7 +115,7 @@ fn min_by<'a>(rows: impl Iterator<Item = &'a Row>, key: impl Fn(&Row) -> f64) ->
 }
 
 fn is_marched(r: &Row) -> bool {
-    r.repr == RunRepr::Sdf.as_str() || r.repr == RunRepr::Grid.as_str()
+    r.repr == ReprKind::Sdf.name() || r.repr == ReprKind::Grid.name()
 }
 
 /// One row per run of an input: replicates merged (median frame time, worst errors and
@@ -176,9 +177,9 @@ pub fn summarize(rows: &[Row]) -> Summary {
                     let fastest = min_by(ok(), time);
                     let smallest = min_by(ok(), bytes);
                     let best_marched = min_by(ok().filter(|r| is_marched(r)), time);
-                    let best_mesh = min_by(ok().filter(|r| r.repr == RunRepr::Mesh.as_str()), time);
+                    let best_mesh = min_by(ok().filter(|r| r.repr == ReprKind::Mesh.name()), time);
                     let small_marched = min_by(ok().filter(|r| is_marched(r)), bytes);
-                    let small_mesh = min_by(ok().filter(|r| r.repr == RunRepr::Mesh.as_str()), bytes);
+                    let small_mesh = min_by(ok().filter(|r| r.repr == ReprKind::Mesh.name()), bytes);
                     AtLevel {
                         quality_px: l,
                         max_silhouette_pct: level.max_silhouette_pct,

@@ -612,11 +612,11 @@ fn grid_file_marched(o: &Object, build: Build) -> (Box<dyn Geometry>, ObjectPlan
 }
 
 /// The zero level set of a grid-file object's trilinear field, in world space, extracted at
-/// `resolution` cells (at most [`super::MAX_EXTRACT_RESOLUTION`]) along the longest axis
+/// `resolution` cells (at most [`super::MAX_EXTRACT_RESOLUTION`]: [`super::extract_resolution`]) along the longest axis
 /// of its box with marching cubes, or with `method`'s extraction method; `None` for other
 /// objects or when the grid holds no surface.
 pub fn grid_file_mesh(o: &Object, resolution: u32, method: MeshMethod) -> Option<TriangleMesh> {
-    grid_file_surface(o, resolution.min(super::MAX_EXTRACT_RESOLUTION), method.extract_method())
+    grid_file_surface(o, super::extract_resolution(resolution), method.extract_method())
 }
 
 /// [`grid_file_mesh`] at `resolution` cells with `method`.

@@ -59,27 +59,90 @@ use crate::geometry::sdf::SdfTree;
 use crate::scene::Scene;
 use crate::scene::shape::{Object, ObjectKind, Primitive, Shading};
 
+/// Which representation, without its parameters: the one list of representations, from
+/// which the command line's `--repr` values (a [`clap::ValueEnum`]), the names in reports
+/// and file names, and the compare CSV's `repr` column all come.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum ReprKind {
+    /// Closed-form intersection where it exists (CSG and repetition are sphere traced).
+    Analytic,
+    /// Sphere tracing of the analytic signed distance functions.
+    Sdf,
+    /// Primitives tessellated at --res and ray traced as triangle meshes.
+    Mesh,
+    /// Objects sampled into signed distance grids of --res cells and ray marched.
+    Grid,
+}
+
+impl ReprKind {
+    /// Every representation, in the order of the command line's list.
+    pub const ALL: [ReprKind; 4] = [ReprKind::Analytic, ReprKind::Sdf, ReprKind::Mesh, ReprKind::Grid];
+
+    /// The command-line name (`analytic`, `sdf`, `mesh`, `grid`): also the compare CSV's
+    /// `repr` column and the `NAME.REPR.png` of `toolkit gallery`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ReprKind::Analytic => "analytic",
+            ReprKind::Sdf => "sdf",
+            ReprKind::Mesh => "mesh",
+            ReprKind::Grid => "grid",
+        }
+    }
+}
+
+impl fmt::Display for ReprKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// How the scene's objects are represented for tracing.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Representation {
     /// Closed-form ray/primitive intersection; objects without one (CSG, repetition) are
     /// sphere traced with `march`.
-    Analytic { march: MarchParams },
+    Analytic {
+        /// Sphere tracing parameters of the objects without a closed form.
+        march: MarchParams,
+    },
     /// Sphere tracing of the analytic signed distance functions.
-    Sdf { march: MarchParams },
+    Sdf {
+        /// Sphere tracing parameters.
+        march: MarchParams,
+    },
     /// Primitives tessellated parametrically at `resolution` (segments around the largest
     /// circle) and ray traced as triangle meshes through a BVH; infinite planes become a
     /// disc around the camera out to the scene's `max_distance`; repetition is instanced
     /// (its child made into one mesh, placed per copy: [`Build::Instanced`]); bounded CSG
     /// is extracted from its SDF (marching cubes, `resolution` cells along the
-    /// longest axis, at most 512); unbounded CSG is sphere traced with `march` (the
-    /// render says so). Objects of the same geometry share one mesh ([`Build::SharedMesh`]).
-    Mesh { resolution: u32, shading: Shading, method: MeshMethod, march: MarchParams },
+    /// longest axis, at most [`MAX_EXTRACT_RESOLUTION`]: [`extract_resolution`]); unbounded
+    /// CSG is sphere traced with `march` (the render says so). Objects of the same geometry
+    /// share one mesh ([`Build::SharedMesh`]).
+    Mesh {
+        /// Segments around the largest circle of a tessellated primitive; cells along the
+        /// longest axis of an extracted object (at most [`MAX_EXTRACT_RESOLUTION`]).
+        resolution: u32,
+        /// Shading of tessellated primitives and mesh files (extracted surfaces are flat).
+        shading: Shading,
+        /// Parametric tessellation, or extraction of every bounded object.
+        method: MeshMethod,
+        /// Sphere tracing parameters of the objects that stay marched.
+        march: MarchParams,
+    },
     /// Every bounded object (primitive, CSG, repetition, mesh) sampled into a signed
     /// distance grid of `resolution` cells along its longest axis (exact distances at cell
     /// corners) and ray marched through the trilinear interpolation with `march`; unbounded
     /// objects and triangles (unsigned) are sphere traced analytically (the render says so).
-    Grid { resolution: u32, fill: GridFill, storage: GridStorage, march: MarchParams },
+    Grid {
+        /// Cells along the longest axis of each gridded object's box.
+        resolution: u32,
+        /// How mesh objects' grids are filled.
+        fill: GridFill,
+        /// How the samples are stored.
+        storage: GridStorage,
+        /// Ray marching parameters of the grids (and sphere tracing of what is not gridded).
+        march: MarchParams,
+    },
 }
 
 /// How the mesh representation turns primitives into triangles.
@@ -91,13 +154,14 @@ pub enum MeshMethod {
     Extracted(ExtractMethod),
 }
 
-/// How a mesh object's grid is filled (analytic objects are always sampled exactly).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// How a mesh object's grid is filled (analytic objects are always sampled exactly); the
+/// command line's `--fill` values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
 pub enum GridFill {
     /// Exact distance to the nearest triangle at every sample, sign from the winding number.
     Sample,
-    /// Surface voxels rasterised, inside found by flood fill, distances from a Euclidean
-    /// distance transform (voxel-accurate).
+    /// Rasterize the surface, flood fill the outside, Euclidean distance transform
+    /// (fast, about one voxel of error; closed meshes only).
     Voxelize,
 }
 
@@ -135,14 +199,19 @@ impl GridStorage {
 }
 
 impl Representation {
-    /// The command-line name.
-    pub fn name(&self) -> &'static str {
+    /// Which representation this is.
+    pub fn kind(&self) -> ReprKind {
         match self {
-            Representation::Analytic { .. } => "analytic",
-            Representation::Sdf { .. } => "sdf",
-            Representation::Mesh { .. } => "mesh",
-            Representation::Grid { .. } => "grid",
+            Representation::Analytic { .. } => ReprKind::Analytic,
+            Representation::Sdf { .. } => ReprKind::Sdf,
+            Representation::Mesh { .. } => ReprKind::Mesh,
+            Representation::Grid { .. } => ReprKind::Grid,
         }
+    }
+
+    /// The command-line name ([`ReprKind::name`]).
+    pub fn name(&self) -> &'static str {
+        self.kind().name()
     }
 
     /// The sphere tracing parameters (used by every object that is marched).
@@ -187,6 +256,18 @@ impl MeshMethod {
 
 /// Largest resolution SDF-to-mesh extraction is run at in the mesh representation.
 pub const MAX_EXTRACT_RESOLUTION: u32 = 512;
+
+/// The resolution an object is extracted at in the mesh representation asked at
+/// `resolution` (the one rule, stated here): `resolution`, at most
+/// [`MAX_EXTRACT_RESOLUTION`]. The mesh representation's `resolution` also counts the
+/// segments of tessellated primitives, which may go higher
+/// (the command line's `MESH_RESOLUTION`); an extraction's sample grid is held in memory, so
+/// the objects extracted from their SDFs (CSG, repetition, grid files, and every object
+/// under [`MeshMethod::Extracted`]) stop at this cap. The render report names the
+/// resolution each object was extracted at.
+pub fn extract_resolution(resolution: u32) -> u32 {
+    resolution.min(MAX_EXTRACT_RESOLUTION)
+}
 
 /// Margin of grids around an object's bounds, in cells: keeps the surface off the grid's
 /// boundary so the interpolated field is closed.
@@ -462,7 +543,7 @@ pub fn plan_object(scene: &Scene, o: &Object, repr: Representation) -> ObjectPla
         let build = match repr {
             Representation::Mesh { resolution, method, .. } => Build::GridFileExtracted {
                 method: method.extract_method(),
-                resolution: resolution.min(MAX_EXTRACT_RESOLUTION),
+                resolution: extract_resolution(resolution),
             },
             Representation::Grid { storage, march, .. } => {
                 Build::GridFileMarched { storage: storage.own(), march }
@@ -512,7 +593,7 @@ pub fn plan_object(scene: &Scene, o: &Object, repr: Representation) -> ObjectPla
                     None if o.bounds().is_none() => marched(Some(Fallback::Unbounded)),
                     None => ObjectPlan::as_asked(Build::Extracted {
                         method: method.extract_method(),
-                        resolution: resolution.min(MAX_EXTRACT_RESOLUTION),
+                        resolution: extract_resolution(resolution),
                     }),
                 }
             }
@@ -522,7 +603,7 @@ pub fn plan_object(scene: &Scene, o: &Object, repr: Representation) -> ObjectPla
             _ if o.bounds().is_none() => marched(Some(Fallback::Unbounded)),
             _ => ObjectPlan::as_asked(Build::Extracted {
                 method: method.extract_method(),
-                resolution: resolution.min(MAX_EXTRACT_RESOLUTION),
+                resolution: extract_resolution(resolution),
             }),
         },
         Representation::Grid { resolution, fill, storage, march } => {
@@ -598,7 +679,7 @@ fn instance_mesh(
         _ if child.bounds().is_none() || !signed(child) => None,
         _ => Some(InstanceMesh::Extracted {
             method: method.extract_method(),
-            resolution: resolution.min(MAX_EXTRACT_RESOLUTION),
+            resolution: extract_resolution(resolution),
         }),
     }
 }

@@ -5,6 +5,7 @@
 //! one after the other, which marched geometry marches side by side (a lane taking the
 //! next ray as its march ends); everything else traces them one by one.
 
+pub mod report;
 pub mod tracer;
 
 use std::path::Path;

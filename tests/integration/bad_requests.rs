@@ -298,3 +298,124 @@ fn absurd_requests_fail_at_once() {
     }
     no_leftovers(&dir);
 }
+
+/// Every flag range (`sdfmesh::config`, where each is stated once) refuses the values just
+/// outside it, with one line naming the flag and the range, exit code 2, before any file
+/// is read and without touching the output.
+#[test]
+fn every_flag_range_refuses_its_edges() {
+    let dir = temp_dir("ranges");
+    let scene = put(&dir, "scene.toml", SCENE);
+    let mesh = put(&dir, "tetra.obj", TETRA);
+    let png = put(&dir, "out.png", "precious");
+    let csv = put(&dir, "out.csv", "precious");
+    let obj = put(&dir, "out.obj", "precious");
+    let sdf = put(&dir, "out.sdf", "precious");
+    let missing = dir.join("missing.toml").to_str().unwrap().to_owned();
+    let folder = dir.to_str().unwrap().to_owned();
+    let gallery = dir.join("g").to_str().unwrap().to_owned();
+    let p = |s: &String| Path::new(s).to_path_buf();
+    let render = |args: &[&'static str], needles: Vec<&'static str>| {
+        let mut all = vec!["render", scene.as_str(), "-o", png.as_str()];
+        all.extend(args);
+        (all, needles, p(&png))
+    };
+    let cases: Vec<(Vec<&str>, Vec<&str>, PathBuf)> = vec![
+        // The mesh representation's --res: 3..=8192.
+        render(&["--repr", "mesh", "--res", "2"], vec!["--res must be between 3 and 8192, got 2"]),
+        render(&["--repr", "mesh", "--res", "8193"], vec!["--res must be between 3 and 8192, got 8193"]),
+        // The grid representation's --res: 2..=1024.
+        render(&["--repr", "grid", "--res", "1"], vec!["--res must be between 2 and 1024 for grids, got 1"]),
+        render(&["--repr", "grid", "--res", "1025"], vec!["between 2 and 1024 for grids, got 1025"]),
+        // Sphere tracing.
+        render(&["--relax", "0.99"], vec!["--relax must be in [1, 2), got 0.99"]),
+        render(&["--relax", "2"], vec!["--relax must be in [1, 2), got 2"]),
+        render(&["--tolerance-px", "0"], vec!["--tolerance-px must be in (0, 16], got 0"]),
+        render(&["--tolerance-px", "16.5"], vec!["--tolerance-px"]),
+        render(&["--epsilon", "1"], vec!["--epsilon must be in (0, 1), got 1"]),
+        render(&["--max-steps", "1000001"], vec!["--max-steps must be between 1 and 1000000"]),
+        // Overrides.
+        render(&["--width", "16385"], vec!["--width must be between 1 and 16384, got 16385"]),
+        render(&["--height", "0"], vec!["--height must be between 1 and 16384, got 0"]),
+        render(&["--depth", "101"], vec!["--depth must be at most 100, got 101"]),
+        // gallery checks every representation: --res 2 is a grid resolution, not a mesh one.
+        (
+            vec!["gallery", &folder, "-o", &gallery, "--res", "2"],
+            vec!["--res must be between 3 and 8192, got 2"],
+            p(&png),
+        ),
+        // convert: --to mesh 2..=1024, --to grid at least 1 (then memory).
+        (
+            vec!["convert", &scene, "--to", "mesh", "--res", "1", "-o", &obj],
+            vec!["between 2 and 1024, got 1"],
+            p(&obj),
+        ),
+        (
+            vec!["convert", &scene, "--to", "mesh", "--res", "1025", "-o", &obj],
+            vec!["between 2 and 1024"],
+            p(&obj),
+        ),
+        (
+            vec!["convert", &mesh, "--to", "grid", "--res", "0", "-o", &sdf],
+            vec!["--res must be at least 1, got 0"],
+            p(&sdf),
+        ),
+        // compare: the sweep in the grid range, frames, band, the SDF sweep.
+        (
+            vec!["compare", &scene, "--csv", &csv, "--res", "1"],
+            vec!["--res must be between 2 and 1024 for grids"],
+            p(&csv),
+        ),
+        (vec!["compare", &scene, "--csv", &csv, "--res", "8,1025"], vec!["got 1025"], p(&csv)),
+        (
+            vec!["compare", &scene, "--csv", &csv, "--frames", "1001"],
+            vec!["--frames must be between 1 and 1000"],
+            p(&csv),
+        ),
+        (
+            vec!["compare", &scene, "--csv", &csv, "--band", "0"],
+            vec!["--band must be at least 1, got 0"],
+            p(&csv),
+        ),
+        (
+            vec!["compare", &scene, "--csv", &csv, "--sdf-relax", "1,2"],
+            vec!["--sdf-tolerance-px/--sdf-relax: --relax"],
+            p(&csv),
+        ),
+        (
+            vec!["compare", &scene, "--csv", &csv, "--sdf-tolerance-px", "17"],
+            vec!["--tolerance-px must be in (0, 16]"],
+            p(&csv),
+        ),
+        // compare --scaling: both representations' ranges, counts, frames.
+        (
+            vec!["compare", "--scaling", "--csv", &csv, "--scaling-res", "2"],
+            vec!["--scaling-res must be between 3 and 8192"],
+            p(&csv),
+        ),
+        (
+            vec!["compare", "--scaling", "--csv", &csv, "--scaling-res", "1025"],
+            vec!["--scaling-res must be between 2 and 1024"],
+            p(&csv),
+        ),
+        (
+            vec!["compare", "--scaling", "--csv", &csv, "--counts", "0"],
+            vec!["--counts must be between 1 and 10000, got 0"],
+            p(&csv),
+        ),
+        (vec!["compare", "--scaling", "--csv", &csv, "--counts", "10,10001"], vec!["got 10001"], p(&csv)),
+        (
+            vec!["compare", "--scaling", "--csv", &csv, "--frames", "0"],
+            vec!["--frames must be between 1 and 1000"],
+            p(&csv),
+        ),
+        // Flags are checked before any input is read: a missing scene is not reached.
+        (vec!["render", &missing, "--width", "0", "-o", &png], vec!["--width"], p(&png)),
+        (vec!["compare", &missing, "--csv", &csv, "--res", "0"], vec!["--res"], p(&csv)),
+    ];
+    for (args, needles, out) in &cases {
+        fails(args, needles, out, &args.join(" "));
+    }
+    assert!(!dir.join("g").exists(), "gallery wrote its folder");
+    no_leftovers(&dir);
+}

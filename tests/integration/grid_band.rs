@@ -5,7 +5,6 @@ use std::sync::Arc;
 
 use glam::{DVec3, UVec3, Vec3};
 use proptest::prelude::*;
-use sdfmesh::cli::commands::render_scene;
 use sdfmesh::convert::mesh_to_grid::band::{band_from_function, band_from_mesh};
 use sdfmesh::convert::mesh_to_grid::voxelize::voxelize_mesh;
 use sdfmesh::convert::mesh_to_grid::{sample_function, sample_mesh};
@@ -16,6 +15,7 @@ use sdfmesh::geometry::grid::band::BandGrid;
 use sdfmesh::geometry::grid::object::GridObject;
 use sdfmesh::geometry::march::MarchParams;
 use sdfmesh::plan::{GridFill, GridStorage, Representation};
+use sdfmesh::render::report::render_scene;
 use sdfmesh::scene::shape::{Object, ObjectKind, Primitive, Shading};
 use sdfmesh::scene::transform::TransformDesc;
 

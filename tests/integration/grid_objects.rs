@@ -5,13 +5,13 @@
 
 use std::path::{Path, PathBuf};
 
-use sdfmesh::cli::commands::render_scene;
 use sdfmesh::convert::extract::ExtractMethod;
 use sdfmesh::convert::mesh_to_grid::sample_mesh;
 use sdfmesh::convert::tessellate::tessellate;
 use sdfmesh::geometry::grid::io::save_grid;
 use sdfmesh::geometry::march::MarchParams;
 use sdfmesh::plan::{GridFill, GridStorage, MeshMethod, Representation};
+use sdfmesh::render::report::render_scene;
 use sdfmesh::scene::parse_scene;
 use sdfmesh::scene::shape::Primitive;
 

@@ -4,11 +4,11 @@
 
 use glam::Vec3;
 use image::RgbImage;
-use sdfmesh::cli::commands::render_scene;
 use sdfmesh::geometry::march::MarchParams;
 use sdfmesh::geometry::sdf::SdfTree;
 use sdfmesh::geometry::{Geometry, Ray, RayStats};
 use sdfmesh::plan::{GridFill, GridStorage, Representation, build_objects, build_scene};
+use sdfmesh::render::report::render_scene;
 use sdfmesh::scene::Scene;
 use sdfmesh::scene::shape::Primitive;
 

@@ -2,9 +2,9 @@
 //! and the sphere-traced renders agree pixel for pixel (silhouettes, shading, shadows).
 
 use glam::Vec3;
-use sdfmesh::cli::commands::render_scene;
 use sdfmesh::geometry::march::MarchParams;
 use sdfmesh::plan::Representation;
+use sdfmesh::render::report::render_scene;
 use sdfmesh::scene::shape::Primitive;
 
 use crate::util::{covered, fraction_within, lit_scene, object};

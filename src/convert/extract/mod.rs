@@ -98,21 +98,30 @@ use lattice::*;
 use qef::*;
 use tetrahedra::*;
 
-/// How [`extract`] turns samples into triangles.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// How [`extract`] turns samples into triangles; the command line's `--method` values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
 pub enum ExtractMethod {
     /// Classic marching cubes: one vertex per sign-changing cube edge, each cube's
     /// configuration triangulated from a generated case table whose ambiguous faces are
     /// resolved by the asymptotic decider (the face's corner samples alone, so both cells
     /// sharing a face agree): watertight and edge-manifold in every case, sharp features
     /// cut off.
+    #[value(
+        name = "mc",
+        help = "Marching cubes (asymptotic decider on ambiguous faces): always closed and manifold"
+    )]
     MarchingCubes,
     /// Marching tetrahedra on a consistent six-tetrahedron split of each cube: watertight
     /// and manifold in every case, about three times marching cubes' triangles.
+    #[value(
+        name = "mt",
+        help = "Marching tetrahedra: always closed and manifold, about three times the triangles"
+    )]
     MarchingTetrahedra,
     /// Dual contouring: one QEF-placed vertex per surface component of a sign-changing
     /// cell, quads across sign-changing edges; keeps sharp features; about as many
     /// triangles as marching cubes.
+    #[value(name = "dc", help = "Dual contouring with a QEF: keeps sharp edges")]
     DualContouring,
 }
 
