@@ -507,14 +507,16 @@ impl Geometry for MeshGeometry {
 
     fn describe(&self) -> String {
         format!(
-            "{}: {} triangles, 8-wide BVH of {} nodes and {} leaf packets (depth {}) built in {:.1} ms, {}",
+            "{}: {} triangles, 8-wide BVH of {} nodes and {} leaf packets (depth {}) built in {:.1} ms, {}, \
+             {} lanes",
             self.label,
             self.shape.triangles.len(),
             self.shape.bvh.nodes.len(),
             self.shape.bvh.packets.len(),
             self.shape.bvh.depth,
             self.build_time.as_secs_f64() * 1e3,
-            if self.shape.normals.is_some() { "smooth shading" } else { "flat shading" }
+            if self.shape.normals.is_some() { "smooth shading" } else { "flat shading" },
+            crate::simd::backend().name()
         )
     }
 }
