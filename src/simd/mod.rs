@@ -13,8 +13,14 @@
 //! value with a one-line error ([`check_env`]).
 
 mod f4;
+mod mesh;
 
-pub use f4::F4;
+#[cfg(target_arch = "x86_64")]
+pub use f4::Sse4;
+pub use f4::{F4, Lanes4};
+#[cfg(target_arch = "x86_64")]
+pub use mesh::{Avx8, AvxMask8};
+pub use mesh::{F8, Lanes8, M8, Mask8, MeshKernel, MeshSimd, Portable, dispatch_mesh};
 
 use std::sync::OnceLock;
 
