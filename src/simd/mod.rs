@@ -14,6 +14,7 @@
 
 mod f4;
 mod mesh;
+mod stack;
 
 #[cfg(target_arch = "x86_64")]
 pub use f4::Sse4;
@@ -21,6 +22,7 @@ pub use f4::{F4, Lanes4};
 #[cfg(target_arch = "x86_64")]
 pub use mesh::{Avx8, AvxMask8};
 pub use mesh::{F8, Lanes8, M8, Mask8, MeshKernel, MeshSimd, Portable, dispatch_mesh};
+pub use stack::WalkStack;
 
 use std::sync::OnceLock;
 

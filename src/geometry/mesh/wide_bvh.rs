@@ -9,13 +9,15 @@
 //! [`crate::geometry::bvh2`].
 
 
+use std::mem::MaybeUninit;
+
 use glam::{DVec3, Vec3};
 use obvhs::bvh2::Bvh2;
 
 use crate::geometry::bvh2;
 use crate::geometry::mesh::triangle::{ShearedRay, Tri4};
 use crate::geometry::{Aabb, RayStats, box_distance};
-use crate::simd::{Lanes8, Mask8, MeshKernel, MeshSimd, dispatch_mesh};
+use crate::simd::{Lanes8, Mask8, MeshKernel, MeshSimd, WalkStack, dispatch_mesh};
 
 /// Children per node. Eight rather than four (benches/primary_rays.rs, armadillo) cuts the
 /// nodes a primary ray visits from 3.4 to 2.5 and the depth from 11 to 7, and raised
@@ -48,8 +50,6 @@ const NONE: u32 = u32::MAX;
 /// Traversal stack entries kept on the call stack (enough for a BVH 36 levels deep); a
 /// deeper BVH walks with a heap stack.
 const STACK: usize = 255;
-/// The smaller call stack of BVHs up to 8 levels deep (every mesh of `../shared/meshes`).
-const SMALL_STACK: usize = 64;
 
 /// An inner node: eight child boxes and references (224 bytes, aligned to a 64-byte cache
 /// line).
@@ -145,20 +145,22 @@ impl<S: MeshSimd> BoxRay<S> {
         let o = origin.to_array();
         // `p + e` and `p - e` with `e >= 2 ulp(p)` bracket the exact product (the rounded
         // `p` is within half an ulp of it); `copysign` picks the entry row without a branch.
-        let offset = |row: usize| {
-            if !S::FUSED_MUL_SUB {
-                return s.splat8(0.0);
+        // (Loops rather than closures, which the compiler may leave out of line, where they
+        // would not be compiled for the backend's instructions.)
+        let mut offset = [s.splat8(0.0); 6];
+        if S::FUSED_MUL_SUB {
+            for (row, x) in offset.iter_mut().enumerate() {
+                let a = row % 3;
+                let p = o[a] * inv[a];
+                let e = (p.abs() * (2.0 * f32::EPSILON)).copysign(inv[a]);
+                *x = s.splat8(if row < 3 { p + e } else { p - e });
             }
-            let a = row % 3;
-            let p = o[a] * inv[a];
-            let e = (p.abs() * (2.0 * f32::EPSILON)).copysign(inv[a]);
-            s.splat8(if row < 3 { p + e } else { p - e })
-        };
+        }
         BoxRay {
             s,
             origin: [s.splat8(o[0]), s.splat8(o[1]), s.splat8(o[2])],
             inv: [s.splat8(inv[0]), s.splat8(inv[1]), s.splat8(inv[2])],
-            offset: [offset(0), offset(1), offset(2), offset(3), offset(4), offset(5)],
+            offset,
         }
     }
 
@@ -349,14 +351,14 @@ impl WideBvh {
         t_max: f32,
         stats: &mut RayStats,
     ) -> Option<LeafHit> {
-        dispatch_mesh(Walk { bvh: self, origin, dir, t_min, t_max, stats, any: false }).closest
+        dispatch_mesh(Walk::<false> { bvh: self, origin, dir, t_min, t_max, stats })
     }
 
     /// Whether any triangle is hit with `t` in `[t_min, t_max]`; stops at the first
     /// (shadow rays). Counts work as [`WideBvh::closest_hit`] does.
     #[inline]
     pub fn any_hit(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
-        dispatch_mesh(Walk { bvh: self, origin, dir, t_min, t_max, stats, any: true }).any
+        dispatch_mesh(Walk::<true> { bvh: self, origin, dir, t_min, t_max, stats })
     }
 
     /// The node of inner-node reference `r` (its byte offset in [`WideBvh::nodes`]): one
@@ -466,56 +468,48 @@ fn stack_needed(bvh: &WideBvh) -> usize {
     bvh.depth * (WIDTH - 1) + 1 + 2
 }
 
-/// Evaluates `$walk` with `$stack` bound to a zeroed traversal stack for `$bvh`: on the
-/// call stack, [`SMALL_STACK`] entries where they suffice (BVHs up to 8 levels deep: zeroing
-/// is 16 stores of 32 bytes), else [`STACK`], else (a pathological BVH) on the heap. A
-/// macro rather than a function taking a closure, which the compiler could leave out of
-/// line, where it would not be compiled for the walk's backend.
+/// Evaluates `$walk` with `$stack` bound to a traversal stack ([`WalkStack`], not zeroed)
+/// for `$bvh`: on the call stack where [`STACK`] entries suffice, else (a pathological
+/// BVH) on the heap. A macro rather than a function taking a closure, which the compiler
+/// could leave out of line, where it would not be compiled for the walk's backend.
 macro_rules! with_stack {
-    ($bvh:expr, $stack:ident => $walk:expr) => {{
-        let needed = stack_needed($bvh);
-        if needed <= SMALL_STACK {
-            let $stack = &mut [0 as Entry; SMALL_STACK][..];
-            $walk
-        } else if needed <= STACK {
-            let $stack = &mut [0 as Entry; STACK][..];
+    ($bvh:expr, $stack:ident => $walk:expr) => {
+        if stack_needed($bvh) <= STACK {
+            let mut slots = [const { MaybeUninit::<Entry>::uninit() }; STACK];
+            let $stack = &mut WalkStack::new(&mut slots);
             $walk
         } else {
-            let $stack = &mut vec![0 as Entry; needed][..];
+            let mut slots = vec![MaybeUninit::<Entry>::uninit(); stack_needed($bvh)];
+            let $stack = &mut WalkStack::new(&mut slots);
             $walk
         }
-    }};
+    };
 }
 
-/// The walks of [`WideBvh::closest_hit`] and [`WideBvh::any_hit`] as one [`MeshKernel`].
-struct Walk<'a> {
+/// A walk of [`WideBvh::closest_hit`] (`ANY` false) or [`WideBvh::any_hit`] (`ANY` true)
+/// as a [`MeshKernel`]: the ray and the work counters.
+struct Walk<'a, const ANY: bool> {
     bvh: &'a WideBvh,
     origin: Vec3,
     dir: Vec3,
     t_min: f32,
     t_max: f32,
     stats: &'a mut RayStats,
-    /// Any hit rather than the closest.
-    any: bool,
 }
 
-/// What a [`Walk`] found: the closest hit, or whether there is any.
-struct WalkResult {
-    closest: Option<LeafHit>,
-    any: bool,
-}
-
-impl MeshKernel for Walk<'_> {
-    type Output = WalkResult;
+impl MeshKernel for Walk<'_, false> {
+    type Output = Option<LeafHit>;
     #[inline(always)]
-    fn run<S: MeshSimd>(self, s: S) -> WalkResult {
-        let Walk { bvh, origin, dir, t_min, t_max, stats, any } = self;
-        if any {
-            WalkResult { closest: None, any: any_walk(s, bvh, origin, dir, t_min, t_max, stats) }
-        } else {
-            let closest = closest_walk(s, bvh, origin, dir, t_min, t_max, stats);
-            WalkResult { any: closest.is_some(), closest }
-        }
+    fn run<S: MeshSimd>(self, s: S) -> Option<LeafHit> {
+        closest_walk(s, self.bvh, self.origin, self.dir, self.t_min, self.t_max, self.stats)
+    }
+}
+
+impl MeshKernel for Walk<'_, true> {
+    type Output = bool;
+    #[inline(always)]
+    fn run<S: MeshSimd>(self, s: S) -> bool {
+        any_walk(s, self.bvh, self.origin, self.dir, self.t_min, self.t_max, self.stats)
     }
 }
 
@@ -547,7 +541,7 @@ pub(crate) fn closest_walk<S: MeshSimd>(
 }
 
 /// Tests the children of node `n` and pushes every hit one but the nearest onto `stack`
-/// (above `len`), farthest deepest, with its entry distance; returns the nearest, or
+/// farthest deepest, with its entry distance; returns the nearest, or
 /// [`NONE`] where the ray enters none. Two children are ordered by one compare-exchange of
 /// their entries, three or four by a network of four, more by insertion.
 #[inline(always)]
@@ -556,17 +550,16 @@ fn visit_node<S: MeshSimd>(
     n: &WideNode,
     t_min: f32,
     t_max: f32,
-    stack: &mut [Entry],
-    len: &mut usize,
+    stack: &mut WalkStack,
 ) -> u32 {
     let (mask, d) = br.hit::<false>(n, t_min, t_max);
-    push_children(n, mask, d, stack, len)
+    push_children(n, mask, d, stack)
 }
 
 /// [`visit_node`] after the box test: the children of `n` in `mask`, entered at the
 /// distances whose keys are `d`.
 #[inline(always)]
-fn push_children(n: &WideNode, mut mask: u32, d: [u32; WIDTH], stack: &mut [Entry], len: &mut usize) -> u32 {
+fn push_children(n: &WideNode, mut mask: u32, d: [u32; WIDTH], stack: &mut WalkStack) -> u32 {
     if mask == 0 {
         return NONE;
     }
@@ -578,8 +571,7 @@ fn push_children(n: &WideNode, mut mask: u32, d: [u32; WIDTH], stack: &mut [Entr
     let (a, b) = ordered(key(l0), key(next_lane(&mut mask)));
     if mask == 0 {
         // Two children, the commonest case after one: no network.
-        stack[*len] = b;
-        *len += 1;
+        stack.push(b);
         return a as u32;
     }
     // Three or four children without a branch on which (it varies from node to node and
@@ -595,18 +587,13 @@ fn push_children(n: &WideNode, mut mask: u32, d: [u32; WIDTH], stack: &mut [Entr
     let (b, d4) = ordered(b, d4);
     let (b, c) = ordered(b, c);
     if mask == 0 {
-        // `pushed` entries, farthest deepest: [c, b] or [d4, c, b].
-        let pushed = 2 + usize::from(present3);
+        // Two or three entries, farthest deepest: [c, b] or [d4, c, b].
         let (first, second) = if present3 { (d4, c) } else { (c, b) };
-        stack[*len] = first;
-        stack[*len + 1] = second;
-        stack[*len + 2] = b;
-        *len += pushed;
+        stack.push_2_or_3([first, second, b], present3);
         return a as u32;
     }
     let mut push = |e: Entry| {
-        stack[*len] = e;
-        *len += 1;
+        stack.push(e);
     };
     // Five to eight (rare): insertion sort of all, then push all but the nearest.
     let mut sorted = [a, b, c, d4, 0, 0, 0, 0];
@@ -637,7 +624,7 @@ fn push_children(n: &WideNode, mut mask: u32, d: [u32; WIDTH], stack: &mut [Entr
 fn closest_walk_in<S: MeshSimd>(
     br: &BoxRay<S>,
     bvh: &WideBvh,
-    stack: &mut [Entry],
+    stack: &mut WalkStack,
     root: (u32, [u32; WIDTH]),
     origin: Vec3,
     dir: Vec3,
@@ -646,23 +633,20 @@ fn closest_walk_in<S: MeshSimd>(
     stats: &mut RayStats,
 ) -> Option<LeafHit> {
     let mut nodes = 1u64;
-    // Entries below `len` are pending children; the rest are never read.
-    let mut len = 0usize;
-    let mut cur = push_children(&bvh.nodes[0], root.0, root.1, stack, &mut len);
+    let mut cur = push_children(&bvh.nodes[0], root.0, root.1, stack);
     // One step down (a macro: a closure would not inherit the walk's target feature):
     // the nearest child the ray enters, else the nearest pending one; where there is none
     // the ray misses.
     macro_rules! descend {
         () => {{
             nodes += 1;
-            cur = visit_node(br, bvh.node(cur), t_min, t_max, stack, &mut len);
+            cur = visit_node(br, bvh.node(cur), t_min, t_max, stack);
             if cur == NONE {
-                if len == 0 {
+                let Some(e) = stack.pop() else {
                     stats.bvh_nodes += nodes;
                     return None;
-                }
-                len -= 1;
-                cur = stack[len] as u32;
+                };
+                cur = e as u32;
             }
         }};
     }
@@ -686,7 +670,7 @@ fn closest_walk_in<S: MeshSimd>(
     'walk: loop {
         if cur & LEAF == 0 {
             nodes += 1;
-            cur = visit_node(br, bvh.node(cur), t_min, t_max, stack, &mut len);
+            cur = visit_node(br, bvh.node(cur), t_min, t_max, stack);
             if cur != NONE {
                 continue 'walk;
             }
@@ -710,11 +694,9 @@ fn closest_walk_in<S: MeshSimd>(
         }
         // Pop the nearest pending child still in front of the closest hit.
         loop {
-            if len == 0 {
+            let Some(e) = stack.pop() else {
                 break 'walk;
-            }
-            len -= 1;
-            let e = stack[len];
+            };
             if (e >> 32) as u32 <= t_max_key {
                 cur = e as u32;
                 break;
@@ -750,7 +732,7 @@ pub(crate) fn any_walk<S: MeshSimd>(
 fn any_walk_in<S: MeshSimd>(
     s: S,
     bvh: &WideBvh,
-    stack: &mut [Entry],
+    stack: &mut WalkStack,
     origin: Vec3,
     dir: Vec3,
     t_min: f32,
@@ -768,12 +750,9 @@ fn any_walk_in<S: MeshSimd>(
     // against 118-121 pinned, armadillo 183-187 against 179-186).
     let sheared = std::hint::black_box(ShearedRay::new(origin, dir));
     let mut found = false;
-    // Entries below `len` are pending nodes; the rest are never read.
-    stack[0] = 0;
-    let mut len = 1usize;
-    while len > 0 {
-        len -= 1;
-        let cur = stack[len] as u32;
+    stack.push(0);
+    while let Some(e) = stack.pop() {
+        let cur = e as u32;
         if cur & LEAF == 0 {
             let n = bvh.node(cur);
             stats.bvh_nodes += 1;
@@ -782,8 +761,7 @@ fn any_walk_in<S: MeshSimd>(
             while mask != 0 {
                 let l = mask.trailing_zeros() as usize;
                 mask &= mask - 1;
-                stack[len] = u64::from(n.children[l]);
-                len += 1;
+                stack.push(u64::from(n.children[l]));
             }
         } else {
             let (first, count) = leaf_range(cur);
