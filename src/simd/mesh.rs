@@ -13,8 +13,8 @@
 
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
 
-use super::f4::{F4, Lanes4};
 use super::avx2;
+use super::f4::{F4, Lanes4};
 
 /// The portable backend: plain Rust arrays, on every target and wherever
 /// `SDFMESH_SIMD=portable` asks for it.
@@ -29,10 +29,6 @@ pub trait MeshSimd: Copy + Send + Sync + 'static {
     type F8: Lanes8<Mask = Self::M8>;
     /// A mask over eight lanes.
     type M8: Mask8<Lanes = Self::F8>;
-    /// Whether [`Lanes8::mul_sub`] is one fused instruction (AVX2 with FMA); on the
-    /// portable backend it is a call to the exact software `fmaf`, too slow for a hot loop,
-    /// so kernels that only want it for speed take another formula there.
-    const FUSED_MUL_SUB: bool;
     /// Four lanes of `x`.
     fn splat4(self, x: f32) -> Self::F4;
     /// Four lanes loaded from `a`.
@@ -65,7 +61,9 @@ pub trait Lanes8:
     fn sqrt(self) -> Self;
     /// Lane-wise absolute value (the sign bit cleared).
     fn abs(self) -> Self;
-    /// Lane-wise `a * b - c`, rounded once (see [`MeshSimd::FUSED_MUL_SUB`]).
+    /// Lane-wise `a * b - c`, rounded once: one FMA instruction on AVX2, exact `f64`
+    /// arithmetic rounded to odd and then to `f32` on the portable backend (the same bits,
+    /// slower).
     fn mul_sub(self, b: Self, c: Self) -> Self;
     /// Lanes where `a <= b`.
     fn le(self, b: Self) -> Self::Mask;
@@ -151,7 +149,6 @@ impl MeshSimd for Portable {
     type F4 = F4;
     type F8 = F8;
     type M8 = M8;
-    const FUSED_MUL_SUB: bool = false;
     #[inline(always)]
     fn splat4(self, x: f32) -> F4 {
         F4([x; 4])
@@ -206,7 +203,19 @@ impl Lanes8 for F8 {
     }
     #[inline(always)]
     fn mul_sub(self, b: F8, c: F8) -> F8 {
-        F8(std::array::from_fn(|l| self.0[l].mul_add(b.0[l], -c.0[l])))
+        // The exact product less `c`, rounded once to `f64`: rounding that to `f32` is the
+        // fused result unless it fell exactly on a midpoint between two `f32`s (or below
+        // or above their normal range), which the exact (slower) path decides.
+        let s: [f64; 8] = std::array::from_fn(|l| self.0[l] as f64 * b.0[l] as f64 - c.0[l] as f64);
+        let hard = s.iter().fold(false, |h, &x| {
+            let m = x.abs();
+            // (NaN, zero and normal `f32` results away from midpoints round alike.)
+            h | (x.to_bits() & 0x1fff_ffff == 0x1000_0000) | (m > 0.0 && m < F32_NORMAL) | (m >= F32_TOP)
+        });
+        if hard {
+            return F8(std::array::from_fn(|l| mul_sub_rounded_once(self.0[l], b.0[l], c.0[l])));
+        }
+        F8(s.map(|x| x as f32))
     }
     #[inline(always)]
     fn le(self, b: F8) -> M8 {
@@ -228,6 +237,35 @@ impl Lanes8 for F8 {
         let a = self.0;
         std::array::from_fn(|l| if a[l] < a[l + 4] { a[l] } else { a[l + 4] })
     }
+}
+
+/// The smallest normal `f32`, as `f64`.
+const F32_NORMAL: f64 = f32::MIN_POSITIVE as f64;
+/// `2^127`: above it an `f64` may round to `f32::MAX` or infinity.
+const F32_TOP: f64 = 1.7014118346046923e38;
+
+/// `a * b - c` rounded once to `f32`, as a fused multiply-subtract rounds it, without
+/// one: the product is exact in `f64` (24 + 24 bits), the difference is taken in `f64`
+/// with its rounding error (Knuth's two-sum) and rounded to odd (the last bit set where
+/// the sum was inexact), and a number rounded to odd with 29 bits to spare rounds to the
+/// nearest `f32` as the exact one does (Boldo and Melquiond 2008). Infinities and NaN
+/// take the plain `f64` path.
+#[inline(always)]
+fn mul_sub_rounded_once(a: f32, b: f32, c: f32) -> f32 {
+    let p = a as f64 * b as f64;
+    let m = -(c as f64);
+    let s = p + m;
+    let v = s - p;
+    let err = (p - (s - v)) + (m - v);
+    let odd = if s.is_finite() && err != 0.0 && s.to_bits() & 1 == 0 {
+        // Away from zero where the error has the sum's sign, else towards it (`s` is not
+        // zero: a sum that rounds to zero is exact).
+        let away = (err > 0.0) == (s > 0.0);
+        f64::from_bits(if away { s.to_bits() + 1 } else { s.to_bits() - 1 })
+    } else {
+        s
+    };
+    odd as f32
 }
 
 macro_rules! f8_op {
@@ -308,7 +346,6 @@ mod avx {
         type F4 = Sse4;
         type F8 = Avx8;
         type M8 = AvxMask8;
-        const FUSED_MUL_SUB: bool = true;
         #[inline(always)]
         fn splat4(self, x: f32) -> Sse4 {
             Sse4::splat(x)
@@ -496,14 +533,48 @@ mod tests {
                 a.le(b).and_not(a.eq(b)).select(a, s.both8(&[0.5, 1.5, 2.5, 3.5])),
                 s.splat_halves8(-1.0, 1.0),
             ] {
-                out.extend(x.to_array().map(f32::to_bits));
+                // Every NaN alike: its payload is not part of the contract.
+                out.extend(x.to_array().map(|v| if v.is_nan() { u32::MAX } else { v.to_bits() }));
             }
             out.extend(a.order_keys());
-            out.extend(a.min_halves().map(f32::to_bits));
+            out.extend(a.min_halves().map(|v| if v.is_nan() { u32::MAX } else { v.to_bits() }));
             out.push(a.le(b).bits());
             out.push(a.eq(b).bits());
             out
         }
+    }
+
+    /// The portable fused multiply-subtract equals `f32::mul_add` (a correctly rounded
+    /// fused operation) bit for bit, on products whose exact difference lies near halfway
+    /// between two floats and on random ones.
+    #[test]
+    fn portable_mul_sub_is_rounded_once() {
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        for i in 0..200_000 {
+            let r = next();
+            let a = f32::from_bits(0x3f80_0000 | (r as u32 & 0x7f_ffff)) * if i % 3 == 0 { 1e4 } else { 1.0 };
+            let b = f32::from_bits(0x3f80_0000 | ((r >> 23) as u32 & 0x7f_ffff))
+                * if i % 5 == 0 { -1.0 } else { 1.0 };
+            // Near the product (cancellation) or a random offset, and the product's own
+            // rounding (exact halfway cases after the subtraction).
+            let c = match i % 4 {
+                0 => a * b,
+                1 => (a * b).next_up(),
+                2 => f32::from_bits((r >> 40) as u32 & 0x7fff_ffff) % 1e6,
+                _ => (a as f64 * b as f64 - 2f64.powi(-30)) as f32,
+            };
+            let c = if c.is_finite() { c } else { 1.5 };
+            let want = a.mul_add(b, -c);
+            assert_eq!(mul_sub_rounded_once(a, b, c).to_bits(), want.to_bits(), "{a} * {b} - {c}");
+        }
+        assert!(mul_sub_rounded_once(f32::INFINITY, 2.0, 1.0).is_infinite());
+        assert!(mul_sub_rounded_once(f32::NAN, 2.0, 1.0).is_nan());
     }
 
     /// The AVX2 lanes give the portable lanes' bits, NaN, zeros and infinities included.

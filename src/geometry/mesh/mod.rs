@@ -29,8 +29,8 @@ use crate::geometry::{
 };
 use crate::mesh::TriangleMesh;
 pub use crate::scene::shape::Shading;
-use crate::simd::{MeshKernel, MeshSimd, Portable, dispatch_mesh};
 use crate::scene::transform::{Transform, TransformDesc};
+use crate::simd::{MeshKernel, MeshSimd, Portable, dispatch_mesh};
 
 /// The extents (longest side of the box, scene units) of the meshes traced in the frame
 /// they are given in: 2^-20 to 2^20 (about 1e-6 to 1e6). Beyond, a mesh is traced in a

@@ -113,7 +113,8 @@ impl ShearedRay {
     pub fn intersect4<S: MeshSimd>(&self, s: S, tri: &Tri4, t_min: f32, t_max: f32) -> ([f32; 4], u32) {
         let [kx, ky, kz] = self.k;
         let (sx, sy, sz) = (s.splat4(self.shear.x), s.splat4(self.shear.y), s.splat4(self.shear.z));
-        let (ox, oy, oz) = (s.splat4(self.origin_k[0]), s.splat4(self.origin_k[1]), s.splat4(self.origin_k[2]));
+        let (ox, oy, oz) =
+            (s.splat4(self.origin_k[0]), s.splat4(self.origin_k[1]), s.splat4(self.origin_k[2]));
         // Per vertex: sheared x, y and the z offset along the ray's main axis. (Functions
         // marked `#[inline(always)]` rather than closures, which the compiler may leave out
         // of line, where they would not be compiled for the backend's instructions.)
@@ -123,9 +124,12 @@ impl ShearedRay {
             (row[0] - o[0] - sx * z, row[1] - o[1] - sy * z, z)
         }
         let o = [ox, oy, oz];
-        let (ax, ay, az) = vertex([s.load4(&tri[0][kx]), s.load4(&tri[0][ky]), s.load4(&tri[0][kz])], o, sx, sy);
-        let (bx, by, bz) = vertex([s.load4(&tri[1][kx]), s.load4(&tri[1][ky]), s.load4(&tri[1][kz])], o, sx, sy);
-        let (cx, cy, cz) = vertex([s.load4(&tri[2][kx]), s.load4(&tri[2][ky]), s.load4(&tri[2][kz])], o, sx, sy);
+        let (ax, ay, az) =
+            vertex([s.load4(&tri[0][kx]), s.load4(&tri[0][ky]), s.load4(&tri[0][kz])], o, sx, sy);
+        let (bx, by, bz) =
+            vertex([s.load4(&tri[1][kx]), s.load4(&tri[1][ky]), s.load4(&tri[1][kz])], o, sx, sy);
+        let (cx, cy, cz) =
+            vertex([s.load4(&tri[2][kx]), s.load4(&tri[2][ky]), s.load4(&tri[2][kz])], o, sx, sy);
         let mut u = cx * by - cy * bx;
         let mut v = ax * cy - ay * cx;
         let mut w = bx * ay - by * ax;
@@ -154,9 +158,17 @@ impl ShearedRay {
     /// lanes 4..8 of the eight-lane type of backend `s`: the same operations in the same
     /// order, so every lane's `t` and hit bit equal the four-lane test's.
     #[inline(always)]
-    pub fn intersect8<S: MeshSimd>(&self, s: S, a: &Tri4, b: &Tri4, t_min: f32, t_max: f32) -> ([f32; 8], u32) {
+    pub fn intersect8<S: MeshSimd>(
+        &self,
+        s: S,
+        a: &Tri4,
+        b: &Tri4,
+        t_min: f32,
+        t_max: f32,
+    ) -> ([f32; 8], u32) {
         let (sx, sy, sz) = (s.splat8(self.shear.x), s.splat8(self.shear.y), s.splat8(self.shear.z));
-        let (ox, oy, oz) = (s.splat8(self.origin_k[0]), s.splat8(self.origin_k[1]), s.splat8(self.origin_k[2]));
+        let (ox, oy, oz) =
+            (s.splat8(self.origin_k[0]), s.splat8(self.origin_k[1]), s.splat8(self.origin_k[2]));
         // Per vertex: sheared x, y and the z offset along the ray's main axis.
         #[inline(always)]
         fn vertex<L: Lanes8>(row: [L; 3], o: [L; 3], sx: L, sy: L) -> (L, L, L) {
@@ -236,7 +248,11 @@ impl ShearedRay {
 /// packets `a` (lanes 0..4) and `b` (lanes 4..8).
 #[inline(always)]
 fn rows8<S: MeshSimd>(s: S, a: &Tri4, b: &Tri4, v: usize, k: [usize; 3]) -> [S::F8; 3] {
-    [s.halves8(&a[v][k[0]], &b[v][k[0]]), s.halves8(&a[v][k[1]], &b[v][k[1]]), s.halves8(&a[v][k[2]], &b[v][k[2]])]
+    [
+        s.halves8(&a[v][k[0]], &b[v][k[0]]),
+        s.halves8(&a[v][k[1]], &b[v][k[1]]),
+        s.halves8(&a[v][k[2]], &b[v][k[2]]),
+    ]
 }
 
 /// Twice the area of a triangle, computed in f64.

@@ -8,7 +8,6 @@
 //! it and their work counting. The scene's top-level BVH over objects stays in
 //! [`crate::geometry::bvh2`].
 
-
 use std::mem::MaybeUninit;
 
 use glam::{DVec3, Vec3};
@@ -111,21 +110,21 @@ fn safe_inverse(dir: Vec3) -> [f32; 3] {
 ///
 /// Both rows of an axis sit at fixed offsets and are ordered by `min` and `max`, which
 /// keep an empty lane's NaN, rather than rows chosen by the direction's signs: no row
-/// index to keep per ray. The root's slab distances are `(bound - origin) * inv`; below
-/// it, on a backend whose [`MeshSimd::FUSED_MUL_SUB`] is one instruction (AVX2), one fused
-/// `bound * inv - offset`, with `offset` the product `origin * inv` rounded away from the
-/// box: its rounding error (up to half an ulp of the product, an absolute error that
-/// grows with the origin's distance from the mesh's frame, unlike the relative error of
-/// `(bound - origin) * inv`) is bounded by twice `f32::EPSILON` of it and added to the
-/// entry offset and taken from the exit one, so the fused test shrinks no box beyond the
-/// rounding of its own result (which the unfused test has too) and grows one by about an
-/// ulp of the origin at most (without it, `tests/integration/mesh_tracing.rs` finds rays
-/// through a mesh far from the origin that miss their nearest triangle). A fused product
-/// is one operation of latency instead of two on each node of a hit ray's chain. The
-/// root, tested while `offset` is still being computed at the ray's start, stays unfused
-/// (a fused root made rays that miss slower). The portable backend, whose fused product
-/// is the software `fmaf`, takes the unfused formula everywhere; the two tests differ only
-/// within an ulp of a box, so they find the same hits.
+/// index to keep per ray. Below the root a slab distance is one fused
+/// `bound * inv - offset` ([`Lanes8::mul_sub`]: one FMA on AVX2, the same bits computed
+/// exactly on the portable backend), with `offset` the product `origin * inv` rounded
+/// away from the box: its rounding error (up to half an ulp of the product, an absolute
+/// error that grows with the origin's distance from the mesh's frame, unlike the relative
+/// error of `(bound - origin) * inv`) is bounded by twice `f32::EPSILON` of it and added
+/// to the entry offset and taken from the exit one, so the fused test shrinks no box
+/// beyond the rounding of its own result (which the unfused test has too) and grows one
+/// by about an ulp of the origin at most (without it, `tests/integration/mesh_tracing.rs`
+/// finds rays through a mesh far from the origin that miss their nearest triangle; the
+/// portable backend's unfused test missed them until it took the fused one too). A fused
+/// product is one operation of latency instead of two on each node of a hit ray's
+/// chain. The root, tested while `offset` is still being computed at the ray's start,
+/// uses `(bound - origin) * inv` (a fused root made rays that miss slower; the root's box
+/// holds every triangle well inside).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct BoxRay<S: MeshSimd> {
     s: S,
@@ -133,7 +132,7 @@ pub(crate) struct BoxRay<S: MeshSimd> {
     inv: [S::F8; 3],
     /// Per bound row (minimum x, y, z, then maximum x, y, z): `origin * inv` of its axis,
     /// raised where the row is the entry slab (the minimum for a nonnegative `inv`) and
-    /// lowered where it is the exit slab (only with [`MeshSimd::FUSED_MUL_SUB`]).
+    /// lowered where it is the exit slab.
     offset: [S::F8; 6],
 }
 
@@ -148,13 +147,11 @@ impl<S: MeshSimd> BoxRay<S> {
         // (Loops rather than closures, which the compiler may leave out of line, where they
         // would not be compiled for the backend's instructions.)
         let mut offset = [s.splat8(0.0); 6];
-        if S::FUSED_MUL_SUB {
-            for (row, x) in offset.iter_mut().enumerate() {
-                let a = row % 3;
-                let p = o[a] * inv[a];
-                let e = (p.abs() * (2.0 * f32::EPSILON)).copysign(inv[a]);
-                *x = s.splat8(if row < 3 { p + e } else { p - e });
-            }
+        for (row, x) in offset.iter_mut().enumerate() {
+            let a = row % 3;
+            let p = o[a] * inv[a];
+            let e = (p.abs() * (2.0 * f32::EPSILON)).copysign(inv[a]);
+            *x = s.splat8(if row < 3 { p + e } else { p - e });
         }
         BoxRay {
             s,
@@ -170,7 +167,7 @@ impl<S: MeshSimd> BoxRay<S> {
     #[inline(always)]
     fn hit<const ROOT: bool>(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
         let b = &n.bounds;
-        let fused = S::FUSED_MUL_SUB && !ROOT;
+        let fused = !ROOT;
         let (x0, x1) = (self.slab(fused, &b[0], 0), self.slab(fused, &b[3], 3));
         let (y0, y1) = (self.slab(fused, &b[1], 1), self.slab(fused, &b[4], 4));
         let (z0, z1) = (self.slab(fused, &b[2], 2), self.slab(fused, &b[5], 5));
@@ -182,8 +179,8 @@ impl<S: MeshSimd> BoxRay<S> {
         (near.le(far).bits(), near.order_keys())
     }
 
-    /// The slab distances of bound row `row` (values `bound`): fused below the root where
-    /// the backend fuses, else `(bound - origin) * inv`.
+    /// The slab distances of bound row `row` (values `bound`): fused below the root, else
+    /// `(bound - origin) * inv`.
     #[inline(always)]
     fn slab(&self, fused: bool, bound: &[f32; WIDTH], row: usize) -> S::F8 {
         let a = row % 3;
@@ -987,14 +984,16 @@ mod tests {
                     .min_by(f32::total_cmp);
                 let ours = w.closest_hit(origin, dir, 0.0, t_max, &mut stats);
                 assert_eq!(ours.map(|h| h.t), brute);
-                // The AVX2 and the portable box tests walk alike: same hits, and here the
-                // same work (the fused AVX2 test differs only within an ulp of a box).
+                // The AVX2 and the portable box tests walk alike: same hits, same work.
                 let portable = closest_walk(Portable, &w, origin, dir, 0.0, t_max, &mut portable_stats);
                 assert_eq!(portable, ours);
                 assert_eq!(deep.closest_hit(origin, dir, 0.0, t_max, &mut RayStats::default()), ours);
                 assert_eq!(deep.any_hit(origin, dir, 0.0, t_max, &mut RayStats::default()), brute.is_some());
                 assert_eq!(medium.closest_hit(origin, dir, 0.0, t_max, &mut RayStats::default()), ours);
-                assert_eq!(medium.any_hit(origin, dir, 0.0, t_max, &mut RayStats::default()), brute.is_some());
+                assert_eq!(
+                    medium.any_hit(origin, dir, 0.0, t_max, &mut RayStats::default()),
+                    brute.is_some()
+                );
                 if let Some(h) = ours {
                     let [a, b, c] = leaf_tris[h.triangle as usize];
                     assert_eq!(h.corners, [a, b, c]);
