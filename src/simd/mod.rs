@@ -12,9 +12,19 @@
 //! The value is read once per process ([`backend`]); the `toolkit` binary refuses an unknown
 //! value with a one-line error ([`check_env`]).
 
+#[cfg(target_arch = "x86_64")]
+mod avx2;
+mod backend;
 mod f4;
+mod lane;
+mod portable;
 
+#[cfg(target_arch = "x86_64")]
+pub use avx2::{A8, A8x4};
+pub use backend::{Kernel, Simd, dispatch};
 pub use f4::F4;
+pub use lane::{Lane, Lane8, Lane32};
+pub use portable::{F8, F8x4, Portable};
 
 use std::sync::OnceLock;
 
@@ -153,3 +163,6 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+mod lane_tests;
