@@ -19,7 +19,7 @@ use std::ops::{Add, Div, Mul, Neg, Sub};
 use super::Avx2;
 use super::Backend;
 use super::backend::Simd;
-use super::lane::{Lane, Lane8, Lane32};
+use super::lane::{Lane, Lane8, Lane32, Lane64};
 use super::portable::{F8, F8x4};
 
 /// Eight f32 lanes in a `__m256` (see the module documentation for why its safe methods
@@ -53,6 +53,42 @@ impl Simd for Avx2 {
     const BACKEND: Backend = Backend::Avx2;
     type F32x8 = A8;
     type F32x32 = A8x4;
+    type F64x4 = A4d;
+
+    #[inline(always)]
+    fn splat4(self, x: f64) -> A4d {
+        // SAFETY: the token proves AVX.
+        A4d(unsafe { _mm256_set1_pd(x) })
+    }
+    #[inline(always)]
+    fn load4_at(self, a: &[f64], i: usize) -> A4d {
+        let a: &[f64; 4] = a[i..i + 4].try_into().unwrap();
+        // SAFETY: the token proves AVX; an unaligned load of the 32 bytes of `a`.
+        A4d(unsafe { _mm256_loadu_pd(a.as_ptr()) })
+    }
+    #[inline(always)]
+    fn mask4(self, bits: u32) -> A4d {
+        // SAFETY: the token proves AVX2; register operations only.
+        A4d(unsafe {
+            let b = _mm256_setr_epi64x(1, 2, 4, 8);
+            _mm256_castsi256_pd(_mm256_cmpeq_epi64(
+                _mm256_and_si256(_mm256_set1_epi64x(i64::from(bits)), b),
+                b,
+            ))
+        })
+    }
+    #[inline(always)]
+    fn u32_masks4(self, v: &[u32], i: usize, limit: i32) -> (A4d, A4d) {
+        let v: &[u32; 4] = v[i..i + 4].try_into().unwrap();
+        // SAFETY: the token proves AVX2; an unaligned load of the 16 bytes of `v`, then
+        // register operations.
+        unsafe {
+            let x = _mm_loadu_si128(v.as_ptr().cast());
+            let zero = _mm256_castsi256_pd(_mm256_cvtepi32_epi64(_mm_cmpeq_epi32(x, _mm_setzero_si128())));
+            let below = _mm256_castsi256_pd(_mm256_cvtepi32_epi64(_mm_cmplt_epi32(x, _mm_set1_epi32(limit))));
+            (A4d(zero), A4d(below))
+        }
+    }
 
     #[inline(always)]
     fn load8(self, a: &[f32; 8]) -> A8 {
@@ -167,6 +203,123 @@ impl Lane8 for A8 {
     #[inline(always)]
     fn lt_mask(self, b: Self) -> u32 {
         (unsafe { _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(self.0, b.0)) }) as u32
+    }
+    #[inline(always)]
+    fn cmp_eq(self, b: Self) -> Self {
+        A8(unsafe { _mm256_cmp_ps::<_CMP_EQ_OQ>(self.0, b.0) })
+    }
+    #[inline(always)]
+    fn cmp_lt(self, b: Self) -> Self {
+        A8(unsafe { _mm256_cmp_ps::<_CMP_LT_OS>(self.0, b.0) })
+    }
+    #[inline(always)]
+    fn cmp_gt(self, b: Self) -> Self {
+        A8(unsafe { _mm256_cmp_ps::<_CMP_GT_OS>(self.0, b.0) })
+    }
+    #[inline(always)]
+    fn and(self, b: Self) -> Self {
+        A8(unsafe { _mm256_and_ps(self.0, b.0) })
+    }
+    #[inline(always)]
+    fn or(self, b: Self) -> Self {
+        A8(unsafe { _mm256_or_ps(self.0, b.0) })
+    }
+    #[inline(always)]
+    fn andnot(self, b: Self) -> Self {
+        A8(unsafe { _mm256_andnot_ps(self.0, b.0) })
+    }
+    #[inline(always)]
+    fn movemask(self) -> u32 {
+        (unsafe { _mm256_movemask_ps(self.0) }) as u32
+    }
+}
+
+/// Four f64 lanes in a `__m256d` (made only through an [`Avx2`] token, as [`A8`]).
+#[derive(Clone, Copy, Debug)]
+#[repr(transparent)]
+pub struct A4d(__m256d);
+
+macro_rules! binary_pd {
+    ($tr:ident, $f:ident, $op:ident) => {
+        impl $tr for A4d {
+            type Output = A4d;
+            #[inline(always)]
+            fn $f(self, b: A4d) -> A4d {
+                A4d(unsafe { $op(self.0, b.0) })
+            }
+        }
+    };
+}
+binary_pd!(Add, add, _mm256_add_pd);
+binary_pd!(Sub, sub, _mm256_sub_pd);
+binary_pd!(Mul, mul, _mm256_mul_pd);
+binary_pd!(Div, div, _mm256_div_pd);
+
+impl Lane64 for A4d {
+    #[inline(always)]
+    fn vsqrt(self) -> Self {
+        A4d(unsafe { _mm256_sqrt_pd(self.0) })
+    }
+    #[inline(always)]
+    fn vmax(self, b: Self) -> Self {
+        A4d(unsafe { _mm256_max_pd(self.0, b.0) })
+    }
+    #[inline(always)]
+    fn cmp_lt(self, b: Self) -> Self {
+        A4d(unsafe { _mm256_cmp_pd::<_CMP_LT_OQ>(self.0, b.0) })
+    }
+    #[inline(always)]
+    fn cmp_le(self, b: Self) -> Self {
+        A4d(unsafe { _mm256_cmp_pd::<_CMP_LE_OQ>(self.0, b.0) })
+    }
+    #[inline(always)]
+    fn cmp_gt(self, b: Self) -> Self {
+        A4d(unsafe { _mm256_cmp_pd::<_CMP_GT_OQ>(self.0, b.0) })
+    }
+    #[inline(always)]
+    fn cmp_ge(self, b: Self) -> Self {
+        A4d(unsafe { _mm256_cmp_pd::<_CMP_GE_OQ>(self.0, b.0) })
+    }
+    #[inline(always)]
+    fn cmp_eq(self, b: Self) -> Self {
+        A4d(unsafe { _mm256_cmp_pd::<_CMP_EQ_OQ>(self.0, b.0) })
+    }
+    #[inline(always)]
+    fn and(self, b: Self) -> Self {
+        A4d(unsafe { _mm256_and_pd(self.0, b.0) })
+    }
+    #[inline(always)]
+    fn andnot(self, b: Self) -> Self {
+        A4d(unsafe { _mm256_andnot_pd(self.0, b.0) })
+    }
+    #[inline(always)]
+    fn select(mask: Self, x: Self, y: Self) -> Self {
+        A4d(unsafe { _mm256_blendv_pd(y.0, x.0, mask.0) })
+    }
+    #[inline(always)]
+    fn movemask(self) -> u32 {
+        (unsafe { _mm256_movemask_pd(self.0) }) as u32
+    }
+    #[inline(always)]
+    fn store(self) -> [f64; 4] {
+        let mut r = [0.0f64; 4];
+        // SAFETY: as above; an unaligned store into the 32 bytes of `r`.
+        unsafe { _mm256_storeu_pd(r.as_mut_ptr(), self.0) };
+        r
+    }
+    #[inline(always)]
+    fn store_at(self, a: &mut [f64], i: usize) {
+        let a: &mut [f64; 4] = (&mut a[i..i + 4]).try_into().unwrap();
+        // SAFETY: as above; an unaligned store into the 32 bytes of `a`.
+        unsafe { _mm256_storeu_pd(a.as_mut_ptr(), self.0) };
+    }
+    #[inline(always)]
+    fn to_f32(self) -> [f32; 4] {
+        let mut r = [0.0f32; 4];
+        // SAFETY: as above; `cvtpd_ps` rounds to nearest (the MXCSR default, as `as f32`);
+        // an unaligned store into the 16 bytes of `r`.
+        unsafe { _mm_storeu_ps(r.as_mut_ptr(), _mm256_cvtpd_ps(self.0)) };
+        r
     }
 }
 

@@ -2,7 +2,8 @@
 //! backend's lane types and makes their values, and [`dispatch`], which runs a [`Kernel`]
 //! on the backend [`super::backend`] selected, compiled for it.
 
-use super::lane::{Lane, Lane8, Lane32};
+use super::lane::{Lane, Lane8, Lane32, Lane64};
+use super::portable::D4;
 use super::portable::{F8, F8x4, Portable};
 use super::{Avx2, Backend};
 
@@ -17,12 +18,23 @@ pub trait Simd: Copy + Send + Sync + 'static {
     type F32x8: Lane8<Token = Self>;
     /// Four packets of eight f32 lanes (the marcher's 32 lanes).
     type F32x32: Lane32<Token = Self>;
+    /// Four f64 lanes.
+    type F64x4: Lane64;
 
     /// `x` in every lane of a packet.
     #[inline(always)]
     fn splat8(self, x: f32) -> Self::F32x8 {
         Lane::splat(self, x)
     }
+    /// `x` in every lane of four f64 lanes.
+    fn splat4(self, x: f64) -> Self::F64x4;
+    /// Loads `a[i..i + 4]` (panics when out of range).
+    fn load4_at(self, a: &[f64], i: usize) -> Self::F64x4;
+    /// Mask lanes (every bit set, or none) from the low four bits of `bits`.
+    fn mask4(self, bits: u32) -> Self::F64x4;
+    /// For `v[i..i + 4]` (panics when out of range), as mask lanes: where the lane is 0,
+    /// and where it is below `limit` as a signed 32-bit integer.
+    fn u32_masks4(self, v: &[u32], i: usize, limit: i32) -> (Self::F64x4, Self::F64x4);
     /// Loads a packet.
     fn load8(self, a: &[f32; 8]) -> Self::F32x8;
     /// Loads four packets.
@@ -63,6 +75,25 @@ impl Simd for Portable {
     const BACKEND: Backend = Backend::Portable;
     type F32x8 = F8;
     type F32x32 = F8x4;
+    type F64x4 = D4;
+
+    #[inline(always)]
+    fn splat4(self, x: f64) -> D4 {
+        D4([x; 4])
+    }
+    #[inline(always)]
+    fn load4_at(self, a: &[f64], i: usize) -> D4 {
+        D4(a[i..i + 4].try_into().unwrap())
+    }
+    #[inline(always)]
+    fn mask4(self, bits: u32) -> D4 {
+        D4(std::array::from_fn(|l| D4::mask(bits >> l & 1 == 1)))
+    }
+    #[inline(always)]
+    fn u32_masks4(self, v: &[u32], i: usize, limit: i32) -> (D4, D4) {
+        let v: &[u32; 4] = v[i..i + 4].try_into().unwrap();
+        (D4(v.map(|x| D4::mask(x == 0))), D4(v.map(|x| D4::mask((x as i32) < limit))))
+    }
 
     #[inline(always)]
     fn load8(self, a: &[f32; 8]) -> F8 {

@@ -42,6 +42,56 @@ pub trait Lane8: Lane {
     fn store(self) -> [f32; 8];
     /// Bit `l` set where lane `l` has `a < b` (false with a NaN).
     fn lt_mask(self, b: Self) -> u32;
+    /// Mask lanes (every bit set where true, none where false): `a == b` (false with NaN).
+    fn cmp_eq(self, b: Self) -> Self;
+    /// Mask lanes: `a < b` (false with a NaN).
+    fn cmp_lt(self, b: Self) -> Self;
+    /// Mask lanes: `a > b` (false with a NaN).
+    fn cmp_gt(self, b: Self) -> Self;
+    /// Bitwise and.
+    fn and(self, b: Self) -> Self;
+    /// Bitwise or.
+    fn or(self, b: Self) -> Self;
+    /// Bitwise `!self & b`.
+    fn andnot(self, b: Self) -> Self;
+    /// Bit `l` set where lane `l`'s sign bit is.
+    fn movemask(self) -> u32;
+}
+
+/// Four f64 lanes. Comparisons give mask lanes (every bit set where true, none where
+/// false; ordered, so false with a NaN) as AVX does; arithmetic is IEEE double precision
+/// lane by lane, so each lane equals the scalar `f64` computation bit for bit.
+pub trait Lane64:
+    Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Div<Output = Self>
+{
+    /// Square root (correctly rounded).
+    fn vsqrt(self) -> Self;
+    /// `if a > b { a } else { b }`.
+    fn vmax(self, b: Self) -> Self;
+    /// Mask lanes: `a < b`.
+    fn cmp_lt(self, b: Self) -> Self;
+    /// Mask lanes: `a <= b`.
+    fn cmp_le(self, b: Self) -> Self;
+    /// Mask lanes: `a > b`.
+    fn cmp_gt(self, b: Self) -> Self;
+    /// Mask lanes: `a >= b`.
+    fn cmp_ge(self, b: Self) -> Self;
+    /// Mask lanes: `a == b`.
+    fn cmp_eq(self, b: Self) -> Self;
+    /// Bitwise and.
+    fn and(self, b: Self) -> Self;
+    /// Bitwise `!self & b`.
+    fn andnot(self, b: Self) -> Self;
+    /// `x` where `mask`'s sign bit is set, else `y`, lane by lane.
+    fn select(mask: Self, x: Self, y: Self) -> Self;
+    /// Bit `l` set where lane `l`'s sign bit is.
+    fn movemask(self) -> u32;
+    /// The four lanes.
+    fn store(self) -> [f64; 4];
+    /// Stores the lanes into `a[i..i + 4]` (panics when out of range).
+    fn store_at(self, a: &mut [f64], i: usize);
+    /// The four lanes rounded to f32 (to nearest, as `as f32`).
+    fn to_f32(self) -> [f32; 4];
 }
 
 /// Four packets of eight f32 lanes run alike: each packet's lanes get exactly the

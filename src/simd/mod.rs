@@ -16,15 +16,19 @@
 mod avx2;
 mod backend;
 mod f4;
+#[cfg(target_arch = "x86_64")]
+mod grid;
 mod lane;
 mod portable;
 
 #[cfg(target_arch = "x86_64")]
-pub use avx2::{A8, A8x4};
+pub use avx2::{A4d, A8, A8x4};
 pub use backend::{Kernel, Simd, dispatch};
 pub use f4::F4;
-pub use lane::{Lane, Lane8, Lane32};
-pub use portable::{F8, F8x4, Portable};
+#[cfg(target_arch = "x86_64")]
+pub use grid::{BAND_BRICK, BAND_BRICK_SAMPLES, BAND_BS, BAND_EMPTY, BandLayout, Lattice};
+pub use lane::{Lane, Lane8, Lane32, Lane64};
+pub use portable::{D4, F8, F8x4, Portable};
 
 use std::sync::OnceLock;
 

@@ -5,7 +5,7 @@
 
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
-use super::lane::{Lane, Lane8, Lane32};
+use super::lane::{Lane, Lane8, Lane32, Lane64};
 
 /// The portable backend's token: always available.
 #[derive(Clone, Copy, Debug, Default)]
@@ -124,6 +124,21 @@ impl Lane for F8 {
     }
 }
 
+impl F8 {
+    #[inline(always)]
+    fn mask(t: bool) -> f32 {
+        f32::from_bits(if t { !0 } else { 0 })
+    }
+    #[inline(always)]
+    fn cmp(self, b: F8, f: impl Fn(f32, f32) -> bool) -> F8 {
+        F8(std::array::from_fn(|l| F8::mask(f(self.0[l], b.0[l]))))
+    }
+    #[inline(always)]
+    fn bits(self, b: F8, f: impl Fn(u32, u32) -> u32) -> F8 {
+        F8(std::array::from_fn(|l| f32::from_bits(f(self.0[l].to_bits(), b.0[l].to_bits()))))
+    }
+}
+
 impl Lane8 for F8 {
     #[inline(always)]
     fn store(self) -> [f32; 8] {
@@ -132,6 +147,146 @@ impl Lane8 for F8 {
     #[inline(always)]
     fn lt_mask(self, b: Self) -> u32 {
         (0..8).fold(0, |m, l| m | ((self.0[l] < b.0[l]) as u32) << l)
+    }
+    #[inline(always)]
+    fn cmp_eq(self, b: Self) -> Self {
+        self.cmp(b, |x, y| x == y)
+    }
+    #[inline(always)]
+    fn cmp_lt(self, b: Self) -> Self {
+        self.cmp(b, |x, y| x < y)
+    }
+    #[inline(always)]
+    fn cmp_gt(self, b: Self) -> Self {
+        self.cmp(b, |x, y| x > y)
+    }
+    #[inline(always)]
+    fn and(self, b: Self) -> Self {
+        self.bits(b, |x, y| x & y)
+    }
+    #[inline(always)]
+    fn or(self, b: Self) -> Self {
+        self.bits(b, |x, y| x | y)
+    }
+    #[inline(always)]
+    fn andnot(self, b: Self) -> Self {
+        self.bits(b, |x, y| !x & y)
+    }
+    #[inline(always)]
+    fn movemask(self) -> u32 {
+        (0..8).fold(0, |m, l| m | (self.0[l].to_bits() >> 31) << l)
+    }
+}
+
+/// Four f64 lanes as a plain array (the portable [`crate::simd::Simd::F64x4`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct D4(pub [f64; 4]);
+
+impl D4 {
+    /// Every bit set where `t`, none where not.
+    #[inline(always)]
+    pub(super) fn mask(t: bool) -> f64 {
+        f64::from_bits(if t { !0 } else { 0 })
+    }
+    #[inline(always)]
+    fn zip(self, b: D4, f: impl Fn(f64, f64) -> f64) -> D4 {
+        D4(std::array::from_fn(|l| f(self.0[l], b.0[l])))
+    }
+    #[inline(always)]
+    fn cmp(self, b: D4, f: impl Fn(f64, f64) -> bool) -> D4 {
+        D4(std::array::from_fn(|l| D4::mask(f(self.0[l], b.0[l]))))
+    }
+    #[inline(always)]
+    fn bits(self, b: D4, f: impl Fn(u64, u64) -> u64) -> D4 {
+        D4(std::array::from_fn(|l| f64::from_bits(f(self.0[l].to_bits(), b.0[l].to_bits()))))
+    }
+}
+
+impl Add for D4 {
+    type Output = D4;
+    #[inline(always)]
+    fn add(self, b: D4) -> D4 {
+        self.zip(b, |x, y| x + y)
+    }
+}
+impl Sub for D4 {
+    type Output = D4;
+    #[inline(always)]
+    fn sub(self, b: D4) -> D4 {
+        self.zip(b, |x, y| x - y)
+    }
+}
+impl Mul for D4 {
+    type Output = D4;
+    #[inline(always)]
+    fn mul(self, b: D4) -> D4 {
+        self.zip(b, |x, y| x * y)
+    }
+}
+impl Div for D4 {
+    type Output = D4;
+    #[inline(always)]
+    fn div(self, b: D4) -> D4 {
+        self.zip(b, |x, y| x / y)
+    }
+}
+
+impl Lane64 for D4 {
+    #[inline(always)]
+    fn vsqrt(self) -> Self {
+        D4(self.0.map(f64::sqrt))
+    }
+    #[inline(always)]
+    fn vmax(self, b: Self) -> Self {
+        self.zip(b, |x, y| if x > y { x } else { y })
+    }
+    #[inline(always)]
+    fn cmp_lt(self, b: Self) -> Self {
+        self.cmp(b, |x, y| x < y)
+    }
+    #[inline(always)]
+    fn cmp_le(self, b: Self) -> Self {
+        self.cmp(b, |x, y| x <= y)
+    }
+    #[inline(always)]
+    fn cmp_gt(self, b: Self) -> Self {
+        self.cmp(b, |x, y| x > y)
+    }
+    #[inline(always)]
+    fn cmp_ge(self, b: Self) -> Self {
+        self.cmp(b, |x, y| x >= y)
+    }
+    #[inline(always)]
+    fn cmp_eq(self, b: Self) -> Self {
+        self.cmp(b, |x, y| x == y)
+    }
+    #[inline(always)]
+    fn and(self, b: Self) -> Self {
+        self.bits(b, |x, y| x & y)
+    }
+    #[inline(always)]
+    fn andnot(self, b: Self) -> Self {
+        self.bits(b, |x, y| !x & y)
+    }
+    #[inline(always)]
+    fn select(mask: Self, x: Self, y: Self) -> Self {
+        D4(std::array::from_fn(|l| if mask.0[l].to_bits() >> 63 == 1 { x.0[l] } else { y.0[l] }))
+    }
+    #[inline(always)]
+    fn movemask(self) -> u32 {
+        (0..4).fold(0, |m, l| m | ((self.0[l].to_bits() >> 63) as u32) << l)
+    }
+    #[inline(always)]
+    fn store(self) -> [f64; 4] {
+        self.0
+    }
+    #[inline(always)]
+    fn store_at(self, a: &mut [f64], i: usize) {
+        a[i..i + 4].copy_from_slice(&self.0);
+    }
+    #[inline(always)]
+    fn to_f32(self) -> [f32; 4] {
+        self.0.map(|x| x as f32)
     }
 }
 
