@@ -13,16 +13,12 @@
 
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
 
-use super::avx2;
 use super::f4::{F4, Lanes4};
+use super::{Portable, Simd, avx2};
 
-/// The portable backend: plain Rust arrays, on every target and wherever
-/// `SDFMESH_SIMD=portable` asks for it.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Portable;
-
-/// A backend of the mesh kernels: its lane types and how values of them are made.
-pub trait MeshSimd: Copy + Send + Sync + 'static {
+/// A backend of the mesh kernels (an extension of [`Simd`] with the lanes they need): its
+/// lane types and how values of them are made.
+pub trait MeshSimd: Simd {
     /// Four `f32` lanes.
     type F4: Lanes4;
     /// Eight `f32` lanes.
@@ -30,13 +26,13 @@ pub trait MeshSimd: Copy + Send + Sync + 'static {
     /// A mask over eight lanes.
     type M8: Mask8<Lanes = Self::F8>;
     /// Four lanes of `x`.
-    fn splat4(self, x: f32) -> Self::F4;
+    fn lanes4(self, x: f32) -> Self::F4;
     /// Four lanes loaded from `a`.
-    fn load4(self, a: &[f32; 4]) -> Self::F4;
+    fn load_lanes4(self, a: &[f32; 4]) -> Self::F4;
     /// Eight lanes of `x`.
-    fn splat8(self, x: f32) -> Self::F8;
+    fn lanes8(self, x: f32) -> Self::F8;
     /// Eight lanes loaded from `a`.
-    fn load8(self, a: &[f32; 8]) -> Self::F8;
+    fn load_lanes8(self, a: &[f32; 8]) -> Self::F8;
     /// Lanes 0..4 from `lo`, lanes 4..8 from `hi`.
     fn halves8(self, lo: &[f32; 4], hi: &[f32; 4]) -> Self::F8;
     /// `lo` in lanes 0..4, `hi` in lanes 4..8.
@@ -122,87 +118,87 @@ pub fn dispatch_mesh<K: MeshKernel>(kernel: K) -> K::Output {
 
 /// Eight `f32` lanes as a plain array: the portable backend's [`Lanes8`].
 #[derive(Clone, Copy, Debug)]
-pub struct F8(pub [f32; 8]);
+pub struct Arr8(pub [f32; 8]);
 
 /// A mask over eight portable lanes: bit `l` for lane `l`.
 #[derive(Clone, Copy, Debug)]
-pub struct M8(pub u32);
+pub struct Bits8(pub u32);
 
-impl F8 {
+impl Arr8 {
     #[inline(always)]
-    fn map(self, f: impl Fn(f32) -> f32) -> F8 {
-        F8(self.0.map(f))
+    fn map(self, f: impl Fn(f32) -> f32) -> Arr8 {
+        Arr8(self.0.map(f))
     }
 
     #[inline(always)]
-    fn zip(self, b: F8, f: impl Fn(f32, f32) -> f32) -> F8 {
-        F8(std::array::from_fn(|l| f(self.0[l], b.0[l])))
+    fn zip(self, b: Arr8, f: impl Fn(f32, f32) -> f32) -> Arr8 {
+        Arr8(std::array::from_fn(|l| f(self.0[l], b.0[l])))
     }
 
     #[inline(always)]
-    fn bits(self, b: F8, f: impl Fn(f32, f32) -> bool) -> M8 {
-        M8((0..8).fold(0, |m, l| m | (u32::from(f(self.0[l], b.0[l])) << l)))
+    fn bits(self, b: Arr8, f: impl Fn(f32, f32) -> bool) -> Bits8 {
+        Bits8((0..8).fold(0, |m, l| m | (u32::from(f(self.0[l], b.0[l])) << l)))
     }
 }
 
 impl MeshSimd for Portable {
     type F4 = F4;
-    type F8 = F8;
-    type M8 = M8;
+    type F8 = Arr8;
+    type M8 = Bits8;
     #[inline(always)]
-    fn splat4(self, x: f32) -> F4 {
+    fn lanes4(self, x: f32) -> F4 {
         F4([x; 4])
     }
     #[inline(always)]
-    fn load4(self, a: &[f32; 4]) -> F4 {
+    fn load_lanes4(self, a: &[f32; 4]) -> F4 {
         F4(*a)
     }
     #[inline(always)]
-    fn splat8(self, x: f32) -> F8 {
-        F8([x; 8])
+    fn lanes8(self, x: f32) -> Arr8 {
+        Arr8([x; 8])
     }
     #[inline(always)]
-    fn load8(self, a: &[f32; 8]) -> F8 {
-        F8(*a)
+    fn load_lanes8(self, a: &[f32; 8]) -> Arr8 {
+        Arr8(*a)
     }
     #[inline(always)]
-    fn halves8(self, lo: &[f32; 4], hi: &[f32; 4]) -> F8 {
-        F8(std::array::from_fn(|l| if l < 4 { lo[l] } else { hi[l - 4] }))
+    fn halves8(self, lo: &[f32; 4], hi: &[f32; 4]) -> Arr8 {
+        Arr8(std::array::from_fn(|l| if l < 4 { lo[l] } else { hi[l - 4] }))
     }
     #[inline(always)]
-    fn splat_halves8(self, lo: f32, hi: f32) -> F8 {
-        F8(std::array::from_fn(|l| if l < 4 { lo } else { hi }))
+    fn splat_halves8(self, lo: f32, hi: f32) -> Arr8 {
+        Arr8(std::array::from_fn(|l| if l < 4 { lo } else { hi }))
     }
     #[inline(always)]
-    fn both8(self, a: &[f32; 4]) -> F8 {
+    fn both8(self, a: &[f32; 4]) -> Arr8 {
         self.halves8(a, a)
     }
 }
 
-impl Lanes8 for F8 {
-    type Mask = M8;
+impl Lanes8 for Arr8 {
+    type Mask = Bits8;
     #[inline(always)]
     fn to_array(self) -> [f32; 8] {
         self.0
     }
     #[inline(always)]
-    fn min(self, b: F8) -> F8 {
+    fn min(self, b: Arr8) -> Arr8 {
         self.zip(b, |x, y| if x < y { x } else { y })
     }
     #[inline(always)]
-    fn max(self, b: F8) -> F8 {
+    fn max(self, b: Arr8) -> Arr8 {
         self.zip(b, |x, y| if x > y { x } else { y })
     }
     #[inline(always)]
-    fn sqrt(self) -> F8 {
+    fn sqrt(self) -> Arr8 {
         self.map(f32::sqrt)
     }
     #[inline(always)]
-    fn abs(self) -> F8 {
+    fn abs(self) -> Arr8 {
         self.map(f32::abs)
     }
     #[inline(always)]
-    fn mul_sub(self, b: F8, c: F8) -> F8 {
+    fn mul_sub(self, b: Arr8, c: Arr8) -> Arr8 {
         // The exact product less `c`, rounded once to `f64`: rounding that to `f32` is the
         // fused result unless it fell exactly on a midpoint between two `f32`s (or below
         // or above their normal range), which the exact (slower) path decides.
@@ -213,16 +209,16 @@ impl Lanes8 for F8 {
             h | (x.to_bits() & 0x1fff_ffff == 0x1000_0000) | (m > 0.0 && m < F32_NORMAL) | (m >= F32_TOP)
         });
         if hard {
-            return F8(std::array::from_fn(|l| mul_sub_rounded_once(self.0[l], b.0[l], c.0[l])));
+            return Arr8(std::array::from_fn(|l| mul_sub_rounded_once(self.0[l], b.0[l], c.0[l])));
         }
-        F8(s.map(|x| x as f32))
+        Arr8(s.map(|x| x as f32))
     }
     #[inline(always)]
-    fn le(self, b: F8) -> M8 {
+    fn le(self, b: Arr8) -> Bits8 {
         self.bits(b, |x, y| x <= y)
     }
     #[inline(always)]
-    fn eq(self, b: F8) -> M8 {
+    fn eq(self, b: Arr8) -> Bits8 {
         self.bits(b, |x, y| x == y)
     }
     #[inline(always)]
@@ -270,10 +266,10 @@ fn mul_sub_rounded_once(a: f32, b: f32, c: f32) -> f32 {
 
 macro_rules! f8_op {
     ($t:ident, $f:ident, $op:tt) => {
-        impl $t for F8 {
-            type Output = F8;
+        impl $t for Arr8 {
+            type Output = Arr8;
             #[inline(always)]
-            fn $f(self, b: F8) -> F8 {
+            fn $f(self, b: Arr8) -> Arr8 {
                 self.zip(b, |x, y| x $op y)
             }
         }
@@ -284,35 +280,35 @@ f8_op!(Sub, sub, -);
 f8_op!(Mul, mul, *);
 f8_op!(Div, div, /);
 
-impl BitAnd for M8 {
-    type Output = M8;
+impl BitAnd for Bits8 {
+    type Output = Bits8;
     #[inline(always)]
-    fn bitand(self, b: M8) -> M8 {
-        M8(self.0 & b.0)
+    fn bitand(self, b: Bits8) -> Bits8 {
+        Bits8(self.0 & b.0)
     }
 }
 
-impl BitOr for M8 {
-    type Output = M8;
+impl BitOr for Bits8 {
+    type Output = Bits8;
     #[inline(always)]
-    fn bitor(self, b: M8) -> M8 {
-        M8(self.0 | b.0)
+    fn bitor(self, b: Bits8) -> Bits8 {
+        Bits8(self.0 | b.0)
     }
 }
 
-impl Mask8 for M8 {
-    type Lanes = F8;
+impl Mask8 for Bits8 {
+    type Lanes = Arr8;
     #[inline(always)]
-    fn and_not(self, b: M8) -> M8 {
-        M8(self.0 & !b.0)
+    fn and_not(self, b: Bits8) -> Bits8 {
+        Bits8(self.0 & !b.0)
     }
     #[inline(always)]
     fn bits(self) -> u32 {
         self.0
     }
     #[inline(always)]
-    fn select(self, a: F8, b: F8) -> F8 {
-        F8(std::array::from_fn(|l| if self.0 >> l & 1 != 0 { a.0[l] } else { b.0[l] }))
+    fn select(self, a: Arr8, b: Arr8) -> Arr8 {
+        Arr8(std::array::from_fn(|l| if self.0 >> l & 1 != 0 { a.0[l] } else { b.0[l] }))
     }
 }
 
@@ -347,20 +343,20 @@ mod avx {
         type F8 = Avx8;
         type M8 = AvxMask8;
         #[inline(always)]
-        fn splat4(self, x: f32) -> Sse4 {
+        fn lanes4(self, x: f32) -> Sse4 {
             Sse4::splat(x)
         }
         #[inline(always)]
-        fn load4(self, a: &[f32; 4]) -> Sse4 {
+        fn load_lanes4(self, a: &[f32; 4]) -> Sse4 {
             Sse4::load(a)
         }
         #[inline(always)]
-        fn splat8(self, x: f32) -> Avx8 {
+        fn lanes8(self, x: f32) -> Avx8 {
             // SAFETY: see the module's note (`self` is the token).
             Avx8(unsafe { _mm256_set1_ps(x) })
         }
         #[inline(always)]
-        fn load8(self, a: &[f32; 8]) -> Avx8 {
+        fn load_lanes8(self, a: &[f32; 8]) -> Avx8 {
             // SAFETY: see the module's note; the load reads the 32 bytes of `a`.
             Avx8(unsafe { _mm256_loadu_ps(a.as_ptr()) })
         }
@@ -514,7 +510,7 @@ mod tests {
     impl MeshKernel for Every {
         type Output = Vec<u32>;
         fn run<S: MeshSimd>(self, s: S) -> Vec<u32> {
-            let (a, b) = (s.load8(&self.0), s.load8(&self.1));
+            let (a, b) = (s.load_lanes8(&self.0), s.load_lanes8(&self.1));
             let c = s.halves8(&[1.0, 2.0, 3.0, 4.0], &[5.0, 6.0, 7.0, 8.0]);
             let mut out = Vec::new();
             for x in [
@@ -529,7 +525,7 @@ mod tests {
                 a.mul_sub(b, c),
                 a.le(b).select(a, c),
                 (a.le(b) | a.eq(c)).select(c, b),
-                (a.le(b) & b.le(a)).select(s.splat8(9.0), b),
+                (a.le(b) & b.le(a)).select(s.lanes8(9.0), b),
                 a.le(b).and_not(a.eq(b)).select(a, s.both8(&[0.5, 1.5, 2.5, 3.5])),
                 s.splat_halves8(-1.0, 1.0),
             ] {

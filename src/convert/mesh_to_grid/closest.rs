@@ -592,7 +592,7 @@ fn collapse(bvh: &Bvh2, corners: &[[Vec3A; 3]]) -> (Vec<Node4>, Vec<ClosestPacke
 /// in the low four lanes and point `2 j + 1` in the high four, per coordinate.
 #[inline(always)]
 fn pair_coordinates<S: MeshSimd>(s: S, qa: &[Vec3A; GROUP_MAX]) -> [[S::F8; 3]; GROUP_MAX / 2] {
-    let mut out = [[s.splat8(0.0); 3]; GROUP_MAX / 2];
+    let mut out = [[s.lanes8(0.0); 3]; GROUP_MAX / 2];
     for (j, pair) in out.iter_mut().enumerate() {
         for (a, x) in pair.iter_mut().enumerate() {
             *x = s.splat_halves8(qa[2 * j][a], qa[2 * j + 1][a]);
@@ -626,8 +626,8 @@ fn node_within<S: MeshSimd>(
     best2: &[f32; GROUP_MAX],
     mask: u32,
 ) -> (u32, Vec4) {
-    let inf = s.splat8(f32::INFINITY);
-    let zero = s.splat8(0.0);
+    let inf = s.lanes8(f32::INFINITY);
+    let zero = s.lanes8(0.0);
     let mut within_all = 0u32;
     let mut nearest = inf;
     let mut pairs = (mask | mask >> 1) & 0x55;
@@ -650,7 +650,7 @@ fn node_within<S: MeshSimd>(
         let rho = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
         let dr = (rho - both(s, &c.r)).max(zero);
         let dh = (h.abs() - both(s, &c.t)).max(zero);
-        let cyl2 = (dr * dr + dh * dh) * s.splat8(CYL_SHRINK);
+        let cyl2 = (dr * dr + dh * dh) * s.lanes8(CYL_SHRINK);
         let d2 = box2.max(cyl2);
         // Points outside `mask` (the second of a pair may be) get a negative best: no
         // child is within it (the bounds are not NaN).
@@ -710,7 +710,7 @@ fn tri_closest<S: MeshSimd>(s: S, t: &PointTri4, q: &[S::F8; 3]) -> (S::F8, [S::
     let vc = d1 * d4 - d3 * d2;
     let vb = d5 * d2 - d1 * d6;
     let va = d3 * d6 - d5 * d4;
-    let zero = s.splat8(0.0);
+    let zero = s.lanes8(0.0);
     // The regions, each as the scalar code tests it (see `PointTri4::closest`).
     let in_a = d1.le(zero) & d2.le(zero);
     let in_b = zero.le(d3) & d4.le(d3);

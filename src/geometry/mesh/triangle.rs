@@ -112,9 +112,9 @@ impl ShearedRay {
     #[inline(always)]
     pub fn intersect4<S: MeshSimd>(&self, s: S, tri: &Tri4, t_min: f32, t_max: f32) -> ([f32; 4], u32) {
         let [kx, ky, kz] = self.k;
-        let (sx, sy, sz) = (s.splat4(self.shear.x), s.splat4(self.shear.y), s.splat4(self.shear.z));
+        let (sx, sy, sz) = (s.lanes4(self.shear.x), s.lanes4(self.shear.y), s.lanes4(self.shear.z));
         let (ox, oy, oz) =
-            (s.splat4(self.origin_k[0]), s.splat4(self.origin_k[1]), s.splat4(self.origin_k[2]));
+            (s.lanes4(self.origin_k[0]), s.lanes4(self.origin_k[1]), s.lanes4(self.origin_k[2]));
         // Per vertex: sheared x, y and the z offset along the ray's main axis. (Functions
         // marked `#[inline(always)]` rather than closures, which the compiler may leave out
         // of line, where they would not be compiled for the backend's instructions.)
@@ -124,20 +124,32 @@ impl ShearedRay {
             (row[0] - o[0] - sx * z, row[1] - o[1] - sy * z, z)
         }
         let o = [ox, oy, oz];
-        let (ax, ay, az) =
-            vertex([s.load4(&tri[0][kx]), s.load4(&tri[0][ky]), s.load4(&tri[0][kz])], o, sx, sy);
-        let (bx, by, bz) =
-            vertex([s.load4(&tri[1][kx]), s.load4(&tri[1][ky]), s.load4(&tri[1][kz])], o, sx, sy);
-        let (cx, cy, cz) =
-            vertex([s.load4(&tri[2][kx]), s.load4(&tri[2][ky]), s.load4(&tri[2][kz])], o, sx, sy);
+        let (ax, ay, az) = vertex(
+            [s.load_lanes4(&tri[0][kx]), s.load_lanes4(&tri[0][ky]), s.load_lanes4(&tri[0][kz])],
+            o,
+            sx,
+            sy,
+        );
+        let (bx, by, bz) = vertex(
+            [s.load_lanes4(&tri[1][kx]), s.load_lanes4(&tri[1][ky]), s.load_lanes4(&tri[1][kz])],
+            o,
+            sx,
+            sy,
+        );
+        let (cx, cy, cz) = vertex(
+            [s.load_lanes4(&tri[2][kx]), s.load_lanes4(&tri[2][ky]), s.load_lanes4(&tri[2][kz])],
+            o,
+            sx,
+            sy,
+        );
         let mut u = cx * by - cy * bx;
         let mut v = ax * cy - ay * cx;
         let mut w = bx * ay - by * ax;
-        let zero = s.splat4(0.0);
+        let zero = s.lanes4(0.0);
         if (u.eq(zero) | v.eq(zero) | w.eq(zero)) != 0 {
             let mut uvw = [u.to_array(), v.to_array(), w.to_array()];
             self.edges_f64(tri, &mut uvw);
-            (u, v, w) = (s.load4(&uvw[0]), s.load4(&uvw[1]), s.load4(&uvw[2]));
+            (u, v, w) = (s.load_lanes4(&uvw[0]), s.load_lanes4(&uvw[1]), s.load_lanes4(&uvw[2]));
         }
         // Inside: no edge function of either sign against the others (for numbers, the
         // negation of "some negative and some positive"; NaN lanes, unused or degenerate,
@@ -150,7 +162,7 @@ impl ShearedRay {
         }
         let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
         let t = t_scaled / det;
-        let ok = candidates & s.splat4(t_min).le(t) & t.le(s.splat4(t_max));
+        let ok = candidates & s.lanes4(t_min).le(t) & t.le(s.lanes4(t_max));
         (t.to_array(), ok)
     }
 
@@ -166,9 +178,9 @@ impl ShearedRay {
         t_min: f32,
         t_max: f32,
     ) -> ([f32; 8], u32) {
-        let (sx, sy, sz) = (s.splat8(self.shear.x), s.splat8(self.shear.y), s.splat8(self.shear.z));
+        let (sx, sy, sz) = (s.lanes8(self.shear.x), s.lanes8(self.shear.y), s.lanes8(self.shear.z));
         let (ox, oy, oz) =
-            (s.splat8(self.origin_k[0]), s.splat8(self.origin_k[1]), s.splat8(self.origin_k[2]));
+            (s.lanes8(self.origin_k[0]), s.lanes8(self.origin_k[1]), s.lanes8(self.origin_k[2]));
         // Per vertex: sheared x, y and the z offset along the ray's main axis.
         #[inline(always)]
         fn vertex<L: Lanes8>(row: [L; 3], o: [L; 3], sx: L, sy: L) -> (L, L, L) {
@@ -182,11 +194,11 @@ impl ShearedRay {
         let mut u = cx * by - cy * bx;
         let mut v = ax * cy - ay * cx;
         let mut w = bx * ay - by * ax;
-        let zero = s.splat8(0.0);
+        let zero = s.lanes8(0.0);
         if (u.eq(zero) | v.eq(zero) | w.eq(zero)).bits() != 0 {
             let mut uvw = [u.to_array(), v.to_array(), w.to_array()];
             self.edges_f64_8(a, b, &mut uvw);
-            (u, v, w) = (s.load8(&uvw[0]), s.load8(&uvw[1]), s.load8(&uvw[2]));
+            (u, v, w) = (s.load_lanes8(&uvw[0]), s.load_lanes8(&uvw[1]), s.load_lanes8(&uvw[2]));
         }
         let inside = (zero.le(u) & zero.le(v) & zero.le(w)) | (u.le(zero) & v.le(zero) & w.le(zero));
         let det = u + v + w;
@@ -196,7 +208,7 @@ impl ShearedRay {
         }
         let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
         let t = t_scaled / det;
-        let ok = candidates & (s.splat8(t_min).le(t) & t.le(s.splat8(t_max))).bits();
+        let ok = candidates & (s.lanes8(t_min).le(t) & t.le(s.lanes8(t_max))).bits();
         (t.to_array(), ok)
     }
 

@@ -146,17 +146,17 @@ impl<S: MeshSimd> BoxRay<S> {
         // `p` is within half an ulp of it); `copysign` picks the entry row without a branch.
         // (Loops rather than closures, which the compiler may leave out of line, where they
         // would not be compiled for the backend's instructions.)
-        let mut offset = [s.splat8(0.0); 6];
+        let mut offset = [s.lanes8(0.0); 6];
         for (row, x) in offset.iter_mut().enumerate() {
             let a = row % 3;
             let p = o[a] * inv[a];
             let e = (p.abs() * (2.0 * f32::EPSILON)).copysign(inv[a]);
-            *x = s.splat8(if row < 3 { p + e } else { p - e });
+            *x = s.lanes8(if row < 3 { p + e } else { p - e });
         }
         BoxRay {
             s,
-            origin: [s.splat8(o[0]), s.splat8(o[1]), s.splat8(o[2])],
-            inv: [s.splat8(inv[0]), s.splat8(inv[1]), s.splat8(inv[2])],
+            origin: [s.lanes8(o[0]), s.lanes8(o[1]), s.lanes8(o[2])],
+            inv: [s.lanes8(inv[0]), s.lanes8(inv[1]), s.lanes8(inv[2])],
             offset,
         }
     }
@@ -174,8 +174,8 @@ impl<S: MeshSimd> BoxRay<S> {
         // Per axis, the entry and exit distances of the slab. `min` and `max` return their
         // second operand where either is NaN, so the NaN of an empty lane carries through
         // every step below and fails the final comparison.
-        let near = x0.min(x1).max(y0.min(y1)).max(self.s.splat8(t_min).max(z0.min(z1)));
-        let far = x0.max(x1).min(y0.max(y1)).min(self.s.splat8(t_max).min(z0.max(z1)));
+        let near = x0.min(x1).max(y0.min(y1)).max(self.s.lanes8(t_min).max(z0.min(z1)));
+        let far = x0.max(x1).min(y0.max(y1)).min(self.s.lanes8(t_max).min(z0.max(z1)));
         (near.le(far).bits(), near.order_keys())
     }
 
@@ -185,9 +185,9 @@ impl<S: MeshSimd> BoxRay<S> {
     fn slab(&self, fused: bool, bound: &[f32; WIDTH], row: usize) -> S::F8 {
         let a = row % 3;
         if fused {
-            self.s.load8(bound).mul_sub(self.inv[a], self.offset[row])
+            self.s.load_lanes8(bound).mul_sub(self.inv[a], self.offset[row])
         } else {
-            (self.s.load8(bound) - self.origin[a]) * self.inv[a]
+            (self.s.load_lanes8(bound) - self.origin[a]) * self.inv[a]
         }
     }
 

@@ -70,7 +70,7 @@
 //! Materials: the tape computes distances only. The material of a hit is looked up once
 //! per hit with [`SdfTree::distance_material`] (the f64 tree), never per march step.
 
-use std::ops::{Add, Div, Mul, Neg, Sub};
+use crate::simd::{F8, F8x4, Kernel, Lane, Lane8, Lane32, Portable, Simd, dispatch};
 
 use glam::{DAffine3, DMat3, DVec3, Vec3};
 
@@ -562,8 +562,8 @@ pub struct TapeScratch {
     vals8: Vec<F8>,
     pts8: Vec<[F8; 3]>,
     /// Four packets' registers for [`Tape::eval32_ops`].
-    vals32: Vec<[F8; 4]>,
-    pts32: Vec<[[F8; 4]; 3]>,
+    vals32: Vec<F8x4>,
+    pts32: Vec<[F8x4; 3]>,
 }
 
 impl TapeScratch {
@@ -572,10 +572,10 @@ impl TapeScratch {
         TapeScratch {
             vals: vec![0.0; tape.vals],
             pts: vec![[0.0; 3]; tape.points],
-            vals8: vec![F8([0.0; 8]); tape.vals],
-            pts8: vec![[F8([0.0; 8]); 3]; tape.points],
-            vals32: vec![[F8([0.0; 8]); 4]; tape.vals],
-            pts32: vec![[[F8([0.0; 8]); 4]; 3]; tape.points],
+            vals8: vec![F8::ZERO; tape.vals],
+            pts8: vec![[F8::ZERO; 3]; tape.points],
+            vals32: vec![F8x4::ZERO; tape.vals],
+            pts32: vec![[F8x4::ZERO; 3]; tape.points],
         }
     }
 
@@ -587,10 +587,10 @@ impl TapeScratch {
             *self = TapeScratch {
                 vals: vec![0.0; vals],
                 pts: vec![[0.0; 3]; points],
-                vals8: vec![F8([0.0; 8]); vals],
-                pts8: vec![[F8([0.0; 8]); 3]; points],
-                vals32: vec![[F8([0.0; 8]); 4]; vals],
-                pts32: vec![[[F8([0.0; 8]); 4]; 3]; points],
+                vals8: vec![F8::ZERO; vals],
+                pts8: vec![[F8::ZERO; 3]; points],
+                vals32: vec![F8x4::ZERO; vals],
+                pts32: vec![[F8x4::ZERO; 3]; points],
             };
         }
     }
@@ -723,7 +723,7 @@ impl Tape {
     /// one ([`super::prune::TapeRegions`]), which uses its registers and triangles.
     #[inline]
     pub fn eval_ops(&self, ops: Ops, p_rel: Vec3, scratch: &mut TapeScratch) -> f32 {
-        run_ops!(ops, &self.triangles, &mut scratch.vals, &mut scratch.pts, p_rel.to_array())
+        run_ops!(ops, &self.triangles, &mut scratch.vals, &mut scratch.pts, p_rel.to_array(), ())
     }
 
     /// The value of primitive operation `op` (one of this tape's) at point `local` of its
@@ -733,14 +733,13 @@ impl Tape {
         let (p, out) = op.primitive_registers()?;
         scratch.pts[p as usize] = local;
         let input = scratch.pts[0];
-        run::<f32>(std::iter::once(op), &self.triangles, &mut scratch.vals, &mut scratch.pts, input);
+        run::<f32>(std::iter::once(op), &self.triangles, &mut scratch.vals, &mut scratch.pts, input, ());
         Some(scratch.vals[out as usize])
     }
 
     /// [`Tape::eval`] at the eight points `(xs[l], ys[l], zs[l])` (relative to
     /// [`Tape::origin`]); lane `l` of the result equals `eval` at point `l` bit for bit.
-    /// Runs the AVX2 build where the CPU has it ([`crate::simd::avx2`]), else
-    /// [`Tape::eval8_portable`].
+    /// Runs on the selected SIMD backend ([`crate::simd::dispatch`]).
     #[inline]
     pub fn eval8(&self, xs: &[f32; 8], ys: &[f32; 8], zs: &[f32; 8], scratch: &mut TapeScratch) -> [f32; 8] {
         self.eval8_ops(Ops::All(&self.ops), xs, ys, zs, scratch)
@@ -756,12 +755,7 @@ impl Tape {
         zs: &[f32; 8],
         scratch: &mut TapeScratch,
     ) -> [f32; 8] {
-        #[cfg(target_arch = "x86_64")]
-        if crate::simd::avx2().is_some() {
-            // SAFETY: the CPU has AVX2 and FMA (checked just above).
-            return unsafe { self.eval8_avx2(ops, xs, ys, zs, scratch) };
-        }
-        self.eval8_portable_ops(ops, xs, ys, zs, scratch)
+        dispatch(Eval8 { tape: self, ops, xs, ys, zs, scratch })
     }
 
     /// [`Tape::eval8_ops`] for four packets of eight points at once (`xs[g][l]` is lane `l`
@@ -770,12 +764,7 @@ impl Tape {
     /// `eval8_ops` on packet `g` bit for bit (the same operations lane by lane).
     #[inline]
     pub fn eval32_ops(&self, ops: Ops, xs: &X32, ys: &X32, zs: &X32, scratch: &mut TapeScratch) -> X32 {
-        #[cfg(target_arch = "x86_64")]
-        if crate::simd::avx2().is_some() {
-            // SAFETY: the CPU has AVX2 and FMA (checked just above).
-            return unsafe { self.eval32_avx2(ops, xs, ys, zs, scratch) };
-        }
-        std::array::from_fn(|g| self.eval8_portable_ops(ops, &xs[g], &ys[g], &zs[g], scratch))
+        dispatch(Eval32 { tape: self, ops, xs, ys, zs, scratch })
     }
 
     /// The portable build of [`Tape::eval8`] (eight-lane arrays the compiler vectorises for
@@ -787,41 +776,49 @@ impl Tape {
         zs: &[f32; 8],
         scratch: &mut TapeScratch,
     ) -> [f32; 8] {
-        self.eval8_portable_ops(Ops::All(&self.ops), xs, ys, zs, scratch)
+        Eval8 { tape: self, ops: Ops::All(&self.ops), xs, ys, zs, scratch }.run(Portable)
     }
+}
 
-    fn eval8_portable_ops(
-        &self,
-        ops: Ops,
-        xs: &[f32; 8],
-        ys: &[f32; 8],
-        zs: &[f32; 8],
-        scratch: &mut TapeScratch,
-    ) -> [f32; 8] {
-        run_ops!(ops, &self.triangles, &mut scratch.vals8, &mut scratch.pts8, [F8(*xs), F8(*ys), F8(*zs)]).0
+/// [`Tape::eval8_ops`] as a SIMD kernel.
+struct Eval8<'a> {
+    tape: &'a Tape,
+    ops: Ops<'a>,
+    xs: &'a [f32; 8],
+    ys: &'a [f32; 8],
+    zs: &'a [f32; 8],
+    scratch: &'a mut TapeScratch,
+}
+
+impl Kernel for Eval8<'_> {
+    type Output = [f32; 8];
+    #[inline(always)]
+    fn run<S: Simd>(self, s: S) -> [f32; 8] {
+        let Eval8 { tape, ops, xs, ys, zs, scratch } = self;
+        let p = [s.load8(xs), s.load8(ys), s.load8(zs)];
+        let (vals, pts) = (s.regs8(&mut scratch.vals8), s.regs8x3(&mut scratch.pts8));
+        run_ops!(ops, &tape.triangles, vals, pts, p, s).store()
     }
+}
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn eval8_avx2(
-        &self,
-        ops: Ops,
-        xs: &[f32; 8],
-        ys: &[f32; 8],
-        zs: &[f32; 8],
-        scratch: &mut TapeScratch,
-    ) -> [f32; 8] {
-        use avx::{A8, cast, cast3};
-        let p = [A8::load(xs), A8::load(ys), A8::load(zs)];
-        run_ops!(ops, &self.triangles, cast(&mut scratch.vals8), cast3(&mut scratch.pts8), p).store()
-    }
+/// [`Tape::eval32_ops`] as a SIMD kernel.
+struct Eval32<'a> {
+    tape: &'a Tape,
+    ops: Ops<'a>,
+    xs: &'a X32,
+    ys: &'a X32,
+    zs: &'a X32,
+    scratch: &'a mut TapeScratch,
+}
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn eval32_avx2(&self, ops: Ops, xs: &X32, ys: &X32, zs: &X32, scratch: &mut TapeScratch) -> X32 {
-        use avx::{A8x4, cast4, cast4x3};
-        let p = [A8x4::load(xs), A8x4::load(ys), A8x4::load(zs)];
-        run_ops!(ops, &self.triangles, cast4(&mut scratch.vals32), cast4x3(&mut scratch.pts32), p).store()
+impl Kernel for Eval32<'_> {
+    type Output = X32;
+    #[inline(always)]
+    fn run<S: Simd>(self, s: S) -> X32 {
+        let Eval32 { tape, ops, xs, ys, zs, scratch } = self;
+        let p = [s.load32(xs), s.load32(ys), s.load32(zs)];
+        let (vals, pts) = (s.regs32(&mut scratch.vals32), s.regs32x3(&mut scratch.pts32));
+        run_ops!(ops, &tape.triangles, vals, pts, p, s).store()
     }
 }
 
@@ -1236,376 +1233,6 @@ fn triangle_consts(a: Vec3, b: Vec3, c: Vec3) -> TriangleConsts {
     }
 }
 
-/// A number of f32 lanes evaluated alike: `f32` (one) or [`F8`] (eight). Every operation
-/// is the same IEEE single-precision operation on every lane, so the lanes of an `F8`
-/// computation equal the `f32` computation bit for bit.
-trait Lane:
-    Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Div<Output = Self> + Neg<Output = Self>
-{
-    /// `x` in every lane.
-    fn splat(x: f32) -> Self;
-    /// Square root (correctly rounded).
-    fn vsqrt(self) -> Self;
-    /// Absolute value.
-    fn vabs(self) -> Self;
-    /// Round towards minus infinity.
-    fn vfloor(self) -> Self;
-    /// `if a < b { a } else { b }`.
-    fn vmin(self, b: Self) -> Self;
-    /// `if a > b { a } else { b }`.
-    fn vmax(self, b: Self) -> Self;
-    /// `if a < b { x } else { y }`, lane by lane.
-    fn select_lt(a: Self, b: Self, x: Self, y: Self) -> Self;
-}
-
-impl Lane for f32 {
-    #[inline(always)]
-    fn splat(x: f32) -> Self {
-        x
-    }
-    #[inline(always)]
-    fn vsqrt(self) -> Self {
-        self.sqrt()
-    }
-    #[inline(always)]
-    fn vabs(self) -> Self {
-        self.abs()
-    }
-    #[inline(always)]
-    fn vfloor(self) -> Self {
-        self.floor()
-    }
-    #[inline(always)]
-    fn vmin(self, b: Self) -> Self {
-        if self < b { self } else { b }
-    }
-    #[inline(always)]
-    fn vmax(self, b: Self) -> Self {
-        if self > b { self } else { b }
-    }
-    #[inline(always)]
-    fn select_lt(a: Self, b: Self, x: Self, y: Self) -> Self {
-        if a < b { x } else { y }
-    }
-}
-
-/// Eight f32 lanes as a plain array, every operation a loop over the lanes that the
-/// compiler vectorises for the baseline target (two 128-bit instructions): the portable
-/// build of [`Tape::eval8`]. The AVX2 build uses [`avx::A8`] instead.
-#[derive(Clone, Copy, Debug)]
-#[repr(C, align(32))]
-struct F8([f32; 8]);
-
-impl F8 {
-    #[inline(always)]
-    fn map(self, f: impl Fn(f32) -> f32) -> F8 {
-        let mut r = [0.0f32; 8];
-        for (l, r) in r.iter_mut().enumerate() {
-            *r = f(self.0[l]);
-        }
-        F8(r)
-    }
-    #[inline(always)]
-    fn zip(self, b: F8, f: impl Fn(f32, f32) -> f32) -> F8 {
-        let mut r = [0.0f32; 8];
-        for (l, r) in r.iter_mut().enumerate() {
-            *r = f(self.0[l], b.0[l]);
-        }
-        F8(r)
-    }
-}
-
-impl Add for F8 {
-    type Output = F8;
-    #[inline(always)]
-    fn add(self, b: F8) -> F8 {
-        self.zip(b, |x, y| x + y)
-    }
-}
-
-impl Sub for F8 {
-    type Output = F8;
-    #[inline(always)]
-    fn sub(self, b: F8) -> F8 {
-        self.zip(b, |x, y| x - y)
-    }
-}
-
-impl Mul for F8 {
-    type Output = F8;
-    #[inline(always)]
-    fn mul(self, b: F8) -> F8 {
-        self.zip(b, |x, y| x * y)
-    }
-}
-
-impl Div for F8 {
-    type Output = F8;
-    #[inline(always)]
-    fn div(self, b: F8) -> F8 {
-        self.zip(b, |x, y| x / y)
-    }
-}
-
-impl Neg for F8 {
-    type Output = F8;
-    #[inline(always)]
-    fn neg(self) -> F8 {
-        self.map(|x| -x)
-    }
-}
-
-impl Lane for F8 {
-    #[inline(always)]
-    fn splat(x: f32) -> Self {
-        F8([x; 8])
-    }
-    #[inline(always)]
-    fn vsqrt(self) -> Self {
-        self.map(f32::sqrt)
-    }
-    #[inline(always)]
-    fn vabs(self) -> Self {
-        self.map(f32::abs)
-    }
-    #[inline(always)]
-    fn vfloor(self) -> Self {
-        self.map(f32::floor)
-    }
-    #[inline(always)]
-    fn vmin(self, b: Self) -> Self {
-        self.zip(b, |x, y| if x < y { x } else { y })
-    }
-    #[inline(always)]
-    fn vmax(self, b: Self) -> Self {
-        self.zip(b, |x, y| if x > y { x } else { y })
-    }
-    #[inline(always)]
-    fn select_lt(a: Self, b: Self, x: Self, y: Self) -> Self {
-        let mut r = [0.0f32; 8];
-        for (l, r) in r.iter_mut().enumerate() {
-            *r = if a.0[l] < b.0[l] { x.0[l] } else { y.0[l] };
-        }
-        F8(r)
-    }
-}
-
-/// Eight lanes in one AVX register, each operation one intrinsic, for the AVX2 build of
-/// [`Tape::eval8`] (`eval8_avx2`): the plain-array [`F8`] lets the compiler vectorise each
-/// operation on its own, and it did not for every one (the repetition cells' floor, clamp
-/// and select came out as a mix of 4-wide and scalar instructions, four times the cost of
-/// a box). Same IEEE operations lane by lane as `f32`: `min`/`max`/select are the ordered
-/// comparisons `a < b` / `a > b` (`minps(a, b)` is `a < b ? a : b`), `floor` rounds
-/// towards minus infinity, `abs` and negation touch the sign bit only, and there is no
-/// fused multiply-add, so results equal [`F8`]'s bit for bit (tested).
-#[cfg(target_arch = "x86_64")]
-mod avx {
-    use super::{F8, Lane};
-    use core::arch::x86_64::*;
-    use std::ops::{Add, Div, Mul, Neg, Sub};
-
-    /// Eight f32 lanes in a `__m256`. Only built and used inside functions compiled with
-    /// `#[target_feature(enable = "avx2,fma")]` that run after [`crate::simd::avx2`]
-    /// said yes: every method is `#[inline(always)]`, so its intrinsic lands in such a
-    /// function.
-    #[derive(Clone, Copy, Debug)]
-    #[repr(transparent)]
-    pub(super) struct A8(__m256);
-
-    /// The value registers of an [`F8`] scratch as [`A8`]s (same size and alignment).
-    #[inline(always)]
-    pub(super) fn cast(v: &mut [F8]) -> &mut [A8] {
-        const { assert!(size_of::<F8>() == size_of::<A8>() && align_of::<F8>() >= align_of::<A8>()) };
-        // SAFETY: `F8` is `repr(C, align(32))` over `[f32; 8]` and `A8` is a transparent
-        // `__m256`: the same 32 bytes, every bit pattern valid for both.
-        unsafe { std::slice::from_raw_parts_mut(v.as_mut_ptr().cast(), v.len()) }
-    }
-
-    /// The point registers of an [`F8`] scratch as [`A8`]s.
-    #[inline(always)]
-    pub(super) fn cast3(v: &mut [[F8; 3]]) -> &mut [[A8; 3]] {
-        // SAFETY: as in `cast`, three of them in a row.
-        unsafe { std::slice::from_raw_parts_mut(v.as_mut_ptr().cast(), v.len()) }
-    }
-
-    impl A8 {
-        #[inline(always)]
-        pub(super) fn load(x: &[f32; 8]) -> A8 {
-            // SAFETY: AVX is enabled where this is inlined (see the type); unaligned load.
-            A8(unsafe { _mm256_loadu_ps(x.as_ptr()) })
-        }
-        #[inline(always)]
-        pub(super) fn store(self) -> [f32; 8] {
-            let mut r = [0.0f32; 8];
-            // SAFETY: as above; unaligned store into the array.
-            unsafe { _mm256_storeu_ps(r.as_mut_ptr(), self.0) };
-            r
-        }
-    }
-
-    macro_rules! binary {
-        ($tr:ident, $f:ident, $op:ident) => {
-            impl $tr for A8 {
-                type Output = A8;
-                #[inline(always)]
-                fn $f(self, b: A8) -> A8 {
-                    // SAFETY: AVX is enabled where this is inlined (see the type).
-                    A8(unsafe { $op(self.0, b.0) })
-                }
-            }
-        };
-    }
-    binary!(Add, add, _mm256_add_ps);
-    binary!(Sub, sub, _mm256_sub_ps);
-    binary!(Mul, mul, _mm256_mul_ps);
-    binary!(Div, div, _mm256_div_ps);
-
-    impl Neg for A8 {
-        type Output = A8;
-        #[inline(always)]
-        fn neg(self) -> A8 {
-            // SAFETY: AVX is enabled where this is inlined (see the type).
-            A8(unsafe { _mm256_xor_ps(self.0, _mm256_set1_ps(-0.0)) })
-        }
-    }
-
-    // SAFETY (every block below): AVX is enabled where these are inlined (see the type).
-    impl Lane for A8 {
-        #[inline(always)]
-        fn splat(x: f32) -> Self {
-            A8(unsafe { _mm256_set1_ps(x) })
-        }
-        #[inline(always)]
-        fn vsqrt(self) -> Self {
-            A8(unsafe { _mm256_sqrt_ps(self.0) })
-        }
-        #[inline(always)]
-        fn vabs(self) -> Self {
-            A8(unsafe { _mm256_andnot_ps(_mm256_set1_ps(-0.0), self.0) })
-        }
-        #[inline(always)]
-        fn vfloor(self) -> Self {
-            A8(unsafe { _mm256_round_ps::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(self.0) })
-        }
-        #[inline(always)]
-        fn vmin(self, b: Self) -> Self {
-            A8(unsafe { _mm256_min_ps(self.0, b.0) })
-        }
-        #[inline(always)]
-        fn vmax(self, b: Self) -> Self {
-            A8(unsafe { _mm256_max_ps(self.0, b.0) })
-        }
-        #[inline(always)]
-        fn select_lt(a: Self, b: Self, x: Self, y: Self) -> Self {
-            A8(unsafe { _mm256_blendv_ps(y.0, x.0, _mm256_cmp_ps::<_CMP_LT_OQ>(a.0, b.0)) })
-        }
-    }
-
-    /// Four [`A8`]s run alike: four packets of a tape evaluation with one dispatch per
-    /// operation ([`super::Tape::eval32_ops`]). Each packet's lanes get exactly the
-    /// operations of an [`A8`] evaluation.
-    #[derive(Clone, Copy, Debug)]
-    #[repr(transparent)]
-    pub(super) struct A8x4([A8; 4]);
-
-    /// The value registers of a four-packet [`F8`] scratch as [`A8x4`]s.
-    #[inline(always)]
-    pub(super) fn cast4(v: &mut [[F8; 4]]) -> &mut [A8x4] {
-        const { assert!(size_of::<[F8; 4]>() == size_of::<A8x4>() && align_of::<F8>() >= align_of::<A8x4>()) };
-        // SAFETY: as in `cast`, four of them in a row.
-        unsafe { std::slice::from_raw_parts_mut(v.as_mut_ptr().cast(), v.len()) }
-    }
-
-    /// The point registers of a four-packet [`F8`] scratch as [`A8x4`]s.
-    #[inline(always)]
-    pub(super) fn cast4x3(v: &mut [[[F8; 4]; 3]]) -> &mut [[A8x4; 3]] {
-        // SAFETY: as in `cast`, twelve of them in a row.
-        unsafe { std::slice::from_raw_parts_mut(v.as_mut_ptr().cast(), v.len()) }
-    }
-
-    impl A8x4 {
-        #[inline(always)]
-        pub(super) fn load(x: &super::X32) -> A8x4 {
-            A8x4([A8::load(&x[0]), A8::load(&x[1]), A8::load(&x[2]), A8::load(&x[3])])
-        }
-        #[inline(always)]
-        pub(super) fn store(self) -> super::X32 {
-            [self.0[0].store(), self.0[1].store(), self.0[2].store(), self.0[3].store()]
-        }
-    }
-
-    /// `$f` of [`A8`] on each packet, written out (a closure would be compiled without
-    /// AVX, and its intrinsics called rather than inlined).
-    macro_rules! each {
-        ($f:expr, $a:expr) => {
-            A8x4([$f($a.0[0]), $f($a.0[1]), $f($a.0[2]), $f($a.0[3])])
-        };
-        ($f:expr, $a:expr, $b:expr) => {
-            A8x4([$f($a.0[0], $b.0[0]), $f($a.0[1], $b.0[1]), $f($a.0[2], $b.0[2]), $f($a.0[3], $b.0[3])])
-        };
-    }
-
-    macro_rules! binary4 {
-        ($tr:ident, $f:ident) => {
-            impl $tr for A8x4 {
-                type Output = A8x4;
-                #[inline(always)]
-                fn $f(self, b: A8x4) -> A8x4 {
-                    each!(<A8 as $tr>::$f, self, b)
-                }
-            }
-        };
-    }
-    binary4!(Add, add);
-    binary4!(Sub, sub);
-    binary4!(Mul, mul);
-    binary4!(Div, div);
-
-    impl Neg for A8x4 {
-        type Output = A8x4;
-        #[inline(always)]
-        fn neg(self) -> A8x4 {
-            each!(<A8 as Neg>::neg, self)
-        }
-    }
-
-    impl Lane for A8x4 {
-        #[inline(always)]
-        fn splat(x: f32) -> Self {
-            A8x4([A8::splat(x); 4])
-        }
-        #[inline(always)]
-        fn vsqrt(self) -> Self {
-            each!(A8::vsqrt, self)
-        }
-        #[inline(always)]
-        fn vabs(self) -> Self {
-            each!(A8::vabs, self)
-        }
-        #[inline(always)]
-        fn vfloor(self) -> Self {
-            each!(A8::vfloor, self)
-        }
-        #[inline(always)]
-        fn vmin(self, b: Self) -> Self {
-            each!(A8::vmin, self, b)
-        }
-        #[inline(always)]
-        fn vmax(self, b: Self) -> Self {
-            each!(A8::vmax, self, b)
-        }
-        #[inline(always)]
-        fn select_lt(a: Self, b: Self, x: Self, y: Self) -> Self {
-            A8x4([
-                A8::select_lt(a.0[0], b.0[0], x.0[0], y.0[0]),
-                A8::select_lt(a.0[1], b.0[1], x.0[1], y.0[1]),
-                A8::select_lt(a.0[2], b.0[2], x.0[2], y.0[2]),
-                A8::select_lt(a.0[3], b.0[3], x.0[3], y.0[3]),
-            ])
-        }
-    }
-}
-
 type P<L> = [L; 3];
 
 #[inline(always)]
@@ -1619,39 +1246,39 @@ fn sub3<L: Lane>(a: P<L>, b: P<L>) -> P<L> {
 }
 
 #[inline(always)]
-fn splat3<L: Lane>(v: [f32; 3]) -> P<L> {
-    [L::splat(v[0]), L::splat(v[1]), L::splat(v[2])]
+fn splat3<L: Lane>(tk: L::Token, v: [f32; 3]) -> P<L> {
+    [L::splat(tk, v[0]), L::splat(tk, v[1]), L::splat(tk, v[2])]
 }
 
 #[inline(always)]
-fn clamp01<L: Lane>(x: L) -> L {
-    x.vmax(L::splat(0.0)).vmin(L::splat(1.0))
+fn clamp01<L: Lane>(tk: L::Token, x: L) -> L {
+    x.vmax(L::splat(tk, 0.0)).vmin(L::splat(tk, 1.0))
 }
 
 /// The repetition cell holding `x` (the coordinate in periods) of [`Op::Cells`] and
 /// [`Op::CellFace`]: `clamp(floor(x - shift + 0.5) + shift, lo, hi)`.
 #[inline(always)]
-fn cell_id<L: Lane>(x: L, shift: L, lo: L, hi: L) -> L {
-    ((x - shift + L::splat(0.5)).vfloor() + shift).vmax(lo).vmin(hi)
+fn cell_id<L: Lane>(tk: L::Token, x: L, shift: L, lo: L, hi: L) -> L {
+    ((x - shift + L::splat(tk, 0.5)).vfloor() + shift).vmax(lo).vmin(hi)
 }
 
 /// [`cell_id`] for one value, as the interval bounds of [`super::prune`] need it.
 pub(crate) fn cell_index(x: f32, shift: f32, lo: f32, hi: f32) -> f32 {
-    cell_id(x, shift, lo, hi)
+    cell_id((), x, shift, lo, hi)
 }
 
 /// The polynomial smooth minimum of [`crate::geometry::sdf`] (`k` and `1 / k` given).
 #[inline(always)]
-fn smooth_min<L: Lane>(a: L, b: L, k: f32, inv_k: f32) -> L {
-    let h = clamp01(L::splat(0.5) + L::splat(0.5) * (b - a) * L::splat(inv_k));
-    b + (a - b) * h - L::splat(k) * h * (L::splat(1.0) - h)
+fn smooth_min<L: Lane>(tk: L::Token, a: L, b: L, k: f32, inv_k: f32) -> L {
+    let h = clamp01(tk, L::splat(tk, 0.5) + L::splat(tk, 0.5) * (b - a) * L::splat(tk, inv_k));
+    b + (a - b) * h - L::splat(tk, k) * h * (L::splat(tk, 1.0) - h)
 }
 
 /// `|v * clamp(v . w / |v|^2, 0, 1) - w|^2`: squared distance from `w` to the segment `v`.
 #[inline(always)]
-fn segment2<L: Lane>(v: [f32; 3], w: P<L>, inv_vv: f32) -> L {
-    let v = splat3::<L>(v);
-    let h = clamp01(dot(v, w) * L::splat(inv_vv));
+fn segment2<L: Lane>(tk: L::Token, v: [f32; 3], w: P<L>, inv_vv: f32) -> L {
+    let v = splat3::<L>(tk, v);
+    let h = clamp01(tk, dot(v, w) * L::splat(tk, inv_vv));
     let d = [v[0] * h - w[0], v[1] * h - w[1], v[2] * h - w[2]];
     dot(d, d)
 }
@@ -1659,8 +1286,8 @@ fn segment2<L: Lane>(v: [f32; 3], w: P<L>, inv_vv: f32) -> L {
 /// Row `r` of an affine map applied to `q`. A function rather than a closure in [`run`]:
 /// a closure is compiled on its own, without the AVX2 of the function it is inlined into.
 #[inline(always)]
-fn affine_row<L: Lane>(r: [f32; 4], q: P<L>) -> L {
-    L::splat(r[0]) * q[0] + L::splat(r[1]) * q[1] + L::splat(r[2]) * q[2] + L::splat(r[3])
+fn affine_row<L: Lane>(tk: L::Token, r: [f32; 4], q: P<L>) -> L {
+    L::splat(tk, r[0]) * q[0] + L::splat(tk, r[1]) * q[1] + L::splat(tk, r[2]) * q[2] + L::splat(tk, r[3])
 }
 
 /// Runs the tape over lanes `L`: the input point in point register 0, the result in value
@@ -1672,101 +1299,108 @@ fn run<'a, L: Lane>(
     vals: &mut [L],
     pts: &mut [P<L>],
     p: P<L>,
+    tk: L::Token,
 ) -> L {
     pts[0] = p;
     for op in ops {
         match *op {
             Op::Translate { src, dst, t } => {
                 let q = pts[src as usize];
-                pts[dst as usize] = [q[0] + L::splat(t[0]), q[1] + L::splat(t[1]), q[2] + L::splat(t[2])];
+                pts[dst as usize] =
+                    [q[0] + L::splat(tk, t[0]), q[1] + L::splat(tk, t[1]), q[2] + L::splat(tk, t[2])];
             }
             Op::Affine { src, dst, m } => {
                 let q = pts[src as usize];
-                pts[dst as usize] = [affine_row(m[0], q), affine_row(m[1], q), affine_row(m[2], q)];
+                pts[dst as usize] =
+                    [affine_row(tk, m[0], q), affine_row(tk, m[1], q), affine_row(tk, m[2], q)];
             }
             Op::Sphere { p, t, out, radius, scale } => {
                 let q = pts[p as usize];
-                let q = [q[0] + L::splat(t[0]), q[1] + L::splat(t[1]), q[2] + L::splat(t[2])];
-                vals[out as usize] = (dot(q, q).vsqrt() - L::splat(radius)) * L::splat(scale);
+                let q = [q[0] + L::splat(tk, t[0]), q[1] + L::splat(tk, t[1]), q[2] + L::splat(tk, t[2])];
+                vals[out as usize] = (dot(q, q).vsqrt() - L::splat(tk, radius)) * L::splat(tk, scale);
             }
             Op::Plane { p, out, normal, offset, scale } => {
                 let q = pts[p as usize];
-                vals[out as usize] = (dot(splat3(normal), q) - L::splat(offset)) * L::splat(scale);
+                vals[out as usize] =
+                    (dot(splat3(tk, normal), q) - L::splat(tk, offset)) * L::splat(tk, scale);
             }
             Op::Box { p, out, half, scale } => {
                 let q = pts[p as usize];
-                let z = L::splat(0.0);
+                let z = L::splat(tk, 0.0);
                 let d = [
-                    q[0].vabs() - L::splat(half[0]),
-                    q[1].vabs() - L::splat(half[1]),
-                    q[2].vabs() - L::splat(half[2]),
+                    q[0].vabs() - L::splat(tk, half[0]),
+                    q[1].vabs() - L::splat(tk, half[1]),
+                    q[2].vabs() - L::splat(tk, half[2]),
                 ];
                 let o = [d[0].vmax(z), d[1].vmax(z), d[2].vmax(z)];
                 let inside = d[0].vmax(d[1]).vmax(d[2]).vmin(z);
-                vals[out as usize] = (dot(o, o).vsqrt() + inside) * L::splat(scale);
+                vals[out as usize] = (dot(o, o).vsqrt() + inside) * L::splat(tk, scale);
             }
             Op::Ellipsoid { p, out, inv_radii, min_radius, scale } => {
                 let q = pts[p as usize];
                 let s = [
-                    q[0] * L::splat(inv_radii[0]),
-                    q[1] * L::splat(inv_radii[1]),
-                    q[2] * L::splat(inv_radii[2]),
+                    q[0] * L::splat(tk, inv_radii[0]),
+                    q[1] * L::splat(tk, inv_radii[1]),
+                    q[2] * L::splat(tk, inv_radii[2]),
                 ];
                 vals[out as usize] =
-                    (dot(s, s).vsqrt() - L::splat(1.0)) * L::splat(min_radius) * L::splat(scale);
+                    (dot(s, s).vsqrt() - L::splat(tk, 1.0)) * L::splat(tk, min_radius) * L::splat(tk, scale);
             }
             Op::Cylinder { p, out, radius, half_height, scale } => {
                 let q = pts[p as usize];
-                let z = L::splat(0.0);
-                let dx = (q[0] * q[0] + q[2] * q[2]).vsqrt() - L::splat(radius);
-                let dy = q[1].vabs() - L::splat(half_height);
+                let z = L::splat(tk, 0.0);
+                let dx = (q[0] * q[0] + q[2] * q[2]).vsqrt() - L::splat(tk, radius);
+                let dy = q[1].vabs() - L::splat(tk, half_height);
                 let (ox, oy) = (dx.vmax(z), dy.vmax(z));
-                vals[out as usize] = (dx.vmax(dy).vmin(z) + (ox * ox + oy * oy).vsqrt()) * L::splat(scale);
+                vals[out as usize] =
+                    (dx.vmax(dy).vmin(z) + (ox * ox + oy * oy).vsqrt()) * L::splat(tk, scale);
             }
             Op::Cone { p, out, h, r1, r2, k2, inv_k2k2, scale } => {
                 let q = pts[p as usize];
-                let z = L::splat(0.0);
+                let z = L::splat(tk, 0.0);
                 let (qx, qy) = ((q[0] * q[0] + q[2] * q[2]).vsqrt(), q[1]);
-                let (k1x, k1y) = (L::splat(r2), L::splat(h));
-                let (k2x, k2y) = (L::splat(k2[0]), L::splat(k2[1]));
-                let r = L::select_lt(qy, z, L::splat(r1), L::splat(r2));
+                let (k1x, k1y) = (L::splat(tk, r2), L::splat(tk, h));
+                let (k2x, k2y) = (L::splat(tk, k2[0]), L::splat(tk, k2[1]));
+                let r = L::select_lt(qy, z, L::splat(tk, r1), L::splat(tk, r2));
                 let (cax, cay) = (qx - qx.vmin(r), qy.vabs() - k1y);
-                let t = clamp01(((k1x - qx) * k2x + (k1y - qy) * k2y) * L::splat(inv_k2k2));
+                let t = clamp01(tk, ((k1x - qx) * k2x + (k1y - qy) * k2y) * L::splat(tk, inv_k2k2));
                 let (cbx, cby) = (qx - k1x + k2x * t, qy - k1y + k2y * t);
-                let s = L::select_lt(cbx.vmax(cay), z, L::splat(-1.0), L::splat(1.0));
+                let s = L::select_lt(cbx.vmax(cay), z, L::splat(tk, -1.0), L::splat(tk, 1.0));
                 vals[out as usize] =
-                    s * (cax * cax + cay * cay).vmin(cbx * cbx + cby * cby).vsqrt() * L::splat(scale);
+                    s * (cax * cax + cay * cay).vmin(cbx * cbx + cby * cby).vsqrt() * L::splat(tk, scale);
             }
             Op::Torus { p, out, major, minor, scale } => {
                 let q = pts[p as usize];
-                let qx = (q[0] * q[0] + q[2] * q[2]).vsqrt() - L::splat(major);
-                vals[out as usize] = ((qx * qx + q[1] * q[1]).vsqrt() - L::splat(minor)) * L::splat(scale);
+                let qx = (q[0] * q[0] + q[2] * q[2]).vsqrt() - L::splat(tk, major);
+                vals[out as usize] =
+                    ((qx * qx + q[1] * q[1]).vsqrt() - L::splat(tk, minor)) * L::splat(tk, scale);
             }
             Op::Triangle { p, out, index, scale } => {
                 let t = &tris[index as usize];
                 let q = pts[p as usize];
-                let pa = sub3(q, splat3(t.a));
-                let pb = sub3(q, splat3(t.b));
-                let pc = sub3(q, splat3(t.c));
+                let pa = sub3(q, splat3(tk, t.a));
+                let pb = sub3(q, splat3(tk, t.b));
+                let pc = sub3(q, splat3(tk, t.c));
                 // Inside the prism over the triangle when the point is on the inner side of
                 // all three edge planes (the tree's sum of signs >= 2).
-                let s = dot(splat3(t.edge_n[0]), pa)
-                    .vmin(dot(splat3(t.edge_n[1]), pb))
-                    .vmin(dot(splat3(t.edge_n[2]), pc));
-                let np = dot(splat3(t.nor), pa);
-                let plane2 = np * np * L::splat(t.inv_nn);
-                let edge2 = segment2(t.ba, pa, t.inv_edge2[0])
-                    .vmin(segment2(t.cb, pb, t.inv_edge2[1]))
-                    .vmin(segment2(t.ac, pc, t.inv_edge2[2]));
-                vals[out as usize] = L::select_lt(s, L::splat(0.0), edge2, plane2).vsqrt() * L::splat(scale);
+                let s = dot(splat3(tk, t.edge_n[0]), pa)
+                    .vmin(dot(splat3(tk, t.edge_n[1]), pb))
+                    .vmin(dot(splat3(tk, t.edge_n[2]), pc));
+                let np = dot(splat3(tk, t.nor), pa);
+                let plane2 = np * np * L::splat(tk, t.inv_nn);
+                let edge2 = segment2(tk, t.ba, pa, t.inv_edge2[0])
+                    .vmin(segment2(tk, t.cb, pb, t.inv_edge2[1]))
+                    .vmin(segment2(tk, t.ac, pc, t.inv_edge2[2]));
+                vals[out as usize] =
+                    L::select_lt(s, L::splat(tk, 0.0), edge2, plane2).vsqrt() * L::splat(tk, scale);
             }
             Op::Capsule { p, out, a, ba, inv_bb, radius, scale } => {
                 let q = pts[p as usize];
-                let pa = sub3(q, splat3(a));
-                let ba = splat3::<L>(ba);
-                let h = clamp01(dot(pa, ba) * L::splat(inv_bb));
+                let pa = sub3(q, splat3(tk, a));
+                let ba = splat3::<L>(tk, ba);
+                let h = clamp01(tk, dot(pa, ba) * L::splat(tk, inv_bb));
                 let d = [pa[0] - ba[0] * h, pa[1] - ba[1] * h, pa[2] - ba[2] * h];
-                vals[out as usize] = (dot(d, d).vsqrt() - L::splat(radius)) * L::splat(scale);
+                vals[out as usize] = (dot(d, d).vsqrt() - L::splat(tk, radius)) * L::splat(tk, scale);
             }
             Op::Min { out, a, b } => {
                 let (x, y) = (vals[a as usize], vals[b as usize]);
@@ -1782,38 +1416,38 @@ fn run<'a, L: Lane>(
             }
             Op::SmoothUnion { out, a, b, k, inv_k } => {
                 let (x, y) = (vals[a as usize], vals[b as usize]);
-                vals[out as usize] = smooth_min(x, y, k, inv_k);
+                vals[out as usize] = smooth_min(tk, x, y, k, inv_k);
             }
             Op::SmoothIntersection { out, a, b, k, inv_k } => {
                 let (x, y) = (vals[a as usize], vals[b as usize]);
-                vals[out as usize] = -smooth_min(-x, -y, k, inv_k);
+                vals[out as usize] = -smooth_min(tk, -x, -y, k, inv_k);
             }
             Op::SmoothSubtraction { out, a, b, k, inv_k } => {
                 let (x, y) = (vals[a as usize], vals[b as usize]);
-                vals[out as usize] = -smooth_min(-x, y, k, inv_k);
+                vals[out as usize] = -smooth_min(tk, -x, y, k, inv_k);
             }
             Op::Scale { a, s } => {
-                vals[a as usize] = vals[a as usize] * L::splat(s);
+                vals[a as usize] = vals[a as usize] * L::splat(tk, s);
             }
             Op::Cells { p, axis, base, other, period, inv_period, shift, lo, hi } => {
-                let x = pts[p as usize][axis as usize] * L::splat(inv_period);
-                let (lo, hi) = (L::splat(lo), L::splat(hi));
-                let id = cell_id(x, L::splat(shift), lo, hi);
-                let step = L::select_lt(id, x, L::splat(1.0), L::splat(-1.0));
+                let x = pts[p as usize][axis as usize] * L::splat(tk, inv_period);
+                let (lo, hi) = (L::splat(tk, lo), L::splat(tk, hi));
+                let id = cell_id(tk, x, L::splat(tk, shift), lo, hi);
+                let step = L::select_lt(id, x, L::splat(tk, 1.0), L::splat(tk, -1.0));
                 let next = (id + step).vmax(lo).vmin(hi);
-                vals[base as usize] = id * L::splat(period);
-                vals[other as usize] = next * L::splat(period);
+                vals[base as usize] = id * L::splat(tk, period);
+                vals[other as usize] = next * L::splat(tk, period);
             }
             Op::CellFace { p, axis, base, face, period, inv_period, shift, lo, hi, half_gap } => {
                 let v = pts[p as usize][axis as usize];
-                let x = v * L::splat(inv_period);
-                let (lo, hi) = (L::splat(lo), L::splat(hi));
-                let id = cell_id(x, L::splat(shift), lo, hi);
-                let offset = id * L::splat(period);
+                let x = v * L::splat(tk, inv_period);
+                let (lo, hi) = (L::splat(tk, lo), L::splat(tk, hi));
+                let id = cell_id(tk, x, L::splat(tk, shift), lo, hi);
+                let offset = id * L::splat(tk, period);
                 let local = v - offset;
-                let inf = L::splat(f32::INFINITY);
-                let up = L::select_lt(id, hi, L::splat(half_gap) - local, inf);
-                let down = L::select_lt(lo, id, L::splat(half_gap) + local, inf);
+                let inf = L::splat(tk, f32::INFINITY);
+                let up = L::select_lt(id, hi, L::splat(tk, half_gap) - local, inf);
+                let down = L::select_lt(lo, id, L::splat(tk, half_gap) + local, inf);
                 vals[base as usize] = offset;
                 vals[face as usize] = down.vmin(up);
             }
