@@ -365,7 +365,10 @@ impl WideBvh {
     /// `and` on the walk's chain, and the bounds check compares the index off it.
     #[inline(always)]
     fn node(&self, r: u32) -> &WideNode {
-        debug_assert!(r.is_multiple_of(size_of::<WideNode>() as u32), "node reference {r} is not a node's offset");
+        debug_assert!(
+            r.is_multiple_of(size_of::<WideNode>() as u32),
+            "node reference {r} is not a node's offset"
+        );
         &self.nodes[r as usize >> 8]
     }
 
