@@ -4,8 +4,9 @@
 //!
 //! * Our tracer (`MeshGeometry::closest_hit`) on 1 and 2 rayon threads, rays in 16x16
 //!   tiles: BVH build time (median of 3), bytes, Mrays/s (median, min and max of 5 frames
-//!   after a warm-up), BVH nodes and triangle tests per ray; where the CPU has AVX2, also
-//!   the same BVH walked with the portable box test (two SSE halves per node).
+//!   after a warm-up), BVH nodes and triangle tests per ray, on the SIMD backend of the
+//!   process (`SDFMESH_SIMD=portable cargo bench --bench primary_rays` times the portable
+//!   one).
 //! * A sweep of obvhs build presets, leaf sizes and reinsertion ratios (1 thread; each
 //!   Bvh2 is collapsed into the 8-wide BVH `MeshGeometry` traces) to choose
 //!   `MeshGeometry::BUILD_PARAMS` by measurement. Nodes per ray count 8-wide nodes visited, tests per ray triangles.
@@ -519,13 +520,6 @@ fn bench_mesh(path: &Path, plan: &Plan) -> Vec<Row> {
         plan.builds,
         opt(ours_cpu_ms, 1)
     );
-    // The same BVH walked with the portable box test (two SSE halves per node), to show
-    // what the AVX2 test brings; only where the CPU has AVX2.
-    let portable = ours.uses_avx2().then(|| {
-        let (mut g, _, _) = build_ours(&mesh, MeshGeometry::BUILD_PARAMS, 1);
-        g.use_portable_box_test();
-        g
-    });
     #[cfg(feature = "embree")]
     let emb = embree::Bench::new(&mesh, plan.builds);
 
@@ -538,9 +532,6 @@ fn bench_mesh(path: &Path, plan: &Plan) -> Vec<Row> {
         cs[0].bytes = format!("{}/{}", ours.bytes_used(), ours.accel_bytes());
         #[cfg(feature = "embree")]
         cs.extend(emb.contenders());
-        if let Some(p) = &portable {
-            cs.push(Contender::new("ours portable box test", ours_tile(p)));
-        }
         race(&mut cs, &pool, &frame, plan.frames);
         if ours_out.is_empty() {
             ours_out = cs[0].out.clone();

@@ -9,6 +9,7 @@
 use glam::DVec3;
 
 use crate::geometry::{Ray, RayStats};
+use crate::simd::{Kernel, Lane64, Simd};
 
 /// Sphere-tracing parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -348,10 +349,8 @@ impl<const W: usize> MarchLanes<W> {
     /// returns those lanes. Four lanes at a time with AVX2 where the CPU has it.
     #[inline]
     fn plain_steps(&mut self, raw: &[f64; W], lanes: u32) -> u32 {
-        #[cfg(target_arch = "x86_64")]
-        if W.is_multiple_of(4) && crate::simd::avx2().is_some() {
-            // SAFETY: the CPU has AVX2 (checked above).
-            return unsafe { avx2::plain_steps(self, raw, lanes) };
+        if W.is_multiple_of(4) && crate::simd::backend() == crate::simd::Backend::Avx2 {
+            return crate::simd::dispatch(PlainSteps { m: self, raw, lanes });
         }
         let mut plain = 0;
         let mut m = lanes;
@@ -523,110 +522,79 @@ impl<const W: usize> MarchLanes<W> {
     }
 }
 
-/// [`MarchLanes::plain_steps`] four lanes at a time.
-#[cfg(target_arch = "x86_64")]
-mod avx2 {
-    use std::arch::x86_64::*;
+/// [`MarchLanes::plain_steps`] four lanes at a time, for `W` a multiple of 4:
+/// [`MarchLanes::plain_step`]'s operations on four lanes at once, with its comparisons as
+/// ordered ones (false with a NaN, as Rust's are), its selections as blends and its
+/// updates kept only in the lanes that take the step, so each lane's results are the
+/// scalar ones bit for bit.
+struct PlainSteps<'a, const W: usize> {
+    m: &'a mut MarchLanes<W>,
+    raw: &'a [f64; W],
+    lanes: u32,
+}
 
-    use super::MarchLanes;
-
-    /// [`MarchLanes::plain_steps`] for `W` a multiple of 4: [`MarchLanes::plain_step`]'s
-    /// operations on four lanes at once, with its comparisons as ordered ones (false with a
-    /// NaN, as Rust's are), its selections as blends and its updates kept only in the
-    /// lanes that take the step, so each lane's results are the scalar ones bit for bit.
-    ///
-    /// # Safety
-    /// The CPU must have AVX2.
-    #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn plain_steps<const W: usize>(
-        m: &mut MarchLanes<W>,
-        raw: &[f64; W],
-        lanes: u32,
-    ) -> u32 {
-        // Four lanes of an array of the lanes' state from lane `i`.
-        macro_rules! load {
-            ($a:expr, $i:expr) => {
-                _mm256_loadu_pd($a.as_ptr().add($i))
-            };
-        }
-        macro_rules! store {
-            ($a:expr, $i:expr, $v:expr, $keep:expr) => {
-                _mm256_storeu_pd($a.as_mut_ptr().add($i), _mm256_blendv_pd(load!($a, $i), $v, $keep))
-            };
-        }
-        // SAFETY: AVX2 is enabled; every load and store is of four lanes `i..i + 4` of a
-        // `[_; W]` with `i + 4 <= W`.
-        unsafe {
-            let zero = _mm256_setzero_pd();
-            let one = _mm256_set1_pd(1.0);
-            let relaxation = _mm256_set1_pd(m.params.relaxation);
-            let (scale, floor) = (_mm256_set1_pd(m.tol_scale), _mm256_set1_pd(m.tol_floor));
-            let magnitude = _mm256_castsi256_pd(_mm256_set1_epi64x(i64::MAX));
-            // `iterations < max_steps - 1` as a signed comparison: a lane past i32::MAX
-            // iterations takes the scalar step.
-            let limit = _mm_set1_epi32(m.params.max_steps.saturating_sub(1).min(i32::MAX as u32) as i32);
-            let (bits64, bits32) = (_mm256_setr_epi64x(1, 2, 4, 8), _mm_setr_epi32(1, 2, 4, 8));
-            let mut plain = 0u32;
-            for i in (0..W).step_by(4) {
-                let want = lanes >> i & 0xf;
-                if want == 0 {
-                    continue;
-                }
-                let (t, x, sign0) = (load!(m.t, i), load!(raw, i), load!(m.sign, i));
-                let iterations = _mm_loadu_si128(m.iterations.as_ptr().add(i).cast());
-                let fresh = _mm256_castsi256_pd(_mm256_cvtepi32_epi64(_mm_cmpeq_epi32(
-                    iterations,
-                    _mm_setzero_si128(),
-                )));
-                let negative = _mm256_cmp_pd::<_CMP_LT_OQ>(x, zero);
-                let first_sign = _mm256_blendv_pd(one, _mm256_set1_pd(-1.0), negative);
-                let sign = _mm256_blendv_pd(sign0, first_sign, _mm256_cmp_pd::<_CMP_EQ_OQ>(sign0, zero));
-                let omega = _mm256_blendv_pd(load!(m.omega, i), relaxation, fresh);
-                let d = _mm256_mul_pd(sign, x);
-                let r = _mm256_and_pd(d, magnitude);
-                let next = _mm256_add_pd(t, _mm256_mul_pd(d, omega));
-                let covered = _mm256_add_pd(load!(m.prev_r, i), r);
-                let fallback = _mm256_and_pd(
-                    _mm256_cmp_pd::<_CMP_GT_OQ>(omega, one),
-                    _mm256_cmp_pd::<_CMP_LT_OQ>(covered, _mm256_sub_pd(t, load!(m.prev_t, i))),
-                );
-                let moves = _mm256_and_pd(
-                    _mm256_cmp_pd::<_CMP_GE_OQ>(r, load!(m.tol, i)),
-                    _mm256_cmp_pd::<_CMP_LE_OQ>(next, load!(m.t1, i)),
-                );
-                let budget = _mm256_castsi256_pd(_mm256_cvtepi32_epi64(_mm_cmplt_epi32(iterations, limit)));
-                let go = _mm256_and_pd(_mm256_andnot_pd(fallback, moves), budget);
-                let k = _mm256_movemask_pd(go) as u32 & want;
-                if k == 0 {
-                    continue;
-                }
-                plain |= k << i;
-                let keep = _mm256_castsi256_pd(_mm256_cmpeq_epi64(
-                    _mm256_and_si256(_mm256_set1_epi64x(i64::from(k)), bits64),
-                    bits64,
-                ));
-                store!(m.sign, i, sign, keep);
-                store!(m.omega, i, omega, keep);
-                store!(m.prev_t, i, t, keep);
-                store!(m.prev_r, i, r, keep);
-                store!(m.r, i, r, keep);
-                store!(m.r_t, i, t, keep);
-                store!(m.t, i, next, keep);
-                let spread = load!(m.spread, i);
-                store!(
-                    m.tol,
-                    i,
-                    _mm256_mul_pd(scale, _mm256_max_pd(_mm256_add_pd(spread, next), floor)),
-                    keep
-                );
-                // `keep` in 32-bit lanes: -1 where the step is taken.
-                let keep32 = _mm_cmpeq_epi32(_mm_and_si128(_mm_set1_epi32(k as i32), bits32), bits32);
-                _mm_storeu_si128(m.iterations.as_mut_ptr().add(i).cast(), _mm_sub_epi32(iterations, keep32));
-                let touches = _mm_loadu_si128(m.touches.as_ptr().add(i).cast());
-                _mm_storeu_si128(m.touches.as_mut_ptr().add(i).cast(), _mm_andnot_si128(keep32, touches));
+impl<const W: usize> Kernel for PlainSteps<'_, W> {
+    type Output = u32;
+    #[inline(always)]
+    fn run<S: Simd>(self, s: S) -> u32 {
+        let PlainSteps { m, raw, lanes } = self;
+        let (zero, one) = (s.splat4(0.0), s.splat4(1.0));
+        let relaxation = s.splat4(m.params.relaxation);
+        let (scale, floor) = (s.splat4(m.tol_scale), s.splat4(m.tol_floor));
+        let magnitude = s.splat4(f64::from_bits(i64::MAX as u64));
+        // `iterations < max_steps - 1` as a signed comparison: a lane past i32::MAX
+        // iterations takes the scalar step.
+        let limit = m.params.max_steps.saturating_sub(1).min(i32::MAX as u32) as i32;
+        let mut plain = 0u32;
+        for i in (0..W).step_by(4) {
+            let want = lanes >> i & 0xf;
+            if want == 0 {
+                continue;
             }
-            plain
+            let (t, x, sign0) = (s.load4_at(&m.t, i), s.load4_at(raw, i), s.load4_at(&m.sign, i));
+            let (fresh, budget) = s.u32_masks4(&m.iterations, i, limit);
+            let negative = x.cmp_lt(zero);
+            let first_sign = S::F64x4::select(negative, s.splat4(-1.0), one);
+            let sign = S::F64x4::select(sign0.cmp_eq(zero), first_sign, sign0);
+            let omega = S::F64x4::select(fresh, relaxation, s.load4_at(&m.omega, i));
+            let d = sign * x;
+            let r = d.and(magnitude);
+            let next = t + d * omega;
+            let covered = s.load4_at(&m.prev_r, i) + r;
+            let fallback = omega.cmp_gt(one).and(covered.cmp_lt(t - s.load4_at(&m.prev_t, i)));
+            let moves = r.cmp_ge(s.load4_at(&m.tol, i)).and(next.cmp_le(s.load4_at(&m.t1, i)));
+            let go = fallback.andnot(moves).and(budget);
+            let k = go.movemask() & want;
+            if k == 0 {
+                continue;
+            }
+            plain |= k << i;
+            let keep = s.mask4(k);
+            // Lanes `i..i + 4` of `a` become `v` where the step is taken. A macro, not a
+            // closure: a closure is compiled without the AVX2 of the kernel's function.
+            macro_rules! store {
+                ($a:expr, $v:expr) => {
+                    S::F64x4::select(keep, $v, s.load4_at($a, i)).store_at($a, i)
+                };
+            }
+            store!(&mut m.sign, sign);
+            store!(&mut m.omega, omega);
+            store!(&mut m.prev_t, t);
+            store!(&mut m.prev_r, r);
+            store!(&mut m.r, r);
+            store!(&mut m.r_t, t);
+            store!(&mut m.t, next);
+            let spread = s.load4_at(&m.spread, i);
+            store!(&mut m.tol, scale * (spread + next).vmax(floor));
+            let mut taken = k;
+            while taken != 0 {
+                let l = i + taken.trailing_zeros() as usize;
+                taken &= taken - 1;
+                m.iterations[l] += 1;
+                m.touches[l] = 0;
+            }
         }
+        plain
     }
 }
 

@@ -14,6 +14,7 @@
 //! primary rays marched side by side ([`Geometry::closest_hits`]), each lane taking exactly
 //! the steps of its own scalar march ([`sphere_trace`] and the batch share [`MarchLanes`]).
 
+use crate::simd::{Kernel, Lane, Lane8, Simd, dispatch};
 use glam::{DVec3, Vec3};
 
 use crate::geometry::march::{
@@ -284,12 +285,10 @@ impl<F: DistanceField> Marched<F> {
         if !self.bounded {
             return Segments8 { t0: [t_min; PACKET], t1: *t_max, some: first_n };
         }
-        #[cfg(target_arch = "x86_64")]
-        if crate::simd::avx2().is_some() {
+        if crate::simd::backend() == crate::simd::Backend::Avx2 {
             // Lanes past the packet's end clip a copy of its first ray (not used).
-            let eight = std::array::from_fn(|k| rays.get(k).unwrap_or(&rays[0]));
-            // SAFETY: the CPU has AVX2, so AVX (checked just above).
-            let mut clipped = unsafe { clip8(eight, &self.bounds, t_min, *t_max) };
+            let rays = std::array::from_fn(|k| rays.get(k).unwrap_or(&rays[0]));
+            let mut clipped = dispatch(Clip8 { rays, b: &self.bounds, t_min, t_max: *t_max });
             clipped.some &= first_n;
             return clipped;
         }
@@ -643,56 +642,46 @@ struct Segments8 {
 /// `t0`) and its early exits as masks (the interval only narrows from one axis to the
 /// next, so an interval found empty at one axis is empty at the end).
 ///
-/// # Safety
-/// The CPU must have AVX.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-unsafe fn clip8(rays: [&Ray; 8], b: &Aabb, t_min: f32, t_max: [f32; 8]) -> Segments8 {
-    use std::arch::x86_64::*;
-    // Component `$c` of axis `$a` of the eight rays. A macro, not a closure: a closure
-    // would not inline into this AVX function.
-    macro_rules! lanes {
-        ($c:ident, $a:expr) => {
-            _mm256_setr_ps(
-                rays[0].$c[$a],
-                rays[1].$c[$a],
-                rays[2].$c[$a],
-                rays[3].$c[$a],
-                rays[4].$c[$a],
-                rays[5].$c[$a],
-                rays[6].$c[$a],
-                rays[7].$c[$a],
-            )
-        };
-    }
-    // SAFETY: AVX is enabled; the transmutes are between `__m256` and eight f32.
-    unsafe {
-        let mut t0 = _mm256_set1_ps(t_min);
-        let mut t1 = std::mem::transmute::<[f32; 8], __m256>(t_max);
-        let mut dead = _mm256_setzero_ps();
-        let mut moving = _mm256_setzero_ps();
-        let all = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
+#[derive(Clone, Copy)]
+struct Clip8<'a> {
+    rays: [&'a Ray; 8],
+    b: &'a Aabb,
+    t_min: f32,
+    t_max: [f32; 8],
+}
+
+impl Kernel for Clip8<'_> {
+    type Output = Segments8;
+    #[inline(always)]
+    fn run<S: Simd>(self, s: S) -> Segments8 {
+        let Clip8 { rays, b, t_min, t_max } = self;
+        let mut t0 = s.splat8(t_min);
+        let mut t1 = s.load8(&t_max);
+        let zero = s.splat8(0.0);
+        let (mut dead, mut moving) = (zero, zero);
+        let all = s.splat8(f32::from_bits(!0));
         for axis in 0..3 {
-            let (o, d) = (lanes!(origin, axis), lanes!(dir, axis));
-            let (lo, hi) = (_mm256_set1_ps(b.min[axis]), _mm256_set1_ps(b.max[axis]));
-            let flat = _mm256_cmp_ps::<_CMP_EQ_OQ>(d, _mm256_setzero_ps());
-            let outside =
-                _mm256_or_ps(_mm256_cmp_ps::<_CMP_LT_OS>(o, lo), _mm256_cmp_ps::<_CMP_GT_OS>(o, hi));
-            dead = _mm256_or_ps(dead, _mm256_and_ps(flat, outside));
-            moving = _mm256_or_ps(moving, _mm256_andnot_ps(flat, all));
-            let inv = _mm256_div_ps(_mm256_set1_ps(1.0), d);
-            let ta = _mm256_mul_ps(_mm256_sub_ps(lo, o), inv);
-            let tb = _mm256_mul_ps(_mm256_sub_ps(hi, o), inv);
-            let (near, far) = (_mm256_min_ps(tb, ta), _mm256_max_ps(ta, tb));
-            t0 = _mm256_or_ps(_mm256_and_ps(flat, t0), _mm256_andnot_ps(flat, _mm256_max_ps(near, t0)));
-            t1 = _mm256_or_ps(_mm256_and_ps(flat, t1), _mm256_andnot_ps(flat, _mm256_min_ps(far, t1)));
+            // Plain arrays, no closures: everything must inline into the kernel.
+            let mut o = [0.0f32; 8];
+            let mut d = [0.0f32; 8];
+            for k in 0..8 {
+                (o[k], d[k]) = (rays[k].origin[axis], rays[k].dir[axis]);
+            }
+            let (o, d) = (s.load8(&o), s.load8(&d));
+            let (lo, hi) = (s.splat8(b.min[axis]), s.splat8(b.max[axis]));
+            let flat = d.cmp_eq(zero);
+            let outside = o.cmp_lt(lo).or(o.cmp_gt(hi));
+            dead = dead.or(flat.and(outside));
+            moving = moving.or(flat.andnot(all));
+            let inv = s.splat8(1.0) / d;
+            let ta = (lo - o) * inv;
+            let tb = (hi - o) * inv;
+            let (near, far) = (tb.vmin(ta), ta.vmax(tb));
+            t0 = flat.and(t0).or(flat.andnot(near.vmax(t0)));
+            t1 = flat.and(t1).or(flat.andnot(far.vmin(t1)));
         }
-        dead = _mm256_or_ps(dead, _mm256_and_ps(moving, _mm256_cmp_ps::<_CMP_GT_OS>(t0, t1)));
-        Segments8 {
-            t0: std::mem::transmute::<__m256, [f32; 8]>(t0),
-            t1: std::mem::transmute::<__m256, [f32; 8]>(t1),
-            some: !(_mm256_movemask_ps(dead) as u32) & 0xff,
-        }
+        dead = dead.or(moving.and(t0.cmp_gt(t1)));
+        Segments8 { t0: t0.store(), t1: t1.store(), some: !dead.movemask() & 0xff }
     }
 }
 
@@ -702,6 +691,7 @@ mod tests {
 
     use super::*;
     use crate::geometry::aabb;
+    use crate::simd::Portable;
 
     #[test]
     #[cfg(target_arch = "x86_64")]
@@ -728,20 +718,19 @@ mod tests {
             }
             rays.push(Ray::new(o, d));
         }
-        if !crate::simd::avx2().is_some() {
-            return;
-        }
+        let avx2 = |k: Clip8| crate::simd::avx2().map(|a| a.run(k));
         for (q, chunk) in rays.chunks(8).enumerate() {
             let t_min = if q % 5 == 0 { 1.0 } else { 0.0 };
             let t_max: [f32; 8] = std::array::from_fn(|k| [100.0, 2.0, 0.5, f32::INFINITY, 3.0][(q + k) % 5]);
             let eight: [&Ray; 8] = std::array::from_fn(|k| &chunk[k]);
-            // SAFETY: the CPU has AVX2, so AVX.
-            let wide = unsafe { clip8(eight, &b, t_min, t_max) };
+            let kernel = Clip8 { rays: eight, b: &b, t_min, t_max };
             let bits = |c: Option<(f32, f32)>| c.map(|(a, b)| (a.to_bits(), b.to_bits()));
-            for k in 0..8 {
-                let one = chunk[k].clip_to_box(&b, t_min, t_max[k]);
-                let eight = (wide.some & 1 << k != 0).then_some((wide.t0[k], wide.t1[k]));
-                assert_eq!(bits(eight), bits(one), "{:?} over [{t_min}, {}]", chunk[k], t_max[k]);
+            for wide in [Some(kernel.run(Portable)), avx2(kernel)].into_iter().flatten() {
+                for k in 0..8 {
+                    let one = chunk[k].clip_to_box(&b, t_min, t_max[k]);
+                    let eight = (wide.some & 1 << k != 0).then_some((wide.t0[k], wide.t1[k]));
+                    assert_eq!(bits(eight), bits(one), "{:?} over [{t_min}, {}]", chunk[k], t_max[k]);
+                }
             }
         }
     }

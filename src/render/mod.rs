@@ -63,12 +63,9 @@ impl Frame {
 #[allow(clippy::manual_clamp)] // `clamp` keeps NaN, which `as u8` would then have to check
 pub fn to_rgb8(c: Vec3) -> [u8; 3] {
     // `max` and `min` take the number where one side is NaN: NaN gives 0, as `clamp` then
-    // a saturating `as u8` would (the value below lies in [0.5, 255.5] either way).
-    let q = |x: f32| {
-        let y = x.max(0.0).min(1.0) * 255.0 + 0.5;
-        // SAFETY: `y` is finite and in [0.5, 255.5]: its integer part fits a u8.
-        unsafe { y.to_int_unchecked::<u8>() }
-    };
+    // a saturating `as u8` would (the value below lies in [0.5, 255.5] either way, so the
+    // saturating cast truncates it as an unchecked one would).
+    let q = |x: f32| (x.max(0.0).min(1.0) * 255.0 + 0.5) as u8;
     [q(c.x), q(c.y), q(c.z)]
 }
 

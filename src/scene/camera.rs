@@ -65,47 +65,11 @@ impl RayGenerator {
         Ray::new(self.origin, (self.forward + self.right * u + self.up * v).normalize())
     }
 
-    /// [`Self::ray_uv`] at eight image-plane points at once, bit for bit: the same single
-    /// precision operations in the same order, four lanes at a time (SSE, part of the
-    /// x86-64 baseline; elsewhere one by one).
+    /// [`Self::ray_uv`] at eight image-plane points at once, bit for bit (the same single
+    /// precision operations in the same order, lane by lane; plain Rust that the compiler
+    /// may vectorise, with no intrinsics of its own).
     #[inline]
     pub fn rays_uv8(&self, u: &[f32; 8], v: &[f32; 8]) -> [Ray; 8] {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::x86_64::{_mm_add_ps, _mm_div_ps, _mm_mul_ps, _mm_set1_ps, _mm_sqrt_ps};
-            let (f, r, w) = (self.forward, self.right, self.up);
-            let mut d = [[0.0f32; 8]; 3];
-            for half in 0..2 {
-                let at = |a: &[f32; 8]| -> std::arch::x86_64::__m128 {
-                    // SAFETY: SSE is part of the x86-64 baseline; `a[4 * half..]` holds four f32.
-                    unsafe { std::mem::transmute::<[f32; 4], _>(std::array::from_fn(|k| a[4 * half + k])) }
-                };
-                let (uh, vh) = (at(u), at(v));
-                // SAFETY: SSE is part of the x86-64 baseline.
-                let c = [(f.x, r.x, w.x), (f.y, r.y, w.y), (f.z, r.z, w.z)].map(|(f, r, w)| unsafe {
-                    _mm_add_ps(
-                        _mm_add_ps(_mm_set1_ps(f), _mm_mul_ps(_mm_set1_ps(r), uh)),
-                        _mm_mul_ps(_mm_set1_ps(w), vh),
-                    )
-                });
-                // glam's `normalize`: times `1 / sqrt(x * x + y * y + z * z)`.
-                // SAFETY: SSE is part of the x86-64 baseline.
-                let inv = unsafe {
-                    let dot = _mm_add_ps(
-                        _mm_add_ps(_mm_mul_ps(c[0], c[0]), _mm_mul_ps(c[1], c[1])),
-                        _mm_mul_ps(c[2], c[2]),
-                    );
-                    _mm_div_ps(_mm_set1_ps(1.0), _mm_sqrt_ps(dot))
-                };
-                for (a, ca) in d.iter_mut().zip(c) {
-                    // SAFETY: SSE is part of the x86-64 baseline; `__m128` is four f32.
-                    let n: [f32; 4] = unsafe { std::mem::transmute(_mm_mul_ps(ca, inv)) };
-                    a[4 * half..4 * half + 4].copy_from_slice(&n);
-                }
-            }
-            std::array::from_fn(|i| Ray::new(self.origin, Vec3::new(d[0][i], d[1][i], d[2][i])))
-        }
-        #[cfg(not(target_arch = "x86_64"))]
         std::array::from_fn(|i| self.ray_uv(u[i], v[i]))
     }
 }

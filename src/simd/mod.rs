@@ -12,9 +12,31 @@
 //! The value is read once per process ([`backend`]); the `toolkit` binary refuses an unknown
 //! value with a one-line error ([`check_env`]).
 
+#[cfg(target_arch = "x86_64")]
+mod avx2;
+mod backend;
 mod f4;
+#[cfg(target_arch = "x86_64")]
+mod grid;
+mod lane;
+mod mesh;
+mod portable;
+mod stack;
 
-pub use f4::F4;
+#[cfg(target_arch = "x86_64")]
+pub use avx2::{A4d, A8, A8x4};
+pub use backend::{Kernel, Simd, dispatch};
+#[cfg(target_arch = "x86_64")]
+pub use f4::Sse4;
+pub use f4::{F4, Lanes4};
+#[cfg(target_arch = "x86_64")]
+pub use grid::{BAND_BRICK, BAND_BRICK_SAMPLES, BAND_BS, BAND_EMPTY, BandLayout, Lattice};
+pub use lane::{Lane, Lane8, Lane32, Lane64};
+pub use mesh::{Arr8, Bits8, Lanes8, Mask8, MeshKernel, MeshSimd, dispatch_mesh};
+#[cfg(target_arch = "x86_64")]
+pub use mesh::{Avx8, AvxMask8};
+pub use portable::{D4, F8, F8x4, Portable};
+pub use stack::WalkStack;
 
 use std::sync::OnceLock;
 
@@ -153,3 +175,6 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+mod lane_tests;

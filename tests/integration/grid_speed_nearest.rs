@@ -9,6 +9,7 @@ use proptest::prelude::*;
 use sdfmesh::convert::mesh_to_grid::closest::{GROUP_MAX, GroupStack, Nearest, NodeStack, TriangleBvh};
 use sdfmesh::convert::mesh_to_grid::sample_mesh;
 use sdfmesh::mesh::TriangleMesh;
+use sdfmesh::simd::Portable;
 
 use crate::util::Lcg;
 
@@ -135,9 +136,6 @@ proptest! {
         let centre = if far_away { Vec3::new(1000.0, -250.0, 40.0) * r } else { Vec3::new(0.1, 0.2, -0.3) * r };
         let mesh = bumpy_sphere(centre, r, amp, k, m, 24, open);
         let tree = TriangleBvh::new(&mesh);
-        let mut portable = tree.clone();
-        portable.use_portable_node_test();
-        prop_assert!(!portable.uses_avx2());
         let (mut stack, mut group_stack, mut visited) = (NodeStack::new(), GroupStack::default(), 0u64);
         let points = query_points(&mesh, centre, r, &mut rng, 60);
         for &p in &points {
@@ -175,13 +173,29 @@ proptest! {
             let mut out: Vec<Option<Nearest>> = vec![None; g];
             let mut group_visited = 0u64;
             tree.nearest_group(&group, &hints, &mut out, &mut group_stack, &mut group_visited);
-            // The portable node test gives the same bits and the same walk as the AVX2 one
-            // (which `tree` uses where the CPU has it).
+            // Both backends give the same bits and the same walk (`nearest_group` runs on
+            // AVX2 where the CPU has it, unless SDFMESH_SIMD=portable).
             let mut portable_out: Vec<Option<Nearest>> = vec![None; g];
             let mut portable_visited = 0u64;
-            portable.nearest_group(&group, &hints, &mut portable_out, &mut group_stack, &mut portable_visited);
+            tree.nearest_group_on(
+                Portable,
+                &group,
+                &hints,
+                &mut portable_out,
+                &mut group_stack,
+                &mut portable_visited,
+            );
             prop_assert_eq!(&out, &portable_out);
             prop_assert_eq!(group_visited, portable_visited);
+            if let Some(s) = sdfmesh::simd::avx2() {
+                let mut avx2_out: Vec<Option<Nearest>> = vec![None; g];
+                let mut avx2_visited = 0u64;
+                s.vectorize(|| {
+                    tree.nearest_group_on(s, &group, &hints, &mut avx2_out, &mut group_stack, &mut avx2_visited)
+                });
+                prop_assert_eq!(&out, &avx2_out);
+                prop_assert_eq!(group_visited, avx2_visited);
+            }
             for (p, n) in group.iter().zip(&out) {
                 let want = brute(&mesh, *p);
                 let got = (n.unwrap().dist2 as f64).sqrt();
@@ -191,18 +205,20 @@ proptest! {
     }
 }
 
-/// Where the CPU has AVX2, the group walks use it (so that the comparison with the
-/// portable node test above compares two paths).
+/// Where the CPU has AVX2 (and `SDFMESH_SIMD` does not ask for the portable backend), the
+/// group walks run on it (so that the comparison of the backends above compares two paths).
 #[test]
 fn group_walks_use_avx2_where_the_cpu_has_it() {
-    let mesh = bumpy_sphere(Vec3::ZERO, 1.0, 0.1, 3.0, 2.0, 8, false);
     #[cfg(target_arch = "x86_64")]
     let has = std::arch::is_x86_feature_detected!("avx2")
+        && std::arch::is_x86_feature_detected!("fma")
         && std::arch::is_x86_feature_detected!("popcnt")
         && std::arch::is_x86_feature_detected!("bmi1");
     #[cfg(not(target_arch = "x86_64"))]
     let has = false;
-    assert_eq!(TriangleBvh::new(&mesh).uses_avx2(), has);
+    assert_eq!(sdfmesh::simd::cpu_has_avx2(), has);
+    let forced = std::env::var("SDFMESH_SIMD").is_ok_and(|v| v.trim() == "portable");
+    assert_eq!(sdfmesh::simd::avx2().is_some(), has && !forced);
 }
 
 #[test]

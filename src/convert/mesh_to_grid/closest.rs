@@ -20,9 +20,10 @@
 //! far or than a caller-supplied upper bound. [`TriangleBvh::nearest_group`] answers up to
 //! [`GROUP_MAX`] nearby points in one walk (a node is opened when any of them needs it,
 //! each prunes by its own best), which shares the node loads and overlaps the points'
-//! independent arithmetic; where the CPU has AVX2 ([`crate::simd::avx2`]) its node and
-//! leaf tests take two points per instruction, with the same operations in the same order
-//! as the portable ones (so the same results). Neither allocates: the caller passes a
+//! independent arithmetic; its node and leaf tests take two points per eight-lane
+//! operation of the backend that [`crate::simd::dispatch_mesh`] picks (one instruction with
+//! AVX2), with the same operations in the same order as the one-point tests (so the same
+//! results on both backends). Neither allocates: the caller passes a
 //! reusable [`NodeStack`] or [`GroupStack`]. The two walks over one tree are kept apart on
 //! purpose: answering one point as a group walk of one point (same results, bit for bit)
 //! made the one-point queries of [`super::MeshSampler`] about 25% slower on the bunny (1.1
@@ -38,6 +39,7 @@ use crate::geometry::bvh2;
 use crate::geometry::mesh::triangle::closest_point_on_triangle;
 use crate::geometry::{Aabb, aabb};
 use crate::mesh::TriangleMesh;
+use crate::simd::{Lanes8, Mask8, MeshKernel, MeshSimd, dispatch_mesh};
 
 /// A reusable traversal stack: per entry, the bits of the squared distance bound of a node
 /// (high 32 bits) and its index (low). Keep one per thread; it grows to the BVH's depth
@@ -152,8 +154,6 @@ pub struct TriangleBvh {
     wide: Vec<Node4>,
     /// The leaves' triangles in packets of four (in SIMD layout).
     packets: Vec<ClosestPacket>,
-    /// Whether the group walks use the AVX2 node test (set where the CPU has it).
-    avx2: bool,
 }
 
 /// Bounding cylinders of four children, as structure of arrays: child `i` lies within
@@ -588,259 +588,205 @@ fn collapse(bvh: &Bvh2, corners: &[[Vec3A; 3]]) -> (Vec<Node4>, Vec<ClosestPacke
     (out, packets)
 }
 
-/// The portable node test of the group walks: bit `4 s + k` of the mask is set when child
-/// `k` of `n` is within `best2[s]` of point `s` (`qs[s]`, splatted), for the points in
-/// `mask`; and per child the least bound among the points it is within (else infinity).
+/// The group's points in pairs, in the lanes of backend `s`: entry `j` holds point `2 j`
+/// in the low four lanes and point `2 j + 1` in the high four, per coordinate.
 #[inline(always)]
-fn node_within(n: &Node4, qs: &[[Vec4; 3]; GROUP_MAX], best2: &[f32; GROUP_MAX], mask: u32) -> (u32, Vec4) {
-    let mut within_all = 0u32;
-    let mut nearest = Vec4::splat(f32::INFINITY);
-    let mut m = mask;
-    while m != 0 {
-        let s = m.trailing_zeros() as usize;
-        m &= m - 1;
-        let d2 = n.distances2(&qs[s]);
-        let within = d2.cmple(Vec4::splat(best2[s]));
-        nearest = nearest.min(Vec4::select(within, d2, Vec4::splat(f32::INFINITY)));
-        within_all |= within.bitmask() << (4 * s);
+fn pair_coordinates<S: MeshSimd>(s: S, qa: &[Vec3A; GROUP_MAX]) -> [[S::F8; 3]; GROUP_MAX / 2] {
+    let mut out = [[s.lanes8(0.0); 3]; GROUP_MAX / 2];
+    for (j, pair) in out.iter_mut().enumerate() {
+        for (a, x) in pair.iter_mut().enumerate() {
+            *x = s.splat_halves8(qa[2 * j][a], qa[2 * j + 1][a]);
+        }
     }
-    (within_all, nearest)
+    out
 }
 
-#[cfg(target_arch = "x86_64")]
-use core::arch::x86_64::{
-    __m256, _CMP_LE_OQ, _mm_min_ps, _mm256_add_ps, _mm256_and_ps, _mm256_andnot_ps, _mm256_blendv_ps,
-    _mm256_broadcast_ps, _mm256_castps256_ps128, _mm256_cmp_ps, _mm256_div_ps, _mm256_extractf128_ps,
-    _mm256_max_ps, _mm256_min_ps, _mm256_movemask_ps, _mm256_mul_ps, _mm256_set_m128, _mm256_set1_ps,
-    _mm256_setzero_ps, _mm256_sqrt_ps, _mm256_storeu_ps, _mm256_sub_ps,
-};
-
-/// The group's points in pairs for the AVX2 node test: entry `j` holds point `2 j` in the
-/// low four lanes and point `2 j + 1` in the high four, per coordinate.
-#[cfg(target_arch = "x86_64")]
+/// `best2[t]` where point `t` is in `mask`, else -1 (within which nothing is).
 #[inline(always)]
-fn pair_coordinates(qa: &[Vec3A; GROUP_MAX]) -> [[__m256; 3]; GROUP_MAX / 2] {
-    core::array::from_fn(|j| {
-        core::array::from_fn(|a| {
-            let (lo, hi) = (Vec4::splat(qa[2 * j][a]), Vec4::splat(qa[2 * j + 1][a]));
-            // SAFETY: SSE and AVX loads of plain values; only called where AVX is present
-            // (the AVX2 walk), and `_mm256_set_m128` only moves data.
-            unsafe { _mm256_set_m128(hi.into(), lo.into()) }
-        })
-    })
+fn masked_best(best2: &[f32; GROUP_MAX], mask: u32, t: usize) -> f32 {
+    if mask >> t & 1 != 0 { best2[t] } else { -1.0 }
 }
 
-/// `best2[t]` in all four lanes where point `t` is in `mask`, else -1.
-#[cfg(target_arch = "x86_64")]
+/// The lanes of `v` in both halves of eight.
 #[inline(always)]
-fn masked_best(best2: &[f32; GROUP_MAX], mask: u32, t: usize) -> Vec4 {
-    Vec4::splat(if mask >> t & 1 != 0 { best2[t] } else { -1.0 })
+fn both<S: MeshSimd>(s: S, v: &Vec4) -> S::F8 {
+    s.both8(v.as_ref())
 }
 
-/// Both halves of a 256-bit register set to the four lanes of `v` (from memory).
-#[cfg(target_arch = "x86_64")]
+/// The node test of the group walks, two points per eight-lane operation: bit `4 s + k`
+/// of the mask is set when child `k` of `n` is within `best2[s]` of point `s` (`qs8`, from
+/// [`pair_coordinates`]), for the points in `mask`; and per child the least bound among
+/// the points it is within (else infinity). The same operations in the same order as
+/// [`Node4::distances2`] (box, then cylinder as [`Cyl4::distances2`]), so the same bits.
 #[inline(always)]
-unsafe fn both(v: &Vec4) -> __m256 {
-    // SAFETY: `Vec4` is 16 bytes of four `f32` (`__m128` layout); the caller has AVX.
-    unsafe { _mm256_broadcast_ps(&*(v as *const Vec4 as *const core::arch::x86_64::__m128)) }
-}
-
-/// [`node_within`] with AVX2: two points per instruction, the same operations in the same
-/// order (so the same bits). Safety: only for code running with AVX2 enabled.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-unsafe fn avx2_node_within(
+fn node_within<S: MeshSimd>(
+    s: S,
     n: &Node4,
-    qs8: &[[__m256; 3]; GROUP_MAX / 2],
+    qs8: &[[S::F8; 3]; GROUP_MAX / 2],
     best2: &[f32; GROUP_MAX],
     mask: u32,
 ) -> (u32, Vec4) {
-    // SAFETY: AVX intrinsics; the caller runs with AVX2 enabled.
-    unsafe {
-        let inf = _mm256_set1_ps(f32::INFINITY);
-        let zero = _mm256_setzero_ps();
-        let sign = _mm256_set1_ps(-0.0);
-        let mut within_all = 0u32;
-        let mut nearest = inf;
-        let mut pairs = (mask | mask >> 1) & 0x55;
-        while pairs != 0 {
-            let s = pairs.trailing_zeros() as usize;
-            pairs &= pairs - 1;
-            let q = &qs8[s / 2];
-            // Box.
-            let mut box2 = zero;
-            for (a, &qa) in q.iter().enumerate() {
-                let d = _mm256_max_ps(
-                    _mm256_max_ps(_mm256_sub_ps(both(&n.lo[a]), qa), _mm256_sub_ps(qa, both(&n.hi[a]))),
-                    zero,
-                );
-                box2 = _mm256_add_ps(box2, _mm256_mul_ps(d, d));
-            }
-            // Cylinder (as `Cyl4::distances2`).
-            let c = &n.cyl;
-            let v = [
-                _mm256_sub_ps(q[0], both(&c.c[0])),
-                _mm256_sub_ps(q[1], both(&c.c[1])),
-                _mm256_sub_ps(q[2], both(&c.c[2])),
-            ];
-            let nn = [both(&c.n[0]), both(&c.n[1]), both(&c.n[2])];
-            let h = _mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(nn[0], v[0]), _mm256_mul_ps(nn[1], v[1])),
-                _mm256_mul_ps(nn[2], v[2]),
-            );
-            let w = [
-                _mm256_sub_ps(v[0], _mm256_mul_ps(h, nn[0])),
-                _mm256_sub_ps(v[1], _mm256_mul_ps(h, nn[1])),
-                _mm256_sub_ps(v[2], _mm256_mul_ps(h, nn[2])),
-            ];
-            let rho = _mm256_sqrt_ps(_mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(w[0], w[0]), _mm256_mul_ps(w[1], w[1])),
-                _mm256_mul_ps(w[2], w[2]),
-            ));
-            let dr = _mm256_max_ps(_mm256_sub_ps(rho, both(&c.r)), zero);
-            let dh = _mm256_max_ps(_mm256_sub_ps(_mm256_andnot_ps(sign, h), both(&c.t)), zero);
-            let cyl2 = _mm256_mul_ps(
-                _mm256_add_ps(_mm256_mul_ps(dr, dr), _mm256_mul_ps(dh, dh)),
-                _mm256_set1_ps(CYL_SHRINK),
-            );
-            let d2 = _mm256_max_ps(box2, cyl2);
-            // Points outside `mask` (the second of a pair may be) get a negative best: no
-            // child is within it (the bounds are not NaN).
-            let (b0, b1) = (masked_best(best2, mask, s), masked_best(best2, mask, s + 1));
-            let within = _mm256_cmp_ps::<_CMP_LE_OQ>(d2, _mm256_set_m128(b1.into(), b0.into()));
-            within_all |= (_mm256_movemask_ps(within) as u32) << (4 * s);
-            nearest = _mm256_min_ps(nearest, _mm256_blendv_ps(inf, d2, within));
+    let inf = s.lanes8(f32::INFINITY);
+    let zero = s.lanes8(0.0);
+    let mut within_all = 0u32;
+    let mut nearest = inf;
+    let mut pairs = (mask | mask >> 1) & 0x55;
+    while pairs != 0 {
+        let p = pairs.trailing_zeros() as usize;
+        pairs &= pairs - 1;
+        let q = &qs8[p / 2];
+        // Box.
+        let mut box2 = zero;
+        for (a, &qa) in q.iter().enumerate() {
+            let d = (both(s, &n.lo[a]) - qa).max(qa - both(s, &n.hi[a])).max(zero);
+            box2 = box2 + d * d;
         }
-        let lo = _mm256_castps256_ps128(nearest);
-        let hi = _mm256_extractf128_ps::<1>(nearest);
-        (within_all, Vec4::from(_mm_min_ps(lo, hi)))
+        // Cylinder (as `Cyl4::distances2`).
+        let c = &n.cyl;
+        let v = [q[0] - both(s, &c.c[0]), q[1] - both(s, &c.c[1]), q[2] - both(s, &c.c[2])];
+        let nn = [both(s, &c.n[0]), both(s, &c.n[1]), both(s, &c.n[2])];
+        let h = nn[0] * v[0] + nn[1] * v[1] + nn[2] * v[2];
+        let w = [v[0] - h * nn[0], v[1] - h * nn[1], v[2] - h * nn[2]];
+        let rho = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
+        let dr = (rho - both(s, &c.r)).max(zero);
+        let dh = (h.abs() - both(s, &c.t)).max(zero);
+        let cyl2 = (dr * dr + dh * dh) * s.lanes8(CYL_SHRINK);
+        let d2 = box2.max(cyl2);
+        // Points outside `mask` (the second of a pair may be) get a negative best: no
+        // child is within it (the bounds are not NaN).
+        let b = s.splat_halves8(masked_best(best2, mask, p), masked_best(best2, mask, p + 1));
+        let within = d2.le(b);
+        within_all |= within.bits() << (4 * p);
+        nearest = nearest.min(within.select(d2, inf));
     }
+    (within_all, Vec4::from_array(nearest.min_halves()))
+}
+
+/// `u - v` per coordinate.
+#[inline(always)]
+fn sub3<L: Lanes8>(u: [L; 3], v: [L; 3]) -> [L; 3] {
+    [u[0] - v[0], u[1] - v[1], u[2] - v[2]]
+}
+
+/// `u . v` summed `(x + y) + z`, as glam's `dot` on `Vec3A` and [`dot`].
+#[inline(always)]
+fn dot3<L: Lanes8>(u: [L; 3], v: [L; 3]) -> L {
+    u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+}
+
+/// `a + e s` per coordinate.
+#[inline(always)]
+fn along3<L: Lanes8>(a: [L; 3], e: [L; 3], s: L) -> [L; 3] {
+    [a[0] + e[0] * s, a[1] + e[1] * s, a[2] + e[2] * s]
+}
+
+/// Per lane, `u` where `m` is set, else `v`.
+#[inline(always)]
+fn select3_lanes<M: Mask8>(m: M, u: [M::Lanes; 3], v: [M::Lanes; 3]) -> [M::Lanes; 3] {
+    [m.select(u[0], v[0]), m.select(u[1], v[1]), m.select(u[2], v[2])]
 }
 
 /// [`PointTri4::closest`] for two points at once (`q`: point `2 j` in the low four lanes,
-/// `2 j + 1` in the high four, as [`pair_coordinates`] gives them) with AVX: the same
-/// operations in the same order, so the same bits. Safety: only for code running with AVX
-/// enabled.
-#[cfg(target_arch = "x86_64")]
+/// `2 j + 1` in the high four, as [`pair_coordinates`] gives them): the same operations in
+/// the same order, so the same bits.
 #[inline(always)]
-unsafe fn avx2_tri_closest(t: &PointTri4, q: &[__m256; 3]) -> (__m256, [__m256; 3]) {
-    // SAFETY: AVX intrinsics; the caller runs with AVX enabled.
-    unsafe {
-        let sub = |u: [__m256; 3], v: [__m256; 3]| {
-            [_mm256_sub_ps(u[0], v[0]), _mm256_sub_ps(u[1], v[1]), _mm256_sub_ps(u[2], v[2])]
-        };
-        let dot = |u: [__m256; 3], v: [__m256; 3]| {
-            _mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(u[0], v[0]), _mm256_mul_ps(u[1], v[1])),
-                _mm256_mul_ps(u[2], v[2]),
-            )
-        };
-        // `a + e s` per coordinate.
-        let along = |a: [__m256; 3], e: [__m256; 3], s: __m256| {
-            [
-                _mm256_add_ps(a[0], _mm256_mul_ps(e[0], s)),
-                _mm256_add_ps(a[1], _mm256_mul_ps(e[1], s)),
-                _mm256_add_ps(a[2], _mm256_mul_ps(e[2], s)),
-            ]
-        };
-        let sel = |m: __m256, u: [__m256; 3], v: [__m256; 3]| {
-            [
-                _mm256_blendv_ps(v[0], u[0], m),
-                _mm256_blendv_ps(v[1], u[1], m),
-                _mm256_blendv_ps(v[2], u[2], m),
-            ]
-        };
-        let le = |x: __m256, y: __m256| _mm256_cmp_ps::<_CMP_LE_OQ>(x, y);
-        let and = |x: __m256, y: __m256| _mm256_and_ps(x, y);
-        let a = [both(&t.a[0]), both(&t.a[1]), both(&t.a[2])];
-        let b = [both(&t.b[0]), both(&t.b[1]), both(&t.b[2])];
-        let c = [both(&t.c[0]), both(&t.c[1]), both(&t.c[2])];
-        let n = [both(&t.n[0]), both(&t.n[1]), both(&t.n[2])];
-        let ab = sub(b, a);
-        let ac = sub(c, a);
-        let ap = sub(*q, a);
-        let bp = sub(*q, b);
-        let cp = sub(*q, c);
-        let d1 = dot(ab, ap);
-        let d2 = dot(ac, ap);
-        let d3 = dot(ab, bp);
-        let d4 = dot(ac, bp);
-        let d5 = dot(ab, cp);
-        let d6 = dot(ac, cp);
-        let vc = _mm256_sub_ps(_mm256_mul_ps(d1, d4), _mm256_mul_ps(d3, d2));
-        let vb = _mm256_sub_ps(_mm256_mul_ps(d5, d2), _mm256_mul_ps(d1, d6));
-        let va = _mm256_sub_ps(_mm256_mul_ps(d3, d6), _mm256_mul_ps(d5, d4));
-        let zero = _mm256_setzero_ps();
-        let in_a = and(le(d1, zero), le(d2, zero));
-        let in_b = and(le(zero, d3), le(d4, d3));
-        let in_ab = and(and(le(vc, zero), le(zero, d1)), le(d3, zero));
-        let in_c = and(le(zero, d6), le(d5, d6));
-        let in_ac = and(and(le(vb, zero), le(zero, d2)), le(d6, zero));
-        let (e, f) = (_mm256_sub_ps(d4, d3), _mm256_sub_ps(d5, d6));
-        let in_bc = and(and(le(va, zero), le(zero, e)), le(zero, f));
-        let tt = _mm256_div_ps(dot(ap, n), both(&t.nn));
-        let x = [
-            _mm256_sub_ps(q[0], _mm256_mul_ps(n[0], tt)),
-            _mm256_sub_ps(q[1], _mm256_mul_ps(n[1], tt)),
-            _mm256_sub_ps(q[2], _mm256_mul_ps(n[2], tt)),
-        ];
-        let x = sel(in_bc, along(b, sub(c, b), _mm256_div_ps(e, _mm256_add_ps(e, f))), x);
-        let x = sel(in_ac, along(a, ac, _mm256_div_ps(d2, _mm256_sub_ps(d2, d6))), x);
-        let x = sel(in_c, c, x);
-        let x = sel(in_ab, along(a, ab, _mm256_div_ps(d1, _mm256_sub_ps(d1, d3))), x);
-        let x = sel(in_b, b, x);
-        let x = sel(in_a, a, x);
-        let off = sub(x, *q);
-        (dot(off, off), x)
-    }
+fn tri_closest<S: MeshSimd>(s: S, t: &PointTri4, q: &[S::F8; 3]) -> (S::F8, [S::F8; 3]) {
+    let q = *q;
+    let a = [both(s, &t.a[0]), both(s, &t.a[1]), both(s, &t.a[2])];
+    let b = [both(s, &t.b[0]), both(s, &t.b[1]), both(s, &t.b[2])];
+    let c = [both(s, &t.c[0]), both(s, &t.c[1]), both(s, &t.c[2])];
+    let n = [both(s, &t.n[0]), both(s, &t.n[1]), both(s, &t.n[2])];
+    let ab = sub3(b, a);
+    let ac = sub3(c, a);
+    let ap = sub3(q, a);
+    let bp = sub3(q, b);
+    let cp = sub3(q, c);
+    let d1 = dot3(ab, ap);
+    let d2 = dot3(ac, ap);
+    let d3 = dot3(ab, bp);
+    let d4 = dot3(ac, bp);
+    let d5 = dot3(ab, cp);
+    let d6 = dot3(ac, cp);
+    let vc = d1 * d4 - d3 * d2;
+    let vb = d5 * d2 - d1 * d6;
+    let va = d3 * d6 - d5 * d4;
+    let zero = s.lanes8(0.0);
+    // The regions, each as the scalar code tests it (see `PointTri4::closest`).
+    let in_a = d1.le(zero) & d2.le(zero);
+    let in_b = zero.le(d3) & d4.le(d3);
+    let in_ab = vc.le(zero) & zero.le(d1) & d3.le(zero);
+    let in_c = zero.le(d6) & d5.le(d6);
+    let in_ac = vb.le(zero) & zero.le(d2) & d6.le(zero);
+    let (e, f) = (d4 - d3, d5 - d6);
+    let in_bc = va.le(zero) & zero.le(e) & zero.le(f);
+    let tt = dot3(ap, n) / both(s, &t.nn);
+    let x = [q[0] - n[0] * tt, q[1] - n[1] * tt, q[2] - n[2] * tt];
+    let x = select3_lanes(in_bc, along3(b, sub3(c, b), e / (e + f)), x);
+    let x = select3_lanes(in_ac, along3(a, ac, d2 / (d2 - d6)), x);
+    let x = select3_lanes(in_c, c, x);
+    let x = select3_lanes(in_ab, along3(a, ab, d1 / (d1 - d3)), x);
+    let x = select3_lanes(in_b, b, x);
+    let x = select3_lanes(in_a, a, x);
+    let off = sub3(x, q);
+    (dot3(off, off), x)
 }
 
-/// [`ClosestPacket::improve`] for points `s` and `s + 1` (`s` even; those in `mask`) of a group
-/// walk at once, with AVX. Safety: only for code running with AVX2 enabled.
-#[cfg(target_arch = "x86_64")]
+/// [`ClosestPacket::improve`] for points `p` and `p + 1` (`p` even; those in `mask`) of a
+/// group walk at once, in the lanes of backend `s`.
 #[inline(always)]
-unsafe fn avx2_improve_pair(
+fn improve_pair<S: MeshSimd>(
+    s: S,
     packet: &ClosestPacket,
-    q: &[__m256; 3],
-    s: usize,
+    q: &[S::F8; 3],
+    p: usize,
     mask: u32,
     best2: &mut [f32; GROUP_MAX],
     best: &mut [(u32, Vec3A); GROUP_MAX],
 ) {
-    // SAFETY: AVX intrinsics; the caller runs with AVX2 enabled.
-    unsafe {
-        let (d2, x) = avx2_tri_closest(&packet.tri, q);
-        // Points outside `mask` get a negative best: no lane is within it.
-        let (b0, b1) = (masked_best(best2, mask, s), masked_best(best2, mask, s + 1));
-        let within = _mm256_cmp_ps::<_CMP_LE_OQ>(d2, _mm256_set_m128(b1.into(), b0.into()));
-        let bits = _mm256_movemask_ps(within) as u32;
-        if bits == 0 {
-            return;
+    let (d2, x) = tri_closest(s, &packet.tri, q);
+    // Points outside `mask` get a negative best: no lane is within it.
+    let b = s.splat_halves8(masked_best(best2, mask, p), masked_best(best2, mask, p + 1));
+    let bits = d2.le(b).bits();
+    if bits == 0 {
+        return;
+    }
+    let d = d2.to_array();
+    for h in 0..2 {
+        let mut lanes = bits >> (4 * h) & 0xf;
+        if lanes == 0 {
+            continue;
         }
-        let mut d = [0.0f32; 8];
-        _mm256_storeu_ps(d.as_mut_ptr(), d2);
-        for h in 0..2 {
-            let mut lanes = bits >> (4 * h) & 0xf;
-            if lanes == 0 {
-                continue;
+        let t = p + h;
+        let mut found = 0;
+        while lanes != 0 {
+            let l = lanes.trailing_zeros() as usize;
+            lanes &= lanes - 1;
+            if d[4 * h + l] <= best2[t] {
+                best2[t] = d[4 * h + l];
+                found = l;
             }
-            let t = s + h;
-            let mut found = 0;
-            while lanes != 0 {
-                let l = lanes.trailing_zeros() as usize;
-                lanes &= lanes - 1;
-                if d[4 * h + l] <= best2[t] {
-                    best2[t] = d[4 * h + l];
-                    found = l;
-                }
-            }
-            let mut xs = [[0.0f32; 8]; 3];
-            for (xa, &xv) in xs.iter_mut().zip(&x) {
-                _mm256_storeu_ps(xa.as_mut_ptr(), xv);
-            }
-            let i = 4 * h + found;
-            best[t] = (packet.slot[found], Vec3A::new(xs[0][i], xs[1][i], xs[2][i]));
         }
+        let xs = [x[0].to_array(), x[1].to_array(), x[2].to_array()];
+        let i = 4 * h + found;
+        best[t] = (packet.slot[found], Vec3A::new(xs[0][i], xs[1][i], xs[2][i]));
+    }
+}
+
+/// [`TriangleBvh::nearest_group`] as a [`MeshKernel`].
+struct GroupWalk<'a> {
+    tree: &'a TriangleBvh,
+    points: &'a [Vec3],
+    hints: &'a [Option<u32>],
+    out: &'a mut [Option<Nearest>],
+    stack: &'a mut GroupStack,
+    visited: &'a mut u64,
+}
+
+impl MeshKernel for GroupWalk<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn run<S: MeshSimd>(self, s: S) {
+        self.tree.group_walk(s, self.points, self.hints, self.out, self.stack, self.visited)
     }
 }
 
@@ -875,7 +821,6 @@ impl TriangleBvh {
                 original: Vec::new(),
                 wide: Vec::new(),
                 packets: Vec::new(),
-                avx2: false,
             };
         }
         let mut bvh = bvh2::build(&boxes, params);
@@ -883,8 +828,7 @@ impl TriangleBvh {
         let corners: Vec<[Vec3A; 3]> = original.iter().map(|&i| tri(&mesh.triangles[i as usize])).collect();
         bvh.primitive_indices = (0..original.len() as u32).collect();
         let (wide, packets) = collapse(&bvh, &corners);
-        let avx2 = crate::simd::avx2().is_some();
-        TriangleBvh { bvh, corners, original, wide, packets, avx2 }
+        TriangleBvh { bvh, corners, original, wide, packets }
     }
 
     /// The nearest triangle to `p` among those closer than `max_dist` (pass
@@ -1015,77 +959,46 @@ impl TriangleBvh {
         stack: &mut GroupStack,
         visited: &mut u64,
     ) {
-        #[cfg(target_arch = "x86_64")]
-        if self.avx2 {
-            // SAFETY: `avx2` is only set where the CPU has AVX2, POPCNT and BMI1
-            // (`crate::simd::avx2`).
-            return unsafe { self.nearest_group_avx2(points, hints, out, stack, visited) };
-        }
-        self.group_walk::<false>(points, hints, out, stack, visited)
+        dispatch_mesh(GroupWalk { tree: self, points, hints, out, stack, visited })
     }
 
-    /// [`TriangleBvh::nearest_group`] with the AVX2 node and leaf tests (two points per
-    /// instruction).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,popcnt,bmi1")]
-    fn nearest_group_avx2(
+    /// [`TriangleBvh::nearest_group`] on backend `s` (for comparing backends: the results
+    /// and the work are the same, bit for bit). Call it for [`crate::simd::Avx2`] inside
+    /// [`crate::simd::Avx2::vectorize`], which compiles it for AVX2.
+    #[inline(always)]
+    pub fn nearest_group_on<S: MeshSimd>(
         &self,
+        s: S,
         points: &[Vec3],
         hints: &[Option<u32>],
         out: &mut [Option<Nearest>],
         stack: &mut GroupStack,
         visited: &mut u64,
     ) {
-        self.group_walk::<true>(points, hints, out, stack, visited)
-    }
-
-    /// Whether [`TriangleBvh::nearest_group`] uses the AVX2 node and leaf tests.
-    pub fn uses_avx2(&self) -> bool {
-        self.avx2
-    }
-
-    /// Makes [`TriangleBvh::nearest_group`] use the portable node and leaf tests even where
-    /// the CPU has AVX2 (for comparing the two; the results are bit-identical).
-    pub fn use_portable_node_test(&mut self) {
-        self.avx2 = false;
+        self.group_walk(s, points, hints, out, stack, visited)
     }
 
     /// The leaf `r` (a reference with [`Node4::LEAF`]) for the points in `mask` of a group
     /// walk: each point's best improved by the leaf's triangles, as [`ClosestPacket::improve`]
-    /// does (with AVX2, two points per instruction, the same bits).
-    #[allow(clippy::too_many_arguments)]
+    /// does (two points per eight-lane operation, the same bits).
     #[inline(always)]
-    fn group_leaf<const AVX2: bool>(
+    fn group_leaf<S: MeshSimd>(
         &self,
+        s: S,
         r: u32,
         mask: u32,
-        qs: &[[Vec4; 3]; GROUP_MAX],
-        #[cfg(target_arch = "x86_64")] qs8: &[[__m256; 3]; GROUP_MAX / 2],
+        qs8: &[[S::F8; 3]; GROUP_MAX / 2],
         best2: &mut [f32; GROUP_MAX],
         best: &mut [(u32, Vec3A); GROUP_MAX],
     ) {
         let mut at = (r & !Node4::LEAF) as usize;
         loop {
             let packet = &self.packets[at];
-            #[cfg(target_arch = "x86_64")]
-            if AVX2 {
-                let mut pairs = (mask | mask >> 1) & 0x55;
-                while pairs != 0 {
-                    let s = pairs.trailing_zeros() as usize;
-                    pairs &= pairs - 1;
-                    // SAFETY: `AVX2` walks only run under `nearest_group_avx2`.
-                    unsafe { avx2_improve_pair(packet, &qs8[s / 2], s, mask, best2, best) };
-                }
-            }
-            if !AVX2 || cfg!(not(target_arch = "x86_64")) {
-                let mut m = mask;
-                while m != 0 {
-                    let s = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    if let Some(found) = packet.improve(&qs[s], &mut best2[s]) {
-                        best[s] = found;
-                    }
-                }
+            let mut pairs = (mask | mask >> 1) & 0x55;
+            while pairs != 0 {
+                let p = pairs.trailing_zeros() as usize;
+                pairs &= pairs - 1;
+                improve_pair(s, packet, &qs8[p / 2], p, mask, best2, best);
             }
             if !packet.more {
                 break;
@@ -1095,8 +1008,9 @@ impl TriangleBvh {
     }
 
     #[inline(always)]
-    fn group_walk<const AVX2: bool>(
+    fn group_walk<S: MeshSimd>(
         &self,
+        s: S,
         points: &[Vec3],
         hints: &[Option<u32>],
         out: &mut [Option<Nearest>],
@@ -1109,13 +1023,11 @@ impl TriangleBvh {
             out.fill(None);
             return;
         }
-        let mut qs = [[Vec4::ZERO; 3]; GROUP_MAX];
         let mut qa = [Vec3A::ZERO; GROUP_MAX];
         let mut best2 = [f32::MAX; GROUP_MAX];
         let mut best: [(u32, Vec3A); GROUP_MAX] = [(u32::MAX, Vec3A::ZERO); GROUP_MAX];
         for s in 0..g {
             qa[s] = Vec3A::from(points[s]);
-            qs[s] = splat3(qa[s]);
             if let Some(slot) = hints[s].filter(|&h| (h as usize) < self.corners.len()) {
                 let [a, b, c] = self.corners[slot as usize];
                 let x = closest_point_on_triangle(qa[s], a, b, c);
@@ -1123,8 +1035,7 @@ impl TriangleBvh {
                 best[s] = (slot, x);
             }
         }
-        #[cfg(target_arch = "x86_64")]
-        let qs8 = pair_coordinates(&qa);
+        let qs8 = pair_coordinates(s, &qa);
         let wide = &self.wide;
         stack.0.clear();
         stack.0.push(GroupEntry { bound: 0.0, node: 0, mask: (1 << g) - 1 });
@@ -1139,15 +1050,7 @@ impl TriangleBvh {
             // Bit `4 s + k`: child `k` is within point `s`'s best; `nearest`: per child, the
             // least bound among the points it is within.
             *visited += 4 * mask.count_ones() as u64;
-            #[cfg(target_arch = "x86_64")]
-            let (within_all, nearest) = if AVX2 {
-                // SAFETY: `AVX2` walks only run under `nearest_group_avx2`.
-                unsafe { avx2_node_within(n, &qs8, &best2, mask) }
-            } else {
-                node_within(n, &qs, &best2, mask)
-            };
-            #[cfg(not(target_arch = "x86_64"))]
-            let (within_all, nearest) = node_within(n, &qs, &best2, mask);
+            let (within_all, nearest) = node_within(s, n, &qs8, &best2, mask);
             // Transposed: bit `s` of `children[k]`, four points at a time (`GROUP_MAX` is 8).
             let mut children = [0u32; 4];
             for (k, c) in children.iter_mut().enumerate() {
@@ -1161,15 +1064,7 @@ impl TriangleBvh {
             while leaves != 0 {
                 let k = leaves.trailing_zeros() as usize;
                 leaves &= leaves - 1;
-                self.group_leaf::<AVX2>(
-                    n.child[k],
-                    children[k],
-                    &qs,
-                    #[cfg(target_arch = "x86_64")]
-                    &qs8,
-                    &mut best2,
-                    &mut best,
-                );
+                self.group_leaf(s, n.child[k], children[k], &qs8, &mut best2, &mut best);
             }
             // Inner nodes onto the stack, farthest first (keys: bound bits, child number).
             let d = nearest.to_array();
@@ -1256,6 +1151,7 @@ impl TriangleBvh {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::simd::Portable;
 
     #[test]
     fn corner_edge_and_face_regions() {
@@ -1312,6 +1208,23 @@ mod tests {
                 }
             };
             let (d2, x) = t4.closest(&splat3(q));
+            // Two points at once (the group walks' test), on both backends: each half has
+            // the bits of the one-point test.
+            let q2 = q * 0.5 + Vec3A::new(0.25, -0.5, 0.125);
+            let (d2b, _) = t4.closest(&splat3(q2));
+            let mut pair = vec![pair_test(Portable, &t4, q, q2)];
+            if let Some(s) = crate::simd::avx2() {
+                pair.push(s.vectorize(|| pair_test(s, &t4, q, q2)));
+            }
+            for (pd, px) in pair {
+                for lane in 0..4 {
+                    assert_eq!(pd[lane].to_bits(), d2[lane].to_bits(), "round {round} lane {lane}");
+                    assert_eq!(pd[lane + 4].to_bits(), d2b[lane].to_bits(), "round {round} lane {lane}");
+                    for a in 0..3 {
+                        assert_eq!(px[a][lane].to_bits(), x[a][lane].to_bits(), "round {round} lane {lane}");
+                    }
+                }
+            }
             for lane in 0..4 {
                 let [a, b, c] = tris[lane].or(tris[0]).unwrap();
                 let want = closest_point_on_triangle(q, a, b, c);
@@ -1334,6 +1247,13 @@ mod tests {
             }
         }
         assert!(corners > 10000 && others > 10000, "{corners} {others}");
+    }
+
+    /// [`tri_closest`] on backend `s` for `q` (lanes 0..4) and `q2` (lanes 4..8).
+    fn pair_test<S: MeshSimd>(s: S, t: &PointTri4, q: Vec3A, q2: Vec3A) -> ([f32; 8], [[f32; 8]; 3]) {
+        let qs = [s.splat_halves8(q.x, q2.x), s.splat_halves8(q.y, q2.y), s.splat_halves8(q.z, q2.z)];
+        let (d2, x) = tri_closest(s, t, &qs);
+        (d2.to_array(), [x[0].to_array(), x[1].to_array(), x[2].to_array()])
     }
 
     #[test]

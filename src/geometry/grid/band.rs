@@ -235,17 +235,6 @@ impl BandGrid {
         if bound < 0.0 { -v } else { v }
     }
 
-    /// Whether every slot, range and sample index fits the `i32` offsets of the AVX2
-    /// gathers of [`BandGrid::march_distance8`].
-    #[cfg(target_arch = "x86_64")]
-    pub(crate) fn fits_avx2(&self) -> bool {
-        let max = i32::MAX as usize;
-        self.slots.len() <= max
-            && self.ranges.len() <= max / 2
-            && self.data.len() <= max
-            && self.dims.max_element() <= 1 << 24
-    }
-
     /// Bytes of memory this grid holds: the struct and every allocated array's capacity.
     pub fn bytes_used(&self) -> usize {
         std::mem::size_of::<Self>()

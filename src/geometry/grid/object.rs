@@ -55,12 +55,7 @@ impl GridStore {
     /// skipping elsewhere) for a band.
     #[inline]
     pub fn march_distance(&self, p: Vec3) -> f32 {
-        #[cfg(target_arch = "x86_64")]
-        if crate::simd::avx2().is_some() {
-            // SAFETY: the CPU has AVX2 and FMA (checked just above).
-            return unsafe { self.march_distance_avx2(p) };
-        }
-        self.march_distance_portable(p)
+        crate::simd::dispatch(MarchDistance { store: self, p })
     }
 
     /// [`GridStore::march_distance`] for the baseline target.
@@ -70,14 +65,6 @@ impl GridStore {
             GridStore::Dense(g) => g.trilinear_inline(p),
             GridStore::Band(b) => b.march_distance(p),
         }
-    }
-
-    /// [`GridStore::march_distance`] compiled for AVX2 (the same source, so the same bits;
-    /// `floor` becomes one instruction instead of a call to the C library).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn march_distance_avx2(&self, p: Vec3) -> f32 {
-        self.march_distance_portable(p)
     }
 
     /// [`GridStore::march_distance`] at the eight points `(xs[l], ys[l], zs[l])`, equal lane
@@ -552,5 +539,21 @@ impl Geometry for ClippedGrid {
         } else {
             self.outside.surface_distance(p)
         }
+    }
+}
+
+/// [`GridStore::march_distance`] as a kernel: the scalar source compiled for the selected
+/// backend (the same source, so the same bits; with AVX2 `floor` becomes one instruction
+/// instead of a call to the C library).
+struct MarchDistance<'a> {
+    store: &'a GridStore,
+    p: Vec3,
+}
+
+impl crate::simd::Kernel for MarchDistance<'_> {
+    type Output = f32;
+    #[inline(always)]
+    fn run<S: crate::simd::Simd>(self, _: S) -> f32 {
+        self.store.march_distance_portable(self.p)
     }
 }

@@ -23,15 +23,14 @@ use obvhs::BvhBuildParams;
 use crate::geometry::bvh2;
 use crate::geometry::mesh::instance::compose;
 use crate::geometry::mesh::triangle::{ShearedRay, closest_point_on_triangle};
-#[cfg(target_arch = "x86_64")]
-use crate::geometry::mesh::wide_bvh::WideBoxRayAvx2;
-use crate::geometry::mesh::wide_bvh::{BoxTest, LeafHit, WideBoxRay, WideBvh, closest_walk};
+use crate::geometry::mesh::wide_bvh::{LeafHit, WideBvh, closest_walk};
 use crate::geometry::{
     Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, Shared, aabb, f32_error, max_abs,
 };
 use crate::mesh::TriangleMesh;
 pub use crate::scene::shape::Shading;
 use crate::scene::transform::{Transform, TransformDesc};
+use crate::simd::{MeshKernel, MeshSimd, Portable, dispatch_mesh};
 
 /// The extents (longest side of the box, scene units) of the meshes traced in the frame
 /// they are given in: 2^-20 to 2^20 (about 1e-6 to 1e6). Beyond, a mesh is traced in a
@@ -311,57 +310,25 @@ impl MeshGeometry {
             + self.placement.as_ref().map_or(0, |_| std::mem::size_of::<Transform>())
     }
 
-    /// Makes the BVH walks use the portable box test even where the CPU has AVX2 (for
-    /// measuring what AVX2 brings; hits are bit-identical).
-    ///
-    /// # Panics
-    /// When the shape is shared with other instances.
-    pub fn use_portable_box_test(&mut self) {
-        Arc::get_mut(&mut self.shape).expect("an unshared mesh").bvh.use_portable_box_test();
-    }
-
-    /// Whether the BVH walks use the AVX2 box test.
-    pub fn uses_avx2(&self) -> bool {
-        self.shape.bvh.uses_avx2()
-    }
-
     /// Bytes of the BVH alone (its struct, nodes and leaf packets).
     pub fn accel_bytes(&self) -> usize {
         self.shape.bvh.bytes_used()
     }
 
-    /// [`Geometry::closest_hit`] with the AVX2 box test: the whole of it (ray setup, walk and
-    /// hit record) compiled with AVX2, in one function.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma,popcnt,bmi1")]
-    fn closest_hit_avx2(
-        &self,
-        origin: Vec3,
-        dir: Vec3,
-        t_min: f32,
-        t_max: f32,
-        stats: &mut RayStats,
-    ) -> Option<Hit> {
-        self.closest_hit_with::<WideBoxRayAvx2>(&Ray::new(origin, dir), t_min, t_max, stats)
-    }
-
-    /// [`Geometry::closest_hit`] with the portable box test.
-    #[inline(never)]
-    fn closest_hit_portable(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
-        self.closest_hit_with::<WideBoxRay>(ray, t_min, t_max, stats)
-    }
-
-    /// [`Geometry::closest_hit`] with the box test `B` (inlined, see [`closest_walk`]).
+    /// [`Geometry::closest_hit`] on backend `s`: ray setup, walk and hit record in one
+    /// body (inlined into [`ClosestHit::run`], so that under AVX2 all of it is compiled
+    /// with AVX2, in one function).
     #[inline(always)]
-    fn closest_hit_with<B: BoxTest>(
+    fn closest_hit_on<S: MeshSimd>(
         &self,
+        s: S,
         ray: &Ray,
         t_min: f32,
         t_max: f32,
         stats: &mut RayStats,
     ) -> Option<Hit> {
         let local = if self.transform.identity { *ray } else { self.transform.ray_to_local(ray) };
-        let leaf = closest_walk::<B>(&self.shape.bvh, local.origin, local.dir, t_min, t_max, stats)?;
+        let leaf = closest_walk(s, &self.shape.bvh, local.origin, local.dir, t_min, t_max, stats)?;
         Some(self.hit_record(ray, &local, leaf, leaf.t, &self.transform))
     }
 
@@ -370,8 +337,8 @@ impl MeshGeometry {
     /// ([`rescale`]): [`Geometry::closest_hit`] with the local direction divided by `f`,
     /// `t` times `f` along it, and normals through the placement (the shape's unit scale
     /// is uniform, so it leaves their directions alone, and the f32 inverse of a scale
-    /// like 2^-100, whose determinant underflows, would make them NaN); with the portable
-    /// box test, whose hits are the AVX2 test's. `None` for other rays.
+    /// like 2^-100, whose determinant underflows, would make them NaN); on the portable
+    /// backend, whose hits are the AVX2 backend's. `None` for other rays.
     #[inline(never)]
     #[cold]
     fn closest_hit_rescaled(
@@ -385,7 +352,7 @@ impl MeshGeometry {
         let f = rescale(local.dir)?;
         let local = Ray::spawned(local.origin, local.dir / f, local.spread);
         let leaf =
-            closest_walk::<WideBoxRay>(&self.shape.bvh, local.origin, local.dir, t_min * f, t_max * f, stats);
+            closest_walk(Portable, &self.shape.bvh, local.origin, local.dir, t_min * f, t_max * f, stats);
         Some(leaf.map(|leaf| self.hit_record(ray, &local, leaf, leaf.t / f, self.transform())))
     }
 
@@ -444,6 +411,25 @@ fn rescale(dir: Vec3) -> Option<f32> {
     Some(2f32.powi(m.log2().floor() as i32))
 }
 
+/// [`Geometry::closest_hit`] of a [`MeshGeometry`] as a [`MeshKernel`].
+struct ClosestHit<'a> {
+    mesh: &'a MeshGeometry,
+    origin: Vec3,
+    dir: Vec3,
+    t_min: f32,
+    t_max: f32,
+    stats: &'a mut RayStats,
+}
+
+impl MeshKernel for ClosestHit<'_> {
+    type Output = Option<Hit>;
+    #[inline(always)]
+    fn run<S: MeshSimd>(self, s: S) -> Option<Hit> {
+        let ray = Ray::new(self.origin, self.dir);
+        self.mesh.closest_hit_on(s, &ray, self.t_min, self.t_max, self.stats)
+    }
+}
+
 impl Geometry for MeshGeometry {
     fn bounds(&self) -> Option<Aabb> {
         self.world_bounds
@@ -455,14 +441,9 @@ impl Geometry for MeshGeometry {
         {
             return hit;
         }
-        #[cfg(target_arch = "x86_64")]
-        if self.shape.bvh.uses_avx2() {
-            // SAFETY: `uses_avx2` is only true where the CPU has AVX2, FMA, POPCNT and BMI1.
-            // The ray goes by value: a caller that has just written it would otherwise
-            // have its stores read back by wider loads, which cannot be forwarded.
-            return unsafe { self.closest_hit_avx2(ray.origin, ray.dir, t_min, t_max, stats) };
-        }
-        self.closest_hit_portable(ray, t_min, t_max, stats)
+        // The ray goes by value: a caller that has just written it would otherwise have
+        // its stores read back by wider loads, which cannot be forwarded.
+        dispatch_mesh(ClosestHit { mesh: self, origin: ray.origin, dir: ray.dir, t_min, t_max, stats })
     }
 
     fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
@@ -507,14 +488,16 @@ impl Geometry for MeshGeometry {
 
     fn describe(&self) -> String {
         format!(
-            "{}: {} triangles, 8-wide BVH of {} nodes and {} leaf packets (depth {}) built in {:.1} ms, {}",
+            "{}: {} triangles, 8-wide BVH of {} nodes and {} leaf packets (depth {}) built in {:.1} ms, {}, \
+             {} lanes",
             self.label,
             self.shape.triangles.len(),
             self.shape.bvh.nodes.len(),
             self.shape.bvh.packets.len(),
             self.shape.bvh.depth,
             self.build_time.as_secs_f64() * 1e3,
-            if self.shape.normals.is_some() { "smooth shading" } else { "flat shading" }
+            if self.shape.normals.is_some() { "smooth shading" } else { "flat shading" },
+            crate::simd::backend().name()
         )
     }
 }

@@ -2,16 +2,14 @@
 //! so it runs along +z, and edge functions are evaluated in 2D with a fallback to f64 when
 //! one is exactly zero. Rays through shared edges and vertices of a closed mesh never pass
 //! between its triangles. [`ShearedRay::intersect4`] runs the same test on four triangles
-//! at once (structure-of-arrays, vectorised by the compiler) with bit-identical results,
-//! returning a hit mask and skipping the distances and their division when no lane's edge
-//! functions agree in sign. Also the exact closest point on a triangle
+//! at once, and [`ShearedRay::intersect8`] on eight (a leaf's two packets), in the lanes of
+//! a [`MeshSimd`] backend, with bit-identical results, returning a hit mask and skipping
+//! the distances and their division when no lane's edge functions agree in sign. Also the exact closest point on a triangle
 //! ([`closest_point_on_triangle`]), for distance queries.
-
-use std::ops::{Add, Div, Mul, Sub};
 
 use glam::{DVec3, Vec3, Vec3A};
 
-use crate::simd::F4;
+use crate::simd::{Lanes4, Lanes8, Mask8, MeshSimd};
 
 /// Per-ray precomputation of the shear that maps the ray to the +z axis.
 #[derive(Clone, Copy, Debug)]
@@ -105,141 +103,117 @@ impl ShearedRay {
 pub type Tri4 = [[[f32; 4]; 3]; 3];
 
 impl ShearedRay {
-    /// [`ShearedRay::intersect`] on the four triangles of `tri` at once: per lane, the hit's
-    /// `t` (bit-identical to the one-triangle test), and a mask with bit `l` set where lane
-    /// `l` hits (the `t` of other lanes is unspecified). Lanes with an edge function exactly
-    /// zero in f32 are redone one at a time in f64, as there. Returns at once, before the
-    /// distances and their division, when no lane's edge functions agree in sign (most
-    /// packets a ray visits).
+    /// [`ShearedRay::intersect`] on the four triangles of `tri` at once, in the four-lane
+    /// type of backend `s`: per lane, the hit's `t` (bit-identical to the one-triangle
+    /// test), and a mask with bit `l` set where lane `l` hits (the `t` of other lanes is
+    /// unspecified). Lanes with an edge function exactly zero in f32 are redone one at a
+    /// time in f64, as there. Returns at once, before the distances and their division,
+    /// when no lane's edge functions agree in sign (most packets a ray visits).
     #[inline(always)]
-    pub fn intersect4(&self, tri: &Tri4, t_min: f32, t_max: f32) -> ([f32; 4], u32) {
+    pub fn intersect4<S: MeshSimd>(&self, s: S, tri: &Tri4, t_min: f32, t_max: f32) -> ([f32; 4], u32) {
         let [kx, ky, kz] = self.k;
-        let (sx, sy, sz) = (F4::splat(self.shear.x), F4::splat(self.shear.y), F4::splat(self.shear.z));
+        let (sx, sy, sz) = (s.lanes4(self.shear.x), s.lanes4(self.shear.y), s.lanes4(self.shear.z));
         let (ox, oy, oz) =
-            (F4::splat(self.origin_k[0]), F4::splat(self.origin_k[1]), F4::splat(self.origin_k[2]));
-        // Per vertex: sheared x, y and the z offset along the ray's main axis.
-        let vertex = |v: &[[f32; 4]; 3]| {
-            let z = F4::load(&v[kz]).sub(oz);
-            (F4::load(&v[kx]).sub(ox).sub(sx.mul(z)), F4::load(&v[ky]).sub(oy).sub(sy.mul(z)), z)
-        };
-        let (ax, ay, az) = vertex(&tri[0]);
-        let (bx, by, bz) = vertex(&tri[1]);
-        let (cx, cy, cz) = vertex(&tri[2]);
-        let mut u = cx.mul(by).sub(cy.mul(bx));
-        let mut v = ax.mul(cy).sub(ay.mul(cx));
-        let mut w = bx.mul(ay).sub(by.mul(ax));
-        let zero = F4::splat(0.0);
+            (s.lanes4(self.origin_k[0]), s.lanes4(self.origin_k[1]), s.lanes4(self.origin_k[2]));
+        // Per vertex: sheared x, y and the z offset along the ray's main axis. (Functions
+        // marked `#[inline(always)]` rather than closures, which the compiler may leave out
+        // of line, where they would not be compiled for the backend's instructions.)
+        #[inline(always)]
+        fn vertex<L: Lanes4>(row: [L; 3], o: [L; 3], sx: L, sy: L) -> (L, L, L) {
+            let z = row[2] - o[2];
+            (row[0] - o[0] - sx * z, row[1] - o[1] - sy * z, z)
+        }
+        let o = [ox, oy, oz];
+        let (ax, ay, az) = vertex(
+            [s.load_lanes4(&tri[0][kx]), s.load_lanes4(&tri[0][ky]), s.load_lanes4(&tri[0][kz])],
+            o,
+            sx,
+            sy,
+        );
+        let (bx, by, bz) = vertex(
+            [s.load_lanes4(&tri[1][kx]), s.load_lanes4(&tri[1][ky]), s.load_lanes4(&tri[1][kz])],
+            o,
+            sx,
+            sy,
+        );
+        let (cx, cy, cz) = vertex(
+            [s.load_lanes4(&tri[2][kx]), s.load_lanes4(&tri[2][ky]), s.load_lanes4(&tri[2][kz])],
+            o,
+            sx,
+            sy,
+        );
+        let mut u = cx * by - cy * bx;
+        let mut v = ax * cy - ay * cx;
+        let mut w = bx * ay - by * ax;
+        let zero = s.lanes4(0.0);
         if (u.eq(zero) | v.eq(zero) | w.eq(zero)) != 0 {
             let mut uvw = [u.to_array(), v.to_array(), w.to_array()];
             self.edges_f64(tri, &mut uvw);
-            (u, v, w) = (F4::load(&uvw[0]), F4::load(&uvw[1]), F4::load(&uvw[2]));
+            (u, v, w) = (s.load_lanes4(&uvw[0]), s.load_lanes4(&uvw[1]), s.load_lanes4(&uvw[2]));
         }
         // Inside: no edge function of either sign against the others (for numbers, the
         // negation of "some negative and some positive"; NaN lanes, unused or degenerate,
         // are never inside, as their `t` would be NaN).
         let inside = (zero.le(u) & zero.le(v) & zero.le(w)) | (u.le(zero) & v.le(zero) & w.le(zero));
-        let det = u.add(v).add(w);
+        let det = u + v + w;
         let candidates = inside & !det.eq(zero) & 0xf;
         if candidates == 0 {
             return ([0.0; 4], 0);
         }
-        let t_scaled = u.mul(sz.mul(az)).add(v.mul(sz.mul(bz))).add(w.mul(sz.mul(cz)));
-        let t = t_scaled.div(det);
-        let ok = candidates & F4::splat(t_min).le(t) & t.le(F4::splat(t_max));
+        let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
+        let t = t_scaled / det;
+        let ok = candidates & s.lanes4(t_min).le(t) & t.le(s.lanes4(t_max));
         (t.to_array(), ok)
     }
 
     /// [`ShearedRay::intersect4`] on two packets at once, `a` in lanes 0..4 and `b` in
-    /// lanes 4..8 of 256-bit registers: the same operations in the same order, so every
-    /// lane's `t` and hit bit equal the four-lane test's. Only inlined into functions
-    /// compiled with AVX (the AVX2 walks of [`crate::geometry::mesh::wide_bvh`]).
-    #[cfg(target_arch = "x86_64")]
+    /// lanes 4..8 of the eight-lane type of backend `s`: the same operations in the same
+    /// order, so every lane's `t` and hit bit equal the four-lane test's.
     #[inline(always)]
-    pub(crate) fn intersect8_avx(&self, a: &Tri4, b: &Tri4, t_min: f32, t_max: f32) -> ([f32; 8], u32) {
-        use core::arch::x86_64::*;
-        let [kx, ky, kz] = self.k;
-        // Macros rather than closures: a closure is not compiled with the AVX target
-        // feature of the function it is inlined into, and would call every intrinsic.
-        macro_rules! row {
-            ($v:expr, $axis:expr) => {
-                _mm256_set_m128(_mm_loadu_ps(b[$v][$axis].as_ptr()), _mm_loadu_ps(a[$v][$axis].as_ptr()))
-            };
+    pub fn intersect8<S: MeshSimd>(
+        &self,
+        s: S,
+        a: &Tri4,
+        b: &Tri4,
+        t_min: f32,
+        t_max: f32,
+    ) -> ([f32; 8], u32) {
+        let (sx, sy, sz) = (s.lanes8(self.shear.x), s.lanes8(self.shear.y), s.lanes8(self.shear.z));
+        let (ox, oy, oz) =
+            (s.lanes8(self.origin_k[0]), s.lanes8(self.origin_k[1]), s.lanes8(self.origin_k[2]));
+        // Per vertex: sheared x, y and the z offset along the ray's main axis.
+        #[inline(always)]
+        fn vertex<L: Lanes8>(row: [L; 3], o: [L; 3], sx: L, sy: L) -> (L, L, L) {
+            let z = row[2] - o[2];
+            (row[0] - o[0] - sx * z, row[1] - o[1] - sy * z, z)
         }
-        macro_rules! le {
-            ($x:expr, $y:expr) => {
-                _mm256_cmp_ps::<_CMP_LE_OQ>($x, $y)
-            };
+        let o = [ox, oy, oz];
+        let (ax, ay, az) = vertex(rows8(s, a, b, 0, self.k), o, sx, sy);
+        let (bx, by, bz) = vertex(rows8(s, a, b, 1, self.k), o, sx, sy);
+        let (cx, cy, cz) = vertex(rows8(s, a, b, 2, self.k), o, sx, sy);
+        let mut u = cx * by - cy * bx;
+        let mut v = ax * cy - ay * cx;
+        let mut w = bx * ay - by * ax;
+        let zero = s.lanes8(0.0);
+        if (u.eq(zero) | v.eq(zero) | w.eq(zero)).bits() != 0 {
+            let mut uvw = [u.to_array(), v.to_array(), w.to_array()];
+            self.edges_f64_8(a, b, &mut uvw);
+            (u, v, w) = (s.load_lanes8(&uvw[0]), s.load_lanes8(&uvw[1]), s.load_lanes8(&uvw[2]));
         }
-        // SAFETY: only reached inside functions compiled with AVX (see above); loads and
-        // stores go through references to four- and eight-lane arrays.
-        unsafe {
-            let (sx, sy, sz) =
-                (_mm256_set1_ps(self.shear.x), _mm256_set1_ps(self.shear.y), _mm256_set1_ps(self.shear.z));
-            let (ox, oy, oz) = (
-                _mm256_set1_ps(self.origin_k[0]),
-                _mm256_set1_ps(self.origin_k[1]),
-                _mm256_set1_ps(self.origin_k[2]),
-            );
-            macro_rules! vertex {
-                ($v:expr) => {{
-                    let z = _mm256_sub_ps(row!($v, kz), oz);
-                    (
-                        _mm256_sub_ps(_mm256_sub_ps(row!($v, kx), ox), _mm256_mul_ps(sx, z)),
-                        _mm256_sub_ps(_mm256_sub_ps(row!($v, ky), oy), _mm256_mul_ps(sy, z)),
-                        z,
-                    )
-                }};
-            }
-            let (ax, ay, az) = vertex!(0);
-            let (bx, by, bz) = vertex!(1);
-            let (cx, cy, cz) = vertex!(2);
-            let mut u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
-            let mut v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
-            let mut w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
-            let zero = _mm256_setzero_ps();
-            let eq0 = _mm256_or_ps(
-                _mm256_or_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(u, zero), _mm256_cmp_ps::<_CMP_EQ_OQ>(v, zero)),
-                _mm256_cmp_ps::<_CMP_EQ_OQ>(w, zero),
-            );
-            if _mm256_movemask_ps(eq0) != 0 {
-                let mut uvw = [[0.0f32; 8]; 3];
-                _mm256_storeu_ps(uvw[0].as_mut_ptr(), u);
-                _mm256_storeu_ps(uvw[1].as_mut_ptr(), v);
-                _mm256_storeu_ps(uvw[2].as_mut_ptr(), w);
-                self.edges_f64_8(a, b, &mut uvw);
-                u = _mm256_loadu_ps(uvw[0].as_ptr());
-                v = _mm256_loadu_ps(uvw[1].as_ptr());
-                w = _mm256_loadu_ps(uvw[2].as_ptr());
-            }
-            let inside = _mm256_or_ps(
-                _mm256_and_ps(_mm256_and_ps(le!(zero, u), le!(zero, v)), le!(zero, w)),
-                _mm256_and_ps(_mm256_and_ps(le!(u, zero), le!(v, zero)), le!(w, zero)),
-            );
-            let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
-            let candidates =
-                _mm256_movemask_ps(_mm256_andnot_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(det, zero), inside)) as u32;
-            if candidates == 0 {
-                return ([0.0; 8], 0);
-            }
-            let t_scaled = _mm256_add_ps(
-                _mm256_add_ps(
-                    _mm256_mul_ps(u, _mm256_mul_ps(sz, az)),
-                    _mm256_mul_ps(v, _mm256_mul_ps(sz, bz)),
-                ),
-                _mm256_mul_ps(w, _mm256_mul_ps(sz, cz)),
-            );
-            let t = _mm256_div_ps(t_scaled, det);
-            let in_range = _mm256_and_ps(le!(_mm256_set1_ps(t_min), t), le!(t, _mm256_set1_ps(t_max)));
-            let ok = candidates & _mm256_movemask_ps(in_range) as u32;
-            let mut out = [0.0f32; 8];
-            _mm256_storeu_ps(out.as_mut_ptr(), t);
-            (out, ok)
+        let inside = (zero.le(u) & zero.le(v) & zero.le(w)) | (u.le(zero) & v.le(zero) & w.le(zero));
+        let det = u + v + w;
+        let candidates = inside.and_not(det.eq(zero)).bits();
+        if candidates == 0 {
+            return ([0.0; 8], 0);
         }
+        let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
+        let t = t_scaled / det;
+        let ok = candidates & (s.lanes8(t_min).le(t) & t.le(s.lanes8(t_max))).bits();
+        (t.to_array(), ok)
     }
 
     /// [`ShearedRay::edges_f64`] on the two packets of an eight-lane test (lanes 0..4 of
     /// `uvw` are `a`'s, 4..8 `b`'s).
-    #[cfg(target_arch = "x86_64")]
     #[cold]
     #[inline(never)]
     fn edges_f64_8(&self, a: &Tri4, b: &Tri4, uvw: &mut [[f32; 8]; 3]) {
@@ -280,6 +254,17 @@ impl ShearedRay {
             uvw[2][l] = (bx * ay - by * ax) as f32;
         }
     }
+}
+
+/// Vertex `v`'s coordinates on the axes `k` (x', y', z' of the sheared frame) of the
+/// packets `a` (lanes 0..4) and `b` (lanes 4..8).
+#[inline(always)]
+fn rows8<S: MeshSimd>(s: S, a: &Tri4, b: &Tri4, v: usize, k: [usize; 3]) -> [S::F8; 3] {
+    [
+        s.halves8(&a[v][k[0]], &b[v][k[0]]),
+        s.halves8(&a[v][k[1]], &b[v][k[1]]),
+        s.halves8(&a[v][k[2]], &b[v][k[2]]),
+    ]
 }
 
 /// Twice the area of a triangle, computed in f64.
@@ -340,6 +325,7 @@ pub fn closest_point_on_triangle(p: Vec3A, a: Vec3A, b: Vec3A, c: Vec3A) -> Vec3
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::simd::Portable;
     use proptest::prelude::*;
 
     #[test]
@@ -356,13 +342,6 @@ mod tests {
         assert!(r.intersect(Vec3::ZERO, Vec3::X, Vec3::Y, 0.0, 10.0).is_none());
     }
 
-    /// `intersect8_avx` compiled with AVX, as the walks that call it are.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx")]
-    fn intersect8_with_avx(r: &ShearedRay, a: &Tri4, b: &Tri4, t_min: f32, t_max: f32) -> ([f32; 8], u32) {
-        r.intersect8_avx(a, b, t_min, t_max)
-    }
-
     /// Packs four triangles into a packet.
     fn packet(tris: &[[Vec3; 3]]) -> Tri4 {
         let mut p = [[[f32::NAN; 4]; 3]; 3];
@@ -377,11 +356,10 @@ mod tests {
     }
 
     proptest! {
-        /// The eight-lane AVX test of two packets gives, lane for lane, the hit bits and
-        /// the bits of `t` of the four-lane test on each, also for rays aimed exactly at a
-        /// corner or an edge (edge functions exactly zero, redone in f64) and for unused
-        /// (NaN) lanes.
-        #[cfg(target_arch = "x86_64")]
+        /// The eight-lane test of two packets gives, lane for lane, the hit bits and the
+        /// bits of `t` of the four-lane test on each, on both backends (the AVX2 one where
+        /// the CPU has it), also for rays aimed exactly at a corner or an edge (edge
+        /// functions exactly zero, redone in f64) and for unused (NaN) lanes.
         #[test]
         fn eight_lane_test_equals_two_four_lane_tests(
             corners in prop::collection::vec(-2.0f32..2.0, 72),
@@ -390,7 +368,6 @@ mod tests {
             at in 0usize..4,
             o in prop::array::uniform3(-6.0f32..6.0),
         ) {
-            prop_assume!(std::arch::is_x86_feature_detected!("avx"));
             let tris: Vec<[Vec3; 3]> = corners
                 .chunks(9)
                 .map(|c| [Vec3::new(c[0], c[1], c[2]), Vec3::new(c[3], c[4], c[5]), Vec3::new(c[6], c[7], c[8])])
@@ -403,15 +380,25 @@ mod tests {
             let origin = Vec3::from(o);
             prop_assume!((target - origin).length() > 1e-3);
             let r = ShearedRay::new(origin, (target - origin).normalize());
-            // SAFETY: the CPU has AVX (checked above).
-            let (t8, m8) = unsafe { intersect8_with_avx(&r, &a, &b, 0.0, 100.0) };
-            let (ta, ma) = r.intersect4(&a, 0.0, 100.0);
-            let (tb, mb) = r.intersect4(&b, 0.0, 100.0);
-            prop_assert_eq!(m8, ma | mb << 4);
-            for l in 0..8 {
-                if m8 & (1 << l) != 0 {
-                    let t4 = if l < 4 { ta[l] } else { tb[l - 4] };
-                    prop_assert_eq!(t8[l].to_bits(), t4.to_bits());
+            let (ta, ma) = r.intersect4(Portable, &a, 0.0, 100.0);
+            let (tb, mb) = r.intersect4(Portable, &b, 0.0, 100.0);
+            let mut results = vec![r.intersect8(Portable, &a, &b, 0.0, 100.0)];
+            if let Some(s) = crate::simd::avx2() {
+                results.push(s.vectorize(|| r.intersect8(s, &a, &b, 0.0, 100.0)));
+                let (a4, b4) = s.vectorize(|| (r.intersect4(s, &a, 0.0, 100.0), r.intersect4(s, &b, 0.0, 100.0)));
+                prop_assert_eq!((a4.1, b4.1), (ma, mb));
+                for l in 0..4 {
+                    prop_assert!(ma & (1 << l) == 0 || a4.0[l].to_bits() == ta[l].to_bits());
+                    prop_assert!(mb & (1 << l) == 0 || b4.0[l].to_bits() == tb[l].to_bits());
+                }
+            }
+            for (t8, m8) in results {
+                prop_assert_eq!(m8, ma | mb << 4);
+                for l in 0..8 {
+                    if m8 & (1 << l) != 0 {
+                        let t4 = if l < 4 { ta[l] } else { tb[l - 4] };
+                        prop_assert_eq!(t8[l].to_bits(), t4.to_bits());
+                    }
                 }
             }
         }

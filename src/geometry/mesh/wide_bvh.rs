@@ -1,15 +1,14 @@
 //! The per-mesh 8-wide BVH: an obvhs `Bvh2` collapsed (grouped by a surface area heuristic
 //! dynamic programme, [`WideBvh::from_bvh2`]) into nodes of eight children whose
-//! boxes are stored as structure-of-arrays (so one ray tests all eight at once: one AVX2
-//! instruction per step where the CPU has it, detected at run time, else two SSE halves),
-//! with leaves of up to eight triangles pre-gathered into one or two [`Tri4`] packets
-//! (tested together in one eight-lane AVX test, `ShearedRay::intersect8_avx`, where the
-//! CPU has it ([`crate::simd::avx2`]), else one [`ShearedRay::intersect4`] after the
-//! other). Owns the closest-hit, any-hit and nearest-point walks over it and their work
-//! counting. The scene's top-level BVH over objects stays in [`crate::geometry::bvh2`].
+//! boxes are stored as structure-of-arrays (so one ray tests all eight at once, [`BoxRay`],
+//! in the eight lanes of a [`MeshSimd`] backend: one AVX2 instruction per step where
+//! [`crate::simd::dispatch_mesh`] picks AVX2), with leaves of up to eight triangles
+//! pre-gathered into one or two [`Tri4`] packets (tested together in one eight-lane test,
+//! [`ShearedRay::intersect8`]). Owns the closest-hit, any-hit and nearest-point walks over
+//! it and their work counting. The scene's top-level BVH over objects stays in
+//! [`crate::geometry::bvh2`].
 
 use std::mem::MaybeUninit;
-use std::ops::{Mul, Sub};
 
 use glam::{DVec3, Vec3};
 use obvhs::bvh2::Bvh2;
@@ -17,12 +16,12 @@ use obvhs::bvh2::Bvh2;
 use crate::geometry::bvh2;
 use crate::geometry::mesh::triangle::{ShearedRay, Tri4};
 use crate::geometry::{Aabb, RayStats, box_distance};
-use crate::simd::F4;
+use crate::simd::{Lanes8, Mask8, MeshKernel, MeshSimd, WalkStack, dispatch_mesh};
 
 /// Children per node. Eight rather than four (benches/primary_rays.rs, armadillo) cuts the
 /// nodes a primary ray visits from 3.4 to 2.5 and the depth from 11 to 7, and raised
-/// throughput from 0.63 to 0.72 of Embree's together with the AVX2 test (which alone is
-/// worth 8% over the portable one).
+/// throughput from 0.63 to 0.72 of Embree's together with the AVX2 test (which alone was
+/// worth 8% over the portable one of two SSE halves).
 pub const WIDTH: usize = 8;
 /// Triangles per leaf packet.
 pub const LEAF_MAX: usize = 4;
@@ -98,39 +97,6 @@ pub struct WideBvh {
     pub packets: Vec<Packet>,
     /// Deepest node level (root = 1), which bounds the traversal stack.
     pub depth: usize,
-    /// Whether the walks test boxes with AVX2 and FMA and count lanes with POPCNT and BMI1
-    /// (true only where the CPU has all four).
-    avx2: bool,
-}
-
-/// A ray prepared for the eight-box test of a [`WideNode`].
-pub(crate) trait BoxTest: Copy {
-    /// Prepares the ray `origin + t * dir`.
-    fn new(origin: Vec3, dir: Vec3) -> Self;
-    /// The lanes whose child box the ray enters within `[t_min, t_max]` (bit `l` for lane
-    /// `l`) and the [`order_key`]s of the entry distances.
-    fn hit(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]);
-
-    /// [`BoxTest::hit`] for the root, the first node of every walk.
-    #[inline(always)]
-    fn hit_root(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
-        self.hit(n, t_min, t_max)
-    }
-
-    /// Tests the triangles of one leaf (its one or two packets) with `sheared`: per lane
-    /// (`LEAF_MAX * k + l` for lane `l` of packet `k`) the hit's `t`, and the mask of lanes
-    /// hit within `[t_min, t_max]`.
-    #[inline(always)]
-    fn leaf(sheared: &ShearedRay, packets: &[Packet], t_min: f32, t_max: f32) -> ([f32; 8], u32) {
-        let mut t = [0.0; 8];
-        let mut mask = 0;
-        for (k, p) in packets.iter().enumerate() {
-            let (tk, mk) = sheared.intersect4(&p.tri, t_min, t_max);
-            t[LEAF_MAX * k..LEAF_MAX * (k + 1)].copy_from_slice(&tk);
-            mask |= mk << (LEAF_MAX * k);
-        }
-        (t, mask)
-    }
 }
 
 /// The safe reciprocal of the direction, per axis (finite and nonzero, with the
@@ -140,177 +106,101 @@ fn safe_inverse(dir: Vec3) -> [f32; 3] {
     [obvhs::ray::safe_inverse(dir.x), obvhs::ray::safe_inverse(dir.y), obvhs::ray::safe_inverse(dir.z)]
 }
 
-/// The portable box test: each node as two halves of four lanes ([`F4`]).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct WideBoxRay {
-    origin: [F4; 3],
-    inv: [F4; 3],
-}
-
-impl BoxTest for WideBoxRay {
-    #[inline(always)]
-    fn new(origin: Vec3, dir: Vec3) -> Self {
-        let inv = safe_inverse(dir);
-        WideBoxRay {
-            origin: [F4::splat(origin.x), F4::splat(origin.y), F4::splat(origin.z)],
-            inv: [F4::splat(inv[0]), F4::splat(inv[1]), F4::splat(inv[2])],
-        }
-    }
-
-    #[inline(always)]
-    fn hit(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
-        let b = &n.bounds;
-        let half = |h: usize| {
-            let slab = |row: usize, a: usize| {
-                let lanes = if h == 0 { b[row].first_chunk::<4>() } else { b[row].last_chunk::<4>() };
-                F4::load(lanes.expect("eight lanes")).sub(self.origin[a]).mul(self.inv[a])
-            };
-            // Per axis, the entry and exit distances of the slab. `min` and `max` return
-            // their second operand where either is NaN, so the NaN of an empty lane carries
-            // through every step below and fails the final comparison.
-            let axis = |a: usize| {
-                let (lo, hi) = (slab(a, a), slab(a + 3, a));
-                (lo.min(hi), lo.max(hi))
-            };
-            let ((nx, fx), (ny, fy), (nz, fz)) = (axis(0), axis(1), axis(2));
-            let near = nx.max(ny).max(F4::splat(t_min).max(nz));
-            let far = fx.min(fy).min(F4::splat(t_max).min(fz));
-            (near.le(far), near.to_array())
-        };
-        let ((m0, d0), (m1, d1)) = (half(0), half(1));
-        let mut d = [0; WIDTH];
-        for (k, x) in d.iter_mut().zip(d0.into_iter().chain(d1)) {
-            *k = order_key(x);
-        }
-        (m0 | m1 << 4, d)
-    }
-}
-
-/// The eight-lane box test on the slab distances `$slab`, an expression in `$row`, of
-/// the six bound rows (unsafe AVX intrinsics, expanded inside `unsafe` blocks of
-/// functions compiled with AVX, and with no closure, which would not inherit the target
-/// feature). Both rows of an axis sit at fixed offsets and are ordered by `min` and
-/// `max`, which keep an empty lane's NaN (as in the portable test), rather than rows
-/// chosen by the direction's signs: no row index to keep per ray. Shared by
-/// [`WideBoxRayAvx2::hit`] and [`WideBoxRayAvx2::hit_root`], which differ only in the slab
-/// distance.
-#[cfg(target_arch = "x86_64")]
-macro_rules! box_test_avx {
-    ($t_min:expr, $t_max:expr, $row:ident => $slab:expr) => {{
-        macro_rules! at {
-            ($r:expr) => {{
-                let $row: usize = $r;
-                $slab
-            }};
-        }
-        let (x0, x1) = (at!(0), at!(3));
-        let (y0, y1) = (at!(1), at!(4));
-        let (z0, z1) = (at!(2), at!(5));
-        let near = _mm256_max_ps(
-            _mm256_max_ps(_mm256_min_ps(x0, x1), _mm256_min_ps(y0, y1)),
-            _mm256_max_ps(_mm256_set1_ps($t_min), _mm256_min_ps(z0, z1)),
-        );
-        let far = _mm256_min_ps(
-            _mm256_min_ps(_mm256_max_ps(x0, x1), _mm256_max_ps(y0, y1)),
-            _mm256_min_ps(_mm256_set1_ps($t_max), _mm256_max_ps(z0, z1)),
-        );
-        let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(near, far)) as u32;
-        // `order_key` on all lanes at once.
-        let bits = _mm256_castps_si256(near);
-        let flip = _mm256_or_si256(_mm256_srai_epi32::<31>(bits), _mm256_set1_epi32(i32::MIN));
-        let mut d = [0u32; WIDTH];
-        _mm256_storeu_si256(d.as_mut_ptr() as *mut __m256i, _mm256_xor_si256(bits, flip));
-        (mask, d)
-    }};
-}
-
-/// The AVX2 box test: all eight lanes in one 256-bit register. Only built by walks that
-/// run under `#[target_feature(enable = "avx2,fma,popcnt,bmi1")]`, which are only called
-/// where [`WideBvh::avx2`] says the CPU has it.
+/// A ray prepared for the eight-box test of a [`WideNode`] in the lanes of backend `S`.
 ///
-/// Below the root a slab distance is one fused `bound * inv - offset`, with `offset` the
-/// product `origin * inv` rounded away from the box: its rounding error (up to half an
-/// ulp of the product, an absolute error that grows with the origin's distance from the
-/// mesh's frame, unlike the relative error of `(bound - origin) * inv`) is bounded by
-/// twice `f32::EPSILON` of it and added to the entry offset and taken from the exit one,
-/// so the fused test shrinks no box beyond the rounding of its own result (which the
-/// unfused test has too) and grows one by about an ulp of the origin at most (without
-/// it, `tests/integration/mesh_tracing.rs` finds rays through a mesh far from the origin that miss
-/// their nearest triangle). A fused product is one operation of latency instead of two
-/// on each node of a hit ray's chain. The root, tested while `offset` is still being
-/// computed at the ray's start, uses `(bound - origin) * inv` as the portable test does
-/// (a fused root made rays that miss slower than the unfused test).
-#[cfg(target_arch = "x86_64")]
+/// Both rows of an axis sit at fixed offsets and are ordered by `min` and `max`, which
+/// keep an empty lane's NaN, rather than rows chosen by the direction's signs: no row
+/// index to keep per ray. Below the root a slab distance is one fused
+/// `bound * inv - offset` ([`Lanes8::mul_sub`]: one FMA on AVX2, the same bits computed
+/// exactly on the portable backend), with `offset` the product `origin * inv` rounded
+/// away from the box: its rounding error (up to half an ulp of the product, an absolute
+/// error that grows with the origin's distance from the mesh's frame, unlike the relative
+/// error of `(bound - origin) * inv`) is bounded by twice `f32::EPSILON` of it and added
+/// to the entry offset and taken from the exit one, so the fused test shrinks no box
+/// beyond the rounding of its own result (which the unfused test has too) and grows one
+/// by about an ulp of the origin at most (without it, `tests/integration/mesh_tracing.rs`
+/// finds rays through a mesh far from the origin that miss their nearest triangle; the
+/// portable backend's unfused test missed them until it took the fused one too). A fused
+/// product is one operation of latency instead of two on each node of a hit ray's
+/// chain. The root, tested while `offset` is still being computed at the ray's start,
+/// uses `(bound - origin) * inv` (a fused root made rays that miss slower; the root's box
+/// holds every triangle well inside).
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct WideBoxRayAvx2 {
-    origin: [core::arch::x86_64::__m256; 3],
-    inv: [core::arch::x86_64::__m256; 3],
+pub(crate) struct BoxRay<S: MeshSimd> {
+    s: S,
+    origin: [S::F8; 3],
+    inv: [S::F8; 3],
     /// Per bound row (minimum x, y, z, then maximum x, y, z): `origin * inv` of its axis,
     /// raised where the row is the entry slab (the minimum for a nonnegative `inv`) and
     /// lowered where it is the exit slab.
-    offset: [core::arch::x86_64::__m256; 6],
+    offset: [S::F8; 6],
 }
 
-#[cfg(target_arch = "x86_64")]
-impl BoxTest for WideBoxRayAvx2 {
+impl<S: MeshSimd> BoxRay<S> {
+    /// Prepares the ray `origin + t * dir`.
     #[inline(always)]
-    fn new(origin: Vec3, dir: Vec3) -> Self {
-        use core::arch::x86_64::_mm256_set1_ps;
+    fn new(s: S, origin: Vec3, dir: Vec3) -> Self {
         let inv = safe_inverse(dir);
         let o = origin.to_array();
-        // SAFETY: only reached inside the `avx2` walks (see the type's documentation), so
-        // the CPU has AVX.
-        let splat = |x: f32| unsafe { _mm256_set1_ps(x) };
         // `p + e` and `p - e` with `e >= 2 ulp(p)` bracket the exact product (the rounded
         // `p` is within half an ulp of it); `copysign` picks the entry row without a branch.
-        let offset = |row: usize| {
+        // (Loops rather than closures, which the compiler may leave out of line, where they
+        // would not be compiled for the backend's instructions.)
+        let mut offset = [s.lanes8(0.0); 6];
+        for (row, x) in offset.iter_mut().enumerate() {
             let a = row % 3;
             let p = o[a] * inv[a];
             let e = (p.abs() * (2.0 * f32::EPSILON)).copysign(inv[a]);
-            splat(if row < 3 { p + e } else { p - e })
-        };
-        WideBoxRayAvx2 {
-            origin: [splat(o[0]), splat(o[1]), splat(o[2])],
-            inv: [splat(inv[0]), splat(inv[1]), splat(inv[2])],
-            offset: [offset(0), offset(1), offset(2), offset(3), offset(4), offset(5)],
+            *x = s.lanes8(if row < 3 { p + e } else { p - e });
+        }
+        BoxRay {
+            s,
+            origin: [s.lanes8(o[0]), s.lanes8(o[1]), s.lanes8(o[2])],
+            inv: [s.lanes8(inv[0]), s.lanes8(inv[1]), s.lanes8(inv[2])],
+            offset,
         }
     }
 
+    /// The lanes whose child box the ray enters within `[t_min, t_max]` (bit `l` for lane
+    /// `l`) and the [`order_key`]s of the entry distances; `ROOT` for the root, the first
+    /// node of every walk (see the type's documentation).
     #[inline(always)]
-    fn hit(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
-        // SAFETY: as in `new`, the CPU has AVX and FMA (see the type's documentation).
-        unsafe {
-            use core::arch::x86_64::*;
-            let b = &n.bounds;
-            box_test_avx!(t_min, t_max, row => _mm256_fmsub_ps(
-                _mm256_loadu_ps(b[row].as_ptr()),
-                self.inv[row % 3],
-                self.offset[row]
-            ))
+    fn hit<const ROOT: bool>(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
+        let b = &n.bounds;
+        let fused = !ROOT;
+        let (x0, x1) = (self.slab(fused, &b[0], 0), self.slab(fused, &b[3], 3));
+        let (y0, y1) = (self.slab(fused, &b[1], 1), self.slab(fused, &b[4], 4));
+        let (z0, z1) = (self.slab(fused, &b[2], 2), self.slab(fused, &b[5], 5));
+        // Per axis, the entry and exit distances of the slab. `min` and `max` return their
+        // second operand where either is NaN, so the NaN of an empty lane carries through
+        // every step below and fails the final comparison.
+        let near = x0.min(x1).max(y0.min(y1)).max(self.s.lanes8(t_min).max(z0.min(z1)));
+        let far = x0.max(x1).min(y0.max(y1)).min(self.s.lanes8(t_max).min(z0.max(z1)));
+        (near.le(far).bits(), near.order_keys())
+    }
+
+    /// The slab distances of bound row `row` (values `bound`): fused below the root, else
+    /// `(bound - origin) * inv`.
+    #[inline(always)]
+    fn slab(&self, fused: bool, bound: &[f32; WIDTH], row: usize) -> S::F8 {
+        let a = row % 3;
+        if fused {
+            self.s.load_lanes8(bound).mul_sub(self.inv[a], self.offset[row])
+        } else {
+            (self.s.load_lanes8(bound) - self.origin[a]) * self.inv[a]
         }
     }
 
+    /// Tests the triangles of one leaf (its one or two packets) with `sheared`: per lane
+    /// (`LEAF_MAX * k + l` for lane `l` of packet `k`) the hit's `t`, and the mask of lanes
+    /// hit within `[t_min, t_max]`. Two packets go through one eight-lane test.
     #[inline(always)]
-    fn hit_root(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
-        // SAFETY: as in `hit`.
-        unsafe {
-            use core::arch::x86_64::*;
-            let b = &n.bounds;
-            box_test_avx!(t_min, t_max, row => _mm256_mul_ps(
-                _mm256_sub_ps(_mm256_loadu_ps(b[row].as_ptr()), self.origin[row % 3]),
-                self.inv[row % 3]
-            ))
-        }
-    }
-
-    /// Both packets of a two-packet leaf in one eight-lane test.
-    #[inline(always)]
-    fn leaf(sheared: &ShearedRay, packets: &[Packet], t_min: f32, t_max: f32) -> ([f32; 8], u32) {
+    fn leaf(&self, sheared: &ShearedRay, packets: &[Packet], t_min: f32, t_max: f32) -> ([f32; 8], u32) {
         const { assert!(LEAF_PACKETS == 2) };
         match packets {
-            [a, b] => sheared.intersect8_avx(&a.tri, &b.tri, t_min, t_max),
+            [a, b] => sheared.intersect8(self.s, &a.tri, &b.tri, t_min, t_max),
             _ => {
-                let (t4, mask) = sheared.intersect4(&packets[0].tri, t_min, t_max);
+                let (t4, mask) = sheared.intersect4(self.s, &packets[0].tri, t_min, t_max);
                 let mut t = [0.0; 8];
                 t[..LEAF_MAX].copy_from_slice(&t4);
                 (t, mask)
@@ -345,7 +235,6 @@ impl WideBvh {
         }
         w.nodes.shrink_to_fit();
         w.packets.shrink_to_fit();
-        w.avx2 = crate::simd::avx2().is_some();
         w
     }
 
@@ -448,7 +337,8 @@ impl WideBvh {
 
     /// The closest triangle hit by the ray `origin + t * dir` with `t` in `[t_min, t_max]`:
     /// its index and `t`. Counts inner nodes visited (each an eight-box test) in
-    /// `stats.bvh_nodes` and triangles tested in `stats.prim_tests`.
+    /// `stats.bvh_nodes` and triangles tested in `stats.prim_tests`. Runs on the backend of
+    /// this process ([`dispatch_mesh`]); [`closest_walk`] runs on a given one.
     #[inline]
     pub fn closest_hit(
         &self,
@@ -458,57 +348,28 @@ impl WideBvh {
         t_max: f32,
         stats: &mut RayStats,
     ) -> Option<LeafHit> {
-        #[cfg(target_arch = "x86_64")]
-        if self.avx2 {
-            // SAFETY: `avx2` is only set where the CPU has AVX2, FMA, POPCNT and BMI1.
-            return unsafe { self.closest_hit_avx2(origin, dir, t_min, t_max, stats) };
-        }
-        closest_walk::<WideBoxRay>(self, origin, dir, t_min, t_max, stats)
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma,popcnt,bmi1")]
-    fn closest_hit_avx2(
-        &self,
-        origin: Vec3,
-        dir: Vec3,
-        t_min: f32,
-        t_max: f32,
-        stats: &mut RayStats,
-    ) -> Option<LeafHit> {
-        closest_walk::<WideBoxRayAvx2>(self, origin, dir, t_min, t_max, stats)
+        dispatch_mesh(Walk::<false> { bvh: self, origin, dir, t_min, t_max, stats })
     }
 
     /// Whether any triangle is hit with `t` in `[t_min, t_max]`; stops at the first
     /// (shadow rays). Counts work as [`WideBvh::closest_hit`] does.
     #[inline]
     pub fn any_hit(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        if self.avx2 {
-            // SAFETY: `avx2` is only set where the CPU has AVX2, FMA, POPCNT and BMI1.
-            return unsafe { self.any_hit_avx2(origin, dir, t_min, t_max, stats) };
-        }
-        any_walk::<WideBoxRay>(self, origin, dir, t_min, t_max, stats)
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma,popcnt,bmi1")]
-    fn any_hit_avx2(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
-        any_walk::<WideBoxRayAvx2>(self, origin, dir, t_min, t_max, stats)
+        dispatch_mesh(Walk::<true> { bvh: self, origin, dir, t_min, t_max, stats })
     }
 
     /// The node of inner-node reference `r` (its byte offset in [`WideBvh::nodes`]): one
     /// add where indexing would shift first, a step of latency less on each node of a
-    /// walk (measured: 1.3% more primary rays per second on the bunny). The check is one
-    /// compare and a branch that never goes the other way: rotated right by 8 bits, a
-    /// multiple of 256 is its node's index, and any other offset has a low bit at the top.
+    /// walk (measured: 1.3% more primary rays per second on the bunny). Indexed by
+    /// `r >> 8`, so that the address is `r` with its low bits masked (`(r >> 8) << 8`), one
+    /// `and` on the walk's chain, and the bounds check compares the index off it.
     #[inline(always)]
     fn node(&self, r: u32) -> &WideNode {
-        let at = r as usize;
-        assert!(at.rotate_right(8) < self.nodes.len(), "node reference out of range");
-        // SAFETY: by the check, `at` is 256 (the size of a node, asserted at compile time)
-        // times an index below `nodes.len()`: the offset of a whole, aligned node.
-        unsafe { &*self.nodes.as_ptr().byte_add(at) }
+        debug_assert!(
+            r.is_multiple_of(size_of::<WideNode>() as u32),
+            "node reference {r} is not a node's offset"
+        );
+        &self.nodes[r as usize >> 8]
     }
 
     /// The packets of the leaf whose first packet and triangle count are `range` (from
@@ -516,17 +377,6 @@ impl WideBvh {
     #[inline(always)]
     fn leaf_packets(&self, (first, count): (usize, usize)) -> &[Packet] {
         &self.packets[first..first + count.div_ceil(LEAF_MAX)]
-    }
-
-    /// Whether the walks use the AVX2 box test.
-    pub fn uses_avx2(&self) -> bool {
-        self.avx2
-    }
-
-    /// Makes the walks use the portable box test even where the CPU has AVX2 (for
-    /// comparing the two; results are bit-identical).
-    pub fn use_portable_box_test(&mut self) {
-        self.avx2 = false;
     }
 
     /// The smallest `dist(triangle)` over the triangles for a query at `p`, visiting
@@ -618,27 +468,58 @@ fn stack_needed(bvh: &WideBvh) -> usize {
     bvh.depth * (WIDTH - 1) + 1 + 2
 }
 
-/// Evaluates `$walk` with `$stack` bound to a traversal stack for `$bvh`: on the call stack
-/// where [`STACK`] entries suffice, else (a pathological BVH) on the heap. A macro rather
-/// than a function taking a closure, as a closure would not inherit the AVX2 target
-/// feature of the walk it is called from.
+/// Evaluates `$walk` with `$stack` bound to a traversal stack ([`WalkStack`], not zeroed)
+/// for `$bvh`: on the call stack where [`STACK`] entries suffice, else (a pathological
+/// BVH) on the heap. A macro rather than a function taking a closure, which the compiler
+/// could leave out of line, where it would not be compiled for the walk's backend.
 macro_rules! with_stack {
     ($bvh:expr, $stack:ident => $walk:expr) => {
         if stack_needed($bvh) <= STACK {
-            let $stack = &mut [const { MaybeUninit::<Entry>::uninit() }; STACK][..];
+            let mut slots = [const { MaybeUninit::<Entry>::uninit() }; STACK];
+            let $stack = &mut WalkStack::new(&mut slots);
             $walk
         } else {
-            let $stack = &mut vec![MaybeUninit::<Entry>::uninit(); stack_needed($bvh)][..];
+            let mut slots = vec![MaybeUninit::<Entry>::uninit(); stack_needed($bvh)];
+            let $stack = &mut WalkStack::new(&mut slots);
             $walk
         }
     };
 }
 
-/// [`WideBvh::closest_hit`] with the box test `B` and a stack from [`with_stack`]. Inlined
-/// into its callers, so that under `#[target_feature(enable = "avx2,fma,popcnt,bmi1")]` (which
-/// alone may use [`WideBoxRayAvx2`]) all of it is compiled with AVX2.
+/// A walk of [`WideBvh::closest_hit`] (`ANY` false) or [`WideBvh::any_hit`] (`ANY` true)
+/// as a [`MeshKernel`]: the ray and the work counters.
+struct Walk<'a, const ANY: bool> {
+    bvh: &'a WideBvh,
+    origin: Vec3,
+    dir: Vec3,
+    t_min: f32,
+    t_max: f32,
+    stats: &'a mut RayStats,
+}
+
+impl MeshKernel for Walk<'_, false> {
+    type Output = Option<LeafHit>;
+    #[inline(always)]
+    fn run<S: MeshSimd>(self, s: S) -> Option<LeafHit> {
+        closest_walk(s, self.bvh, self.origin, self.dir, self.t_min, self.t_max, self.stats)
+    }
+}
+
+impl MeshKernel for Walk<'_, true> {
+    type Output = bool;
+    #[inline(always)]
+    fn run<S: MeshSimd>(self, s: S) -> bool {
+        any_walk(s, self.bvh, self.origin, self.dir, self.t_min, self.t_max, self.stats)
+    }
+}
+
+/// [`WideBvh::closest_hit`] on backend `s`: the root's test, then (for a ray that enters
+/// it) the walk on a stack from [`with_stack`], set up only then. Inlined into its
+/// callers, so that inside a kernel run by [`dispatch_mesh`] all of it is compiled for the
+/// backend.
 #[inline(always)]
-pub(crate) fn closest_walk<B: BoxTest>(
+pub(crate) fn closest_walk<S: MeshSimd>(
+    s: S,
     bvh: &WideBvh,
     origin: Vec3,
     dir: Vec3,
@@ -646,23 +527,39 @@ pub(crate) fn closest_walk<B: BoxTest>(
     t_max: f32,
     stats: &mut RayStats,
 ) -> Option<LeafHit> {
-    with_stack!(bvh, stack => closest_walk_in::<B>(bvh, stack, origin, dir, t_min, t_max, stats))
+    if bvh.nodes.is_empty() {
+        return None;
+    }
+    let br = BoxRay::new(s, origin, dir);
+    // The root, before the stack: most rays that miss end here.
+    let (mask, d) = br.hit::<true>(&bvh.nodes[0], t_min, t_max);
+    if mask == 0 {
+        stats.bvh_nodes += 1;
+        return None;
+    }
+    with_stack!(bvh, stack => closest_walk_in(&br, bvh, stack, (mask, d), origin, dir, t_min, t_max, stats))
 }
 
 /// Tests the children of node `n` and pushes every hit one but the nearest onto `stack`
-/// (above `len`), farthest deepest, with its entry distance; returns the nearest, or
+/// farthest deepest, with its entry distance; returns the nearest, or
 /// [`NONE`] where the ray enters none. Two children are ordered by one compare-exchange of
 /// their entries, three or four by a network of four, more by insertion.
 #[inline(always)]
-fn visit_node<B: BoxTest, const ROOT: bool>(
-    br: &B,
+fn visit_node<S: MeshSimd>(
+    br: &BoxRay<S>,
     n: &WideNode,
     t_min: f32,
     t_max: f32,
-    stack: &mut [MaybeUninit<Entry>],
-    len: &mut usize,
+    stack: &mut WalkStack,
 ) -> u32 {
-    let (mut mask, d) = if ROOT { br.hit_root(n, t_min, t_max) } else { br.hit(n, t_min, t_max) };
+    let (mask, d) = br.hit::<false>(n, t_min, t_max);
+    push_children(n, mask, d, stack)
+}
+
+/// [`visit_node`] after the box test: the children of `n` in `mask`, entered at the
+/// distances whose keys are `d`.
+#[inline(always)]
+fn push_children(n: &WideNode, mut mask: u32, d: [u32; WIDTH], stack: &mut WalkStack) -> u32 {
     if mask == 0 {
         return NONE;
     }
@@ -674,8 +571,7 @@ fn visit_node<B: BoxTest, const ROOT: bool>(
     let (a, b) = ordered(key(l0), key(next_lane(&mut mask)));
     if mask == 0 {
         // Two children, the commonest case after one: no network.
-        stack[*len].write(b);
-        *len += 1;
+        stack.push(b);
         return a as u32;
     }
     // Three or four children without a branch on which (it varies from node to node and
@@ -691,18 +587,13 @@ fn visit_node<B: BoxTest, const ROOT: bool>(
     let (b, d4) = ordered(b, d4);
     let (b, c) = ordered(b, c);
     if mask == 0 {
-        // `pushed` entries, farthest deepest: [c, b] or [d4, c, b].
-        let pushed = 2 + usize::from(present3);
+        // Two or three entries, farthest deepest: [c, b] or [d4, c, b].
         let (first, second) = if present3 { (d4, c) } else { (c, b) };
-        stack[*len].write(first);
-        stack[*len + 1].write(second);
-        stack[*len + 2].write(b);
-        *len += pushed;
+        stack.push_2_or_3([first, second, b], present3);
         return a as u32;
     }
     let mut push = |e: Entry| {
-        stack[*len].write(e);
-        *len += 1;
+        stack.push(e);
     };
     // Five to eight (rare): insertion sort of all, then push all but the nearest.
     let mut sorted = [a, b, c, d4, 0, 0, 0, 0];
@@ -723,49 +614,39 @@ fn visit_node<B: BoxTest, const ROOT: bool>(
     sorted[0] as u32
 }
 
-/// [`closest_walk`] on `stack` (at least [`stack_needed`] entries). Two loops: the first
-/// descends to the first leaf the ray reaches, with no triangle test yet, so that the most
-/// rays, which miss the mesh's triangles without reaching a leaf, leave before the sheared
-/// ray is set up (one level below the root); the second goes on from that leaf with it.
+/// [`closest_walk`] on `stack` (at least [`stack_needed`] entries) from the root, whose
+/// box test gave `root`. Two loops: the first descends to the first leaf the ray reaches,
+/// with no triangle test yet, so that the most rays, which miss the mesh's triangles
+/// without reaching a leaf, leave before the sheared ray is set up (one level below the
+/// root); the second goes on from that leaf with it.
 #[inline(always)]
-fn closest_walk_in<B: BoxTest>(
+#[allow(clippy::too_many_arguments)]
+fn closest_walk_in<S: MeshSimd>(
+    br: &BoxRay<S>,
     bvh: &WideBvh,
-    stack: &mut [MaybeUninit<Entry>],
+    stack: &mut WalkStack,
+    root: (u32, [u32; WIDTH]),
     origin: Vec3,
     dir: Vec3,
     t_min: f32,
     mut t_max: f32,
     stats: &mut RayStats,
 ) -> Option<LeafHit> {
-    if bvh.nodes.is_empty() {
-        return None;
-    }
-    let br = B::new(origin, dir);
-    let mut nodes = 0u64;
-    // Entries below `len` are initialised; the rest are never read.
-    let mut len = 0usize;
-    // The root, outside the loop: most rays that miss end here.
-    let mut cur = visit_node::<B, true>(&br, &bvh.nodes[0], t_min, t_max, stack, &mut len);
-    if cur == NONE {
-        stats.bvh_nodes += 1;
-        return None;
-    }
-    nodes += 1;
+    let mut nodes = 1u64;
+    let mut cur = push_children(&bvh.nodes[0], root.0, root.1, stack);
     // One step down (a macro: a closure would not inherit the walk's target feature):
     // the nearest child the ray enters, else the nearest pending one; where there is none
     // the ray misses.
     macro_rules! descend {
         () => {{
             nodes += 1;
-            cur = visit_node::<B, false>(&br, bvh.node(cur), t_min, t_max, stack, &mut len);
+            cur = visit_node(br, bvh.node(cur), t_min, t_max, stack);
             if cur == NONE {
-                if len == 0 {
+                let Some(e) = stack.pop() else {
                     stats.bvh_nodes += nodes;
                     return None;
-                }
-                len -= 1;
-                // SAFETY: entries below the old `len` were written by a push.
-                cur = unsafe { stack[len].assume_init() } as u32;
+                };
+                cur = e as u32;
             }
         }};
     }
@@ -789,14 +670,14 @@ fn closest_walk_in<B: BoxTest>(
     'walk: loop {
         if cur & LEAF == 0 {
             nodes += 1;
-            cur = visit_node::<B, false>(&br, bvh.node(cur), t_min, t_max, stack, &mut len);
+            cur = visit_node(br, bvh.node(cur), t_min, t_max, stack);
             if cur != NONE {
                 continue 'walk;
             }
         } else {
             let (first, count) = leaf_range(cur);
             tests += count as u64;
-            let (t, mut hits) = B::leaf(&sheared, bvh.leaf_packets((first, count)), t_min, t_max);
+            let (t, mut hits) = br.leaf(&sheared, bvh.leaf_packets((first, count)), t_min, t_max);
             if hits != 0 {
                 // The nearest hit lane (the last of equals, as a lane-by-lane scan would
                 // take).
@@ -813,12 +694,9 @@ fn closest_walk_in<B: BoxTest>(
         }
         // Pop the nearest pending child still in front of the closest hit.
         loop {
-            if len == 0 {
+            let Some(e) = stack.pop() else {
                 break 'walk;
-            }
-            len -= 1;
-            // SAFETY: entries below the old `len` were written by a push.
-            let e = unsafe { stack[len].assume_init() };
+            };
             if (e >> 32) as u32 <= t_max_key {
                 cur = e as u32;
                 break;
@@ -834,9 +712,10 @@ fn closest_walk_in<B: BoxTest>(
     })
 }
 
-/// [`WideBvh::any_hit`] with the box test `B` and a stack from [`with_stack`].
+/// [`WideBvh::any_hit`] on backend `s` with a stack from [`with_stack`].
 #[inline(always)]
-fn any_walk<B: BoxTest>(
+pub(crate) fn any_walk<S: MeshSimd>(
+    s: S,
     bvh: &WideBvh,
     origin: Vec3,
     dir: Vec3,
@@ -844,14 +723,16 @@ fn any_walk<B: BoxTest>(
     t_max: f32,
     stats: &mut RayStats,
 ) -> bool {
-    with_stack!(bvh, stack => any_walk_in::<B>(bvh, stack, origin, dir, t_min, t_max, stats))
+    with_stack!(bvh, stack => any_walk_in(s, bvh, stack, origin, dir, t_min, t_max, stats))
 }
 
 /// [`any_walk`] on `stack` (at least [`stack_needed`] entries).
 #[inline(always)]
-fn any_walk_in<B: BoxTest>(
+#[allow(clippy::too_many_arguments)]
+fn any_walk_in<S: MeshSimd>(
+    s: S,
     bvh: &WideBvh,
-    stack: &mut [MaybeUninit<Entry>],
+    stack: &mut WalkStack,
     origin: Vec3,
     dir: Vec3,
     t_min: f32,
@@ -861,7 +742,7 @@ fn any_walk_in<B: BoxTest>(
     if bvh.nodes.is_empty() {
         return false;
     }
-    let br = B::new(origin, dir);
+    let br = BoxRay::new(s, origin, dir);
     // Set up at the start and pinned there, as in the closest walk (shadow rays start on
     // a surface inside the mesh's box, so nearly all of them reach a leaf): left to the
     // compiler, or built lazily at the first leaf, its latency lands on the walk's chain
@@ -869,27 +750,23 @@ fn any_walk_in<B: BoxTest>(
     // against 118-121 pinned, armadillo 183-187 against 179-186).
     let sheared = std::hint::black_box(ShearedRay::new(origin, dir));
     let mut found = false;
-    // Entries below `len` are initialised; the rest are never read.
-    stack[0].write(0);
-    let mut len = 1usize;
-    while len > 0 {
-        len -= 1;
-        // SAFETY: entries below the old `len` were written.
-        let cur = unsafe { stack[len].assume_init() } as u32;
+    stack.push(0);
+    while let Some(e) = stack.pop() {
+        let cur = e as u32;
         if cur & LEAF == 0 {
             let n = bvh.node(cur);
             stats.bvh_nodes += 1;
-            let (mut mask, _) = br.hit(n, t_min, t_max);
+            // Every node, the root too, with the test below the root (as measured).
+            let (mut mask, _) = br.hit::<false>(n, t_min, t_max);
             while mask != 0 {
                 let l = mask.trailing_zeros() as usize;
                 mask &= mask - 1;
-                stack[len].write(u64::from(n.children[l]));
-                len += 1;
+                stack.push(u64::from(n.children[l]));
             }
         } else {
             let (first, count) = leaf_range(cur);
             stats.prim_tests += count as u64;
-            if B::leaf(&sheared, bvh.leaf_packets((first, count)), t_min, t_max).1 != 0 {
+            if br.leaf(&sheared, bvh.leaf_packets((first, count)), t_min, t_max).1 != 0 {
                 found = true;
                 break;
             }
@@ -1054,6 +931,7 @@ fn set_lane(n: &mut WideNode, lane: usize, b: &Aabb, reference: u32) {
 mod tests {
     use super::*;
     use crate::geometry::aabb;
+    use crate::simd::Portable;
     use obvhs::BvhBuildParams;
 
     /// Closest hit, any hit and nearest distance over the wide BVH equal brute-force loops,
@@ -1088,11 +966,12 @@ mod tests {
             let leaf_tris: Vec<[Vec3; 3]> = order.iter().map(|&i| tris[i as usize]).collect();
             let leaf_boxes: Vec<Aabb> = order.iter().map(|&i| boxes[i as usize]).collect();
             let w = WideBvh::from_bvh2(&bvh2, &leaf_boxes, |i| leaf_tris[i as usize]);
-            let mut portable = w.clone();
-            portable.use_portable_box_test();
             // As deep as no call stack holds: the walks take a heap stack, same results.
             let mut deep = w.clone();
             deep.depth = 40;
+            // Deeper than the small call stack holds: the larger one.
+            let mut medium = w.clone();
+            medium.depth = 20;
             let mut portable_stats = RayStats::default();
             let ids: Vec<u32> = w.packets.iter().flat_map(|p| p.ids).filter(|&i| i != u32::MAX).collect();
             assert_eq!(ids.len(), tris.len(), "every triangle in one packet lane");
@@ -1108,18 +987,24 @@ mod tests {
                     .min_by(f32::total_cmp);
                 let ours = w.closest_hit(origin, dir, 0.0, t_max, &mut stats);
                 assert_eq!(ours.map(|h| h.t), brute);
-                // The AVX2 and the portable box tests walk alike: same hits, and here the
-                // same work (the fused AVX2 test differs only within an ulp of a box).
-                assert_eq!(portable.closest_hit(origin, dir, 0.0, t_max, &mut portable_stats), ours);
+                // The AVX2 and the portable box tests walk alike: same hits, same work.
+                let portable = closest_walk(Portable, &w, origin, dir, 0.0, t_max, &mut portable_stats);
+                assert_eq!(portable, ours);
                 assert_eq!(deep.closest_hit(origin, dir, 0.0, t_max, &mut RayStats::default()), ours);
                 assert_eq!(deep.any_hit(origin, dir, 0.0, t_max, &mut RayStats::default()), brute.is_some());
+                assert_eq!(medium.closest_hit(origin, dir, 0.0, t_max, &mut RayStats::default()), ours);
+                assert_eq!(
+                    medium.any_hit(origin, dir, 0.0, t_max, &mut RayStats::default()),
+                    brute.is_some()
+                );
                 if let Some(h) = ours {
                     let [a, b, c] = leaf_tris[h.triangle as usize];
                     assert_eq!(h.corners, [a, b, c]);
                     assert_eq!(s.intersect(a, b, c, h.t, h.t).map(|h| h.t), Some(h.t));
                 }
                 assert_eq!(w.any_hit(origin, dir, 0.0, t_max, &mut stats), brute.is_some());
-                assert_eq!(portable.any_hit(origin, dir, 0.0, t_max, &mut portable_stats), brute.is_some());
+                let portable = any_walk(Portable, &w, origin, dir, 0.0, t_max, &mut portable_stats);
+                assert_eq!(portable, brute.is_some());
                 let p = origin.as_dvec3();
                 let near = w.nearest(p, |i| {
                     leaf_tris[i as usize].iter().map(|v| (v.as_dvec3() - p).length()).fold(f64::MAX, f64::min)

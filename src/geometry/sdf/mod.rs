@@ -21,6 +21,7 @@ use crate::geometry::{
     Census, Geometry, Hit, PACKET, Ray, RayStats, distance_by_projection, f32_error, max_abs,
 };
 use crate::scene::shape::grow;
+use crate::simd::{Kernel, Lane64, Simd, dispatch};
 use glam::{DVec2, DVec3, UVec3, Vec3};
 
 use crate::geometry::MaterialId;
@@ -735,7 +736,7 @@ impl SdfField {
         SCRATCH.with(|s| {
             let mut s = s.borrow_mut();
             s.fit(tape);
-            if crate::simd::avx2().is_some() {
+            if crate::simd::backend() == crate::simd::Backend::Avx2 {
                 tape.eval8_ops(ops, &[rel.x; 8], &[rel.y; 8], &[rel.z; 8], &mut s)[0] as f64
             } else {
                 tape.eval_ops(ops, rel, &mut s) as f64
@@ -882,16 +883,46 @@ fn tape_inputs32(
     t: &Lanes32,
     tol: &Lanes32,
 ) -> ([tape::X32; 3], u32) {
-    #[cfg(target_arch = "x86_64")]
-    if crate::simd::avx2().is_some() {
-        // SAFETY: the CPU has AVX2 (checked just above).
-        return unsafe { inputs_avx2::tape_inputs32(tape, (o, d, t, tol)) };
+    dispatch(TapeInputs32 { tape, o, d, t, tol })
+}
+
+/// [`tape_inputs32`] as a SIMD kernel: `DVec3` arithmetic on four lanes at once
+/// (`o + d * t`, the difference to the origin, `x * x + y * y + z * z` and its square
+/// root, rounded after each operation as the scalar code is), the rounding to f32 to
+/// nearest (as `as f32` is) and the tolerance test as an ordered comparison.
+struct TapeInputs32<'a> {
+    tape: &'a tape::Tape,
+    o: &'a Rays32,
+    d: &'a Rays32,
+    t: &'a Lanes32,
+    tol: &'a Lanes32,
+}
+
+impl Kernel for TapeInputs32<'_> {
+    type Output = ([tape::X32; 3], u32);
+    #[inline(always)]
+    fn run<S: Simd>(self, s: S) -> Self::Output {
+        let TapeInputs32 { tape, o, d, t, tol } = self;
+        let mut rel = [[[0.0f32; PACKET]; WIDE / PACKET]; 3];
+        let mut resolved = 0u32;
+        let (k, m) = tape.error_parts();
+        let (k, m, quarter) = (s.splat4(k), s.splat4(m), s.splat4(0.25));
+        for i in (0..WIDE).step_by(4) {
+            let ti = s.load4_at(t, i);
+            let mut sq = s.splat4(0.0);
+            for a in 0..3 {
+                let p = s.load4_at(&o[a], i) + s.load4_at(&d[a], i) * ti;
+                let r = p - s.splat4(tape.origin[a]);
+                rel[a][i / PACKET][i % PACKET..i % PACKET + 4].copy_from_slice(&r.to_f32());
+                let rr = r * r;
+                sq = if a == 0 { rr } else { sq + rr };
+            }
+            let err = k * (sq.vsqrt() + m);
+            let within = err.cmp_le(quarter * s.load4_at(tol, i));
+            resolved |= within.movemask() << i;
+        }
+        (rel, resolved)
     }
-    let points = ray_points32(o, d, t);
-    let resolved = (0..WIDE)
-        .filter(|&i| tape.error_bound((points[i] - tape.origin).length()) <= 0.25 * tol[i])
-        .fold(0, |m, i| m | 1 << i);
-    (relative32(tape, &points), resolved)
 }
 
 /// The 32 world `points` relative to the tape's origin, rounded to f32
@@ -905,59 +936,6 @@ fn relative32(tape: &tape::Tape, points: &[DVec3; WIDE]) -> [tape::X32; 3] {
         }
     }
     rel
-}
-
-/// [`tape_inputs32`] four lanes at a time.
-#[cfg(target_arch = "x86_64")]
-mod inputs_avx2 {
-    use std::arch::x86_64::*;
-
-    use super::tape;
-    use crate::geometry::PACKET;
-    use crate::geometry::marched::{Lanes32, Rays32, WIDE};
-
-    /// [`super::tape_inputs32`]: `DVec3` arithmetic on four lanes at once (`o + d * t`, the
-    /// difference to the origin, `x * x + y * y + z * z` and its square root, rounded after
-    /// each operation as the scalar code is), the rounding to f32 by `cvtpd_ps` (to
-    /// nearest, as `as f32` is) and the tolerance test as an ordered comparison.
-    ///
-    /// # Safety
-    /// The CPU must have AVX2.
-    #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn tape_inputs32(
-        tape: &tape::Tape,
-        (o, d, t, tol): (&Rays32, &Rays32, &Lanes32, &Lanes32),
-    ) -> ([tape::X32; 3], u32) {
-        let mut rel = [[[0.0f32; PACKET]; WIDE / PACKET]; 3];
-        let mut resolved = 0u32;
-        let (k, m) = tape.error_parts();
-        // SAFETY: AVX2 is enabled; every load and store is of four lanes `i..i + 4` of a
-        // 32-lane array, or of lanes `l..l + 4` (`l` 0 or 4) of an 8-lane packet.
-        unsafe {
-            let (k, m, quarter) = (_mm256_set1_pd(k), _mm256_set1_pd(m), _mm256_set1_pd(0.25));
-            for i in (0..WIDE).step_by(4) {
-                let ti = _mm256_loadu_pd(t.as_ptr().add(i));
-                let mut sq = _mm256_setzero_pd();
-                for a in 0..3 {
-                    let p = _mm256_add_pd(
-                        _mm256_loadu_pd(o[a].as_ptr().add(i)),
-                        _mm256_mul_pd(_mm256_loadu_pd(d[a].as_ptr().add(i)), ti),
-                    );
-                    let r = _mm256_sub_pd(p, _mm256_set1_pd(tape.origin[a]));
-                    _mm_storeu_ps(rel[a][i / PACKET].as_mut_ptr().add(i % PACKET), _mm256_cvtpd_ps(r));
-                    let rr = _mm256_mul_pd(r, r);
-                    sq = if a == 0 { rr } else { _mm256_add_pd(sq, rr) };
-                }
-                let err = _mm256_mul_pd(k, _mm256_add_pd(_mm256_sqrt_pd(sq), m));
-                let within = _mm256_cmp_pd::<_CMP_LE_OQ>(
-                    err,
-                    _mm256_mul_pd(quarter, _mm256_loadu_pd(tol.as_ptr().add(i))),
-                );
-                resolved |= (_mm256_movemask_pd(within) as u32) << i;
-            }
-        }
-        (rel, resolved)
-    }
 }
 
 /// The analytic field: distances from the tape where f32 is precise enough for the
