@@ -245,7 +245,7 @@ fn main() {
     out.line(format!(
         "analytic SDF evaluation, 1 thread: f64 tree vs f32 tape, scalar and 8-wide ({}); {} points per \
          object, {} timed rounds of >= {} s per evaluator, interleaved",
-        if sdfmesh::simd::avx2() { "AVX2" } else { "portable, no AVX2" },
+        if sdfmesh::simd::avx2().is_some() { "AVX2" } else { "portable, no AVX2" },
         plan.points,
         plan.rounds,
         plan.secs
