@@ -154,6 +154,15 @@ pub struct MarchLanes<const W: usize> {
     /// The hit tolerance at [`Self::t`]: what the field's evaluation must resolve there
     /// (world units; infinite for a lane that marches nothing).
     pub tol: [f64; W],
+    /// Each lane's ray by component (`origin[a][l]` is component `a` of lane `l`'s
+    /// [`Segment::origin`]): the field is evaluated at `origin + dir * t`.
+    pub origin: [[f64; W]; 3],
+    /// Each lane's [`Segment::dir`] by component.
+    pub dir: [[f64; W]; 3],
+    /// The caller's index of each lane's ray ([`Self::assign`]), moved with the lane.
+    pub ray: [usize; W],
+    /// The caller's end of each lane's ray ([`Self::assign`]), moved with the lane.
+    pub reach: [f32; W],
     /// [`Segment::spread`].
     spread: [f64; W],
     /// [`Segment::t0`] and [`Segment::t1`].
@@ -222,6 +231,10 @@ impl<const W: usize> MarchLanes<W> {
         MarchLanes {
             t: [0.0; W],
             tol: [f64::INFINITY; W],
+            origin: [[0.0; W]; 3],
+            dir: [[0.0; W]; 3],
+            ray: [0; W],
+            reach: [0.0; W],
             spread: [0.0; W],
             t0: [0.0; W],
             t1: [0.0; W],
@@ -249,6 +262,9 @@ impl<const W: usize> MarchLanes<W> {
     pub fn start(&mut self, l: usize, seg: &Segment, stats: &mut RayStats) {
         stats.marched_rays += 1;
         self.t[l] = seg.t0;
+        for a in 0..3 {
+            (self.origin[a][l], self.dir[a][l]) = (seg.origin[a], seg.dir[a]);
+        }
         self.spread[l] = seg.spread;
         (self.t0[l], self.t1[l]) = (seg.t0, seg.t1);
         self.sign[l] = 0.0;
@@ -261,6 +277,23 @@ impl<const W: usize> MarchLanes<W> {
         self.tol[l] = self.march_tolerance(l);
     }
 
+    /// Records the caller's index `ray` and end `reach` of lane `l`'s ray
+    /// ([`Self::ray`], [`Self::reach`]).
+    #[inline]
+    pub fn assign(&mut self, l: usize, ray: usize, reach: f32) {
+        (self.ray[l], self.reach[l]) = (ray, reach);
+    }
+
+    /// Idle lane `l` evaluates lane `from`'s point (its value is not used): the same
+    /// parameter, origin and direction.
+    #[inline]
+    pub fn copy_point(&mut self, from: usize, l: usize) {
+        self.t[l] = self.t[from];
+        for a in 0..3 {
+            (self.origin[a][l], self.dir[a][l]) = (self.origin[a][from], self.dir[a][from]);
+        }
+    }
+
     /// Lane `l` marches nothing (its tolerance is infinite, [`Self::tol`]).
     #[inline]
     pub fn stop(&mut self, l: usize) {
@@ -271,7 +304,8 @@ impl<const W: usize> MarchLanes<W> {
     /// nothing: the march goes on in `to` with the same steps.
     #[inline]
     pub fn move_lane(&mut self, from: usize, to: usize) {
-        self.t[to] = self.t[from];
+        self.copy_point(from, to);
+        (self.ray[to], self.reach[to]) = (self.ray[from], self.reach[from]);
         self.tol[to] = self.tol[from];
         self.spread[to] = self.spread[from];
         (self.t0[to], self.t1[to]) = (self.t0[from], self.t1[from]);

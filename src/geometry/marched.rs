@@ -356,13 +356,9 @@ impl<F: DistanceField> Marched<F> {
         refill: bool,
         eval: impl Fn(&[[f64; W]; 3], &[[f64; W]; 3], &[f64; W], &[f64; W], u32) -> [f64; W],
     ) {
-        // Lane `l` marches ray `ray_of[l]`; `reach_of[l]` is that ray's end.
+        // Each lane's state, its ray by component and its ray's index and end included
+        // (`MarchLanes::ray`, `MarchLanes::reach`), lives in `lanes`.
         let mut lanes = MarchLanes::<W>::new(&self.march, self.size, self.field.is_signed());
-        let mut ray_of = [0usize; W];
-        let mut reach_of = [0.0f32; W];
-        // The rays by component for the field's evaluation at `origin + dir * t`.
-        let mut origin = [[0.0; W]; 3];
-        let mut dir = [[0.0; W]; 3];
         // The rays are clipped to the bounds eight at a time ([`Marched::segments8`]) as the
         // lanes reach them: `ready` has bit `k` set where ray `chunk + k` is asked for, has a
         // segment and waits for a lane; `next` is the first ray not clipped yet. `idle`
@@ -401,10 +397,7 @@ impl<F: DistanceField> Marched<F> {
                     let i = chunk + k;
                     let seg = Segment::along(&rays[i], clipped.t0[k] as f64, clipped.t1[k] as f64);
                     lanes.start(l, &seg, stats);
-                    (ray_of[l], reach_of[l]) = (i, ends[k]);
-                    for a in 0..3 {
-                        (origin[a][l], dir[a][l]) = (seg.origin[a], seg.dir[a]);
-                    }
+                    lanes.assign(l, i, ends[k]);
                 }
             }
             let mut marching = !idle & all;
@@ -422,10 +415,6 @@ impl<F: DistanceField> Marched<F> {
                         break;
                     }
                     lanes.move_lane(from, to);
-                    (ray_of[to], reach_of[to]) = (ray_of[from], reach_of[from]);
-                    for a in 0..3 {
-                        (origin[a][to], dir[a][to]) = (origin[a][from], dir[a][from]);
-                    }
                     (idle, marching) = ((idle & !(1 << to)) | 1 << from, (marching & !(1 << from)) | 1 << to);
                 }
             }
@@ -445,12 +434,9 @@ impl<F: DistanceField> Marched<F> {
             while rest != 0 {
                 let l = rest.trailing_zeros() as usize;
                 rest &= rest - 1;
-                lanes.t[l] = lanes.t[first];
-                for a in 0..3 {
-                    (origin[a][l], dir[a][l]) = (origin[a][first], dir[a][first]);
-                }
+                lanes.copy_point(first, l);
             }
-            let d = eval(&origin, &dir, &lanes.t, &lanes.tol, packets);
+            let d = eval(&lanes.origin, &lanes.dir, &lanes.t, &lanes.tol, packets);
             let mut ended = lanes.feed(&d, marching, stats);
             idle |= ended;
             while ended != 0 {
@@ -458,9 +444,9 @@ impl<F: DistanceField> Marched<F> {
                 ended &= ended - 1;
                 lanes.stop(l);
                 if let Some(mh) =
-                    lanes.outcome(l).filter(|h| h.t >= t_min as f64 && h.t <= reach_of[l] as f64)
+                    lanes.outcome(l).filter(|h| h.t >= t_min as f64 && h.t <= lanes.reach[l] as f64)
                 {
-                    on_hit(ray_of[l], mh, stats);
+                    on_hit(lanes.ray[l], mh, stats);
                 }
             }
         }
@@ -732,6 +718,80 @@ mod tests {
                     assert_eq!(bits(eight), bits(one), "{:?} over [{t_min}, {}]", chunk[k], t_max[k]);
                 }
             }
+        }
+    }
+
+    /// The bulk call of a field equals its scalar distance lane by lane, bit for bit.
+    fn bulk_equals_scalar<F: DistanceField>(field: &F, o: [f64; 3], dirs: &[[f64; 3]], ts: &[f64], tol: f64) {
+        let lane = |l: usize| l % dirs.len();
+        let o32: Rays32 = [[o[0]; WIDE], [o[1]; WIDE], [o[2]; WIDE]];
+        let d32: Rays32 = std::array::from_fn(|a| std::array::from_fn(|l| dirs[lane(l)][a]));
+        let t32: Lanes32 = std::array::from_fn(|l| ts[l % ts.len()]);
+        let tol32: Lanes32 = std::array::from_fn(|l| tol * (1.0 + (l % 3) as f64));
+        let wide = field.distance32_rays(&o32, &d32, &t32, &tol32, 0b1111);
+        for l in 0..WIDE {
+            let p = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| o32[a][l] + d32[a][l] * t32[l]));
+            let one = field.distance_within(p, tol32[l]);
+            assert_eq!(wide[l].to_bits(), one.to_bits(), "lane {l} at {p}: {} vs {one}", wide[l]);
+        }
+        let part = |a: &[f64; WIDE]| -> [f64; PACKET] { std::array::from_fn(|l| a[l]) };
+        let eight = field.distance8_rays(
+            &o32.each_ref().map(part),
+            &d32.each_ref().map(part),
+            &part(&t32),
+            &part(&tol32),
+        );
+        for l in 0..PACKET {
+            assert_eq!(eight[l].to_bits(), wide[l].to_bits(), "packet lane {l}");
+        }
+    }
+
+    fn sphere_union() -> crate::scene::shape::Object {
+        use crate::scene::shape::{CsgOp, Object, ObjectKind, Primitive};
+        use crate::scene::transform::TransformDesc;
+        let ball = |x: f32, r: f32| Object {
+            kind: ObjectKind::Primitive(Primitive::Sphere { radius: r }),
+            transform: TransformDesc { translate: Vec3::new(x, 0.1, 0.0), ..TransformDesc::default() },
+            material: 0,
+            label: "s".into(),
+        };
+        Object {
+            kind: ObjectKind::Csg {
+                op: CsgOp::SmoothUnion { k: 0.2 },
+                children: vec![ball(-0.4, 0.5), ball(0.5, 0.4)],
+            },
+            transform: TransformDesc::default(),
+            material: 0,
+            label: "u".into(),
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(48))]
+        #[test]
+        fn bulk_distance_equals_scalar_per_lane(
+            o in proptest::array::uniform3(-3.0f64..3.0),
+            dirs in proptest::collection::vec(proptest::array::uniform3(-1.0f64..1.0), 1..9),
+            ts in proptest::collection::vec(0.0f64..6.0, 1..33),
+            tol in 1e-6f64..1e-1,
+        ) {
+            let object = sphere_union();
+            let sdf = crate::geometry::sdf::SdfField::new(&object, object.bounds()).unwrap();
+            bulk_equals_scalar(&sdf, o, &dirs, &ts, tol);
+            let mut g = crate::geometry::grid::SdfGrid::for_bounds(Vec3::splat(-1.0), Vec3::splat(1.0), 24, 2).unwrap();
+            for k in 0..g.dims.z {
+                for j in 0..g.dims.y {
+                    for i in 0..g.dims.x {
+                        let idx = g.index(i, j, k);
+                        g.values[idx] = g.position(i, j, k).length() - 0.6;
+                    }
+                }
+            }
+            let band = crate::geometry::grid::band::BandGrid::from_dense(&g, 2).unwrap();
+            let dense = crate::geometry::grid::object::GridObject::new(g, 0, Default::default(), "g".into());
+            bulk_equals_scalar(&dense.field, o, &dirs, &ts, tol);
+            let band = crate::geometry::grid::object::GridObject::new(band, 0, Default::default(), "b".into());
+            bulk_equals_scalar(&band.field, o, &dirs, &ts, tol);
         }
     }
 }

@@ -32,6 +32,11 @@ fn values() -> Vec<f32> {
     v
 }
 
+/// A lane result beside the scalar operation it must equal.
+type Unary<V> = (V, fn(f32) -> f32);
+/// A lane result beside the scalar binary operation it must equal.
+type Binary<V> = (V, fn(f32, f32) -> f32);
+
 fn same(a: f32, b: f32) -> bool {
     a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan())
 }
@@ -43,7 +48,7 @@ fn check_backend<S: Simd>(s: S) {
         let a: [f32; 8] = std::array::from_fn(|l| v[(i + l) % v.len()]);
         let b: [f32; 8] = std::array::from_fn(|l| v[(i * 7 + 3 * l + 1) % v.len()]);
         let (x, y) = (s.load8(&a), s.load8(&b));
-        let unary: [(S::F32x8, fn(f32) -> f32); 5] = [
+        let unary: [Unary<S::F32x8>; 5] = [
             (-x, |a| -a),
             (x.vsqrt(), f32::vsqrt),
             (x.vabs(), f32::vabs),
@@ -56,7 +61,7 @@ fn check_backend<S: Simd>(s: S) {
                 assert!(same(got[l], f(a[l])), "unary {k} lane {l}: {} vs {}", got[l], f(a[l]));
             }
         }
-        let binary: [(S::F32x8, fn(f32, f32) -> f32); 7] = [
+        let binary: [Binary<S::F32x8>; 7] = [
             (x + y, |a, b| a + b),
             (x - y, |a, b| a - b),
             (x * y, |a, b| a * b),
@@ -87,10 +92,10 @@ fn check_backend<S: Simd>(s: S) {
         let want8 =
             |p: S::F32x8, q: S::F32x8| S::F32x8::select_lt(p, q, (p * q).vsqrt(), p.vmin(q) - q).store();
         let (ab, ba) = (want8(x, y), want8(y, x));
-        for g in 0..4 {
+        for (g, packet) in got.iter().enumerate() {
             let want = if g % 2 == 0 { ab } else { ba };
             for l in 0..8 {
-                assert!(same(got[g][l], want[l]), "packet {g} lane {l}");
+                assert!(same(packet[l], want[l]), "packet {g} lane {l}");
             }
         }
     }
