@@ -43,6 +43,7 @@
 
 // `!(x >= 0.0)` is the NaN-rejecting form used on purpose in the numerical code.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
+#![warn(missing_docs)]
 
 pub mod base;
 pub mod cli;

@@ -39,5 +39,6 @@ mod scene_errors;
 mod scene_grid;
 mod sdf_prune;
 mod sdf_tape;
+mod source_rules;
 mod tessellate;
 mod winding_sign;

@@ -124,18 +124,37 @@ fn smooth_min(a: f64, b: f64, k: f64) -> (f64, f64) {
 #[derive(Clone, Debug)]
 pub enum SdfNode {
     /// A primitive under a transform.
-    Primitive { prim: Primitive, transform: Transform, material: MaterialId },
+    Primitive {
+        /// The shape, in its local frame.
+        prim: Primitive,
+        /// Local frame to parent frame.
+        transform: Transform,
+        /// The material of its surface.
+        material: MaterialId,
+    },
     /// A CSG operation under a transform.
-    Csg { op: CsgOp, children: Vec<SdfNode>, transform: Transform },
+    Csg {
+        /// How the children combine.
+        op: CsgOp,
+        /// The operands, in the operation's local frame.
+        children: Vec<SdfNode>,
+        /// Local frame to parent frame.
+        transform: Transform,
+    },
     /// Domain repetition under a transform (see [`ObjectKind::Repeat`]). `gaps[axis]`:
     /// where the child's bounds keep at least this distance (> 0, local units) from its
     /// cell's faces along that axis ([`cell_gaps`]), the neighbouring cells along it are
     /// bounded by the face instead of evaluated ([`eval_repeat`]).
     Repeat {
+        /// Spacing of the copies per axis (local units); 0 for an axis not repeated.
         period: Vec3,
+        /// Copies per repeated axis, centred on the origin; `None` for infinitely many.
         count: Option<UVec3>,
+        /// What each cell holds.
         child: Box<SdfNode>,
+        /// Local frame to parent frame.
         transform: Transform,
+        /// Per axis, the child's clearance from its cell's faces, when positive.
         gaps: [Option<f64>; 3],
     },
 }
