@@ -5,40 +5,12 @@
 //! `files`, `simd`) names nothing above it. Reads every file under `src/` with std only.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
 
 /// Module `a` -> module `b` -> the files of `a` that name `b`.
 type Graph = BTreeMap<String, BTreeMap<String, BTreeSet<String>>>;
 
 /// The modules below everything else: they may name only each other.
 const BOTTOM: [&str; 4] = ["base", "error", "files", "simd"];
-
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for entry in std::fs::read_dir(dir).unwrap() {
-        let path = entry.unwrap().path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "rs") {
-            out.push(path);
-        }
-    }
-}
-
-/// Every file of `src/`, as its path relative to `src/` and its text.
-fn sources() -> Vec<(String, String)> {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut files = Vec::new();
-    rust_files(&src, &mut files);
-    files.sort();
-    assert!(files.len() > 20, "found only {} files under src/", files.len());
-    files
-        .into_iter()
-        .map(|p| {
-            let rel = p.strip_prefix(&src).unwrap().to_string_lossy().replace('\\', "/");
-            (rel, std::fs::read_to_string(&p).unwrap())
-        })
-        .collect()
-}
 
 /// The module path of a file relative to `src/`: `geometry/grid/mod.rs` -> `[geometry,
 /// grid]`, `files.rs` -> `[files]`; empty for the crate roots `lib.rs` and `main.rs`.
@@ -203,7 +175,7 @@ fn explain(g: &Graph, cycle: &[String]) -> String {
 
 #[test]
 fn no_import_circle_between_top_level_modules() {
-    let g = graph(&sources());
+    let g = graph(&crate::util::crate_sources());
     for m in ["base", "cli", "compare", "convert", "geometry", "grid", "mesh", "scene", "simd"] {
         assert!(g.contains_key(m), "no module {m} found under src/:\n{}", describe(&g));
     }
@@ -215,7 +187,7 @@ fn no_import_circle_between_top_level_modules() {
 
 #[test]
 fn the_bottom_layer_names_nothing_above_it() {
-    let g = graph(&sources());
+    let g = graph(&crate::util::crate_sources());
     for m in BOTTOM {
         let above: Vec<String> = g
             .get(m)

@@ -3,35 +3,6 @@
 //! `unsafe` there with a `SAFETY` note (just above it, or a note covering the blocks below);
 //! no file over 1400 lines; a `//!` header on every file.
 
-use std::path::{Path, PathBuf};
-
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for entry in std::fs::read_dir(dir).unwrap() {
-        let path = entry.unwrap().path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "rs") {
-            out.push(path);
-        }
-    }
-}
-
-/// Every file of `src/` with its text.
-fn sources() -> Vec<(String, String)> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut files = Vec::new();
-    rust_files(&root.join("src"), &mut files);
-    files.sort();
-    assert!(files.len() > 20, "found only {} files under src/", files.len());
-    files
-        .into_iter()
-        .map(|p| {
-            let rel = p.strip_prefix(root).unwrap().to_string_lossy().replace('\\', "/");
-            (rel, std::fs::read_to_string(&p).unwrap())
-        })
-        .collect()
-}
-
 /// The code of a line: what comes before a `//` comment (a `//` inside a string literal
 /// cuts the line short, which can only hide code, never invent it).
 fn code(line: &str) -> &str {
@@ -49,13 +20,13 @@ fn has_word(text: &str, word: &str) -> bool {
 }
 
 fn in_simd(path: &str) -> bool {
-    path.starts_with("src/simd/")
+    path.starts_with("simd/")
 }
 
 #[test]
 fn unsafe_and_intrinsics_only_in_the_simd_layer() {
     let mut bad = Vec::new();
-    for (path, text) in sources() {
+    for (path, text) in crate::util::crate_sources() {
         if in_simd(&path) {
             continue;
         }
@@ -68,7 +39,7 @@ fn unsafe_and_intrinsics_only_in_the_simd_layer() {
                 || c.contains("_mm_")
                 || c.contains("_mm256_")
             {
-                bad.push(format!("{path}:{}: {}", n + 1, line.trim()));
+                bad.push(format!("src/{path}:{}: {}", n + 1, line.trim()));
             }
         }
     }
@@ -79,7 +50,7 @@ fn unsafe_and_intrinsics_only_in_the_simd_layer() {
 fn every_unsafe_in_the_simd_layer_has_a_safety_note() {
     let mut bad = Vec::new();
     let mut blocks = 0;
-    for (path, text) in sources() {
+    for (path, text) in crate::util::crate_sources() {
         if !in_simd(&path) {
             continue;
         }
@@ -111,7 +82,7 @@ fn every_unsafe_in_the_simd_layer_has_a_safety_note() {
                 }
             }
             if !ok {
-                bad.push(format!("{path}:{}: {}", n + 1, line.trim()));
+                bad.push(format!("src/{path}:{}: {}", n + 1, line.trim()));
             }
         }
     }
@@ -122,13 +93,13 @@ fn every_unsafe_in_the_simd_layer_has_a_safety_note() {
 #[test]
 fn no_file_over_1400_lines_and_every_file_has_a_header() {
     let mut bad = Vec::new();
-    for (path, text) in sources() {
+    for (path, text) in crate::util::crate_sources() {
         let lines = text.lines().count();
         if lines > 1400 {
-            bad.push(format!("{path}: {lines} lines (at most 1400)"));
+            bad.push(format!("src/{path}: {lines} lines (at most 1400)"));
         }
         if !text.trim_start().starts_with("//!") {
-            bad.push(format!("{path}: no //! header"));
+            bad.push(format!("src/{path}: no //! header"));
         }
     }
     assert!(bad.is_empty(), "{}", bad.join("\n"));
