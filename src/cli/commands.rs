@@ -197,7 +197,7 @@ pub fn convert_command(
                 true,
             );
             for (done, o) in scene.objects.iter().enumerate() {
-                crate::cli::progress::set(per_object * done as u64);
+                stage.set(per_object * done as u64);
                 let extracted = extract_object(o, res, method)
                     .or_else(|| grid_file_mesh(o, res, MeshMethod::Extracted(method)));
                 match extracted {

@@ -8,17 +8,11 @@
 //! shown, their reports are a relaxed atomic load and a return.
 
 use std::io::IsTerminal;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::base::progress;
-
-/// Whether a bar is shown (checked before taking the lock).
-static ACTIVE: AtomicBool = AtomicBool::new(false);
-/// The bar of the current stage.
-static BAR: Mutex<Option<ProgressBar>> = Mutex::new(None);
 
 /// The bar receives the library's reports of work done.
 impl progress::Sink for ProgressBar {
@@ -30,7 +24,8 @@ impl progress::Sink for ProgressBar {
 /// A stage of a command whose progress is shown while it lives; the bar is cleared when it
 /// is dropped.
 pub struct Stage {
-    shown: bool,
+    /// The bar, when one is shown (it is also the installed [`progress::Sink`]).
+    bar: Option<ProgressBar>,
 }
 
 impl Stage {
@@ -38,7 +33,7 @@ impl Stage {
     /// is true and stderr is a terminal.
     pub fn start(label: &str, total: u64, show: bool) -> Stage {
         if !show || !std::io::stderr().is_terminal() {
-            return Stage { shown: false };
+            return Stage { bar: None };
         }
         let bar = ProgressBar::new(total);
         if let Ok(style) = ProgressStyle::with_template("{msg} [{bar:30}] {percent:>3}% {elapsed} ETA {eta}")
@@ -46,40 +41,25 @@ impl Stage {
             bar.set_style(style.progress_chars("=> "));
         }
         bar.set_message(label.to_owned());
-        if let Ok(mut b) = BAR.lock() {
-            progress::install(Arc::new(bar.clone()));
-            *b = Some(bar);
-            ACTIVE.store(true, Ordering::Release);
+        progress::install(Arc::new(bar.clone()));
+        Stage { bar: Some(bar) }
+    }
+
+    /// Sets this stage's progress to `done` units (no-op when no bar is shown); for stages
+    /// whose parts report fewer units than they were estimated at.
+    pub fn set(&self, done: u64) {
+        if let Some(bar) = &self.bar {
+            bar.set_position(done);
         }
-        Stage { shown: true }
     }
 }
 
 impl Drop for Stage {
     fn drop(&mut self) {
-        if !self.shown {
-            return;
-        }
-        ACTIVE.store(false, Ordering::Release);
-        progress::remove();
-        if let Ok(mut b) = BAR.lock()
-            && let Some(bar) = b.take()
-        {
+        if let Some(bar) = self.bar.take() {
+            progress::remove();
             bar.finish_and_clear();
         }
-    }
-}
-
-/// Sets the current stage's progress to `done` units (no-op when no bar is shown); for
-/// stages whose parts report fewer units than they were estimated at.
-pub fn set(done: u64) {
-    if !ACTIVE.load(Ordering::Relaxed) {
-        return;
-    }
-    if let Ok(b) = BAR.lock()
-        && let Some(bar) = b.as_ref()
-    {
-        bar.set_position(done);
     }
 }
 
@@ -91,11 +71,9 @@ mod tests {
     fn hidden_stages_cost_nothing_and_never_draw() {
         // Under the test harness stderr is not a terminal: nothing is shown.
         let stage = Stage::start("sampling", 10, true);
-        assert!(!stage.shown);
-        assert!(!ACTIVE.load(Ordering::Relaxed));
+        assert!(stage.bar.is_none());
         progress::advance(5);
-        set(7);
+        stage.set(7);
         drop(stage);
-        assert!(BAR.lock().unwrap().is_none());
     }
 }
