@@ -243,34 +243,36 @@ impl MeshGeometry {
         }
         let local_bounds = boxes.iter().copied().reduce(|a, b| a.union(&b));
         let shape = Arc::new(MeshShape { positions, triangles, normals, bvh, local_bounds, unit });
-        let (transform, placement) = shape.frame(transform);
-        let world_bounds = local_bounds.map(|b| transform.box_to_world(&b));
-        MeshGeometry {
-            shape,
-            far_scale: far_scale(&transform),
-            transform,
-            placement,
-            material,
-            world_bounds,
-            label,
-            build_time: start.elapsed(),
-        }
+        let build_time = start.elapsed();
+        Self::on_shape(shape, transform, material, label, build_time)
     }
 
     /// Another instance of this geometry's mesh and BVH (shared, not copied) under
     /// `transform` (mesh frame to world) with `material`.
     pub fn placed(&self, transform: Transform, material: MaterialId, label: String) -> MeshGeometry {
-        let (transform, placement) = self.shape.frame(transform);
-        let world_bounds = self.shape.local_bounds.map(|b| transform.box_to_world(&b));
+        Self::on_shape(Arc::clone(&self.shape), transform, material, label, self.build_time)
+    }
+
+    /// The geometry of `shape` under `transform` (mesh frame to world): the one place an
+    /// instance's frame, placement and world bounds are derived.
+    fn on_shape(
+        shape: Arc<MeshShape>,
+        transform: Transform,
+        material: MaterialId,
+        label: String,
+        build_time: std::time::Duration,
+    ) -> MeshGeometry {
+        let (transform, placement) = shape.frame(transform);
+        let world_bounds = shape.local_bounds.map(|b| transform.box_to_world(&b));
         MeshGeometry {
-            shape: Arc::clone(&self.shape),
             far_scale: far_scale(&transform),
+            shape,
             transform,
             placement,
             material,
             world_bounds,
             label,
-            build_time: self.build_time,
+            build_time,
         }
     }
 
