@@ -10,7 +10,7 @@
 //! ([`crate::geometry::grid::object::GridObject`], a [`Marched`] over a
 //! [`GridField`](crate::geometry::grid::object::GridField)) are the two fields plugged in
 //! today; a new marched representation is a new field, not a new marcher. A field that
-//! evaluates eight points at once ([`DistanceField::distance8_within`]) gets packets of
+//! evaluates eight points at once ([`DistanceField::distances`]) gets packets of
 //! primary rays marched side by side ([`Geometry::closest_hits`]), each lane taking exactly
 //! the steps of its own scalar march ([`sphere_trace`] and the batch share [`MarchLanes`]).
 
@@ -24,94 +24,160 @@ use crate::geometry::{
     Aabb, Census, Geometry, Hit, MaterialId, PACKET, Ray, RayStats, Shared, f32_error, max_abs,
 };
 
-/// The points `origin + dir * t[l]` of eight rays (`origin[a][l]` is component `a` of lane
-/// `l`), computed as `DVec3` arithmetic does (see [`DistanceField::distance8_rays`]).
-#[inline]
-pub fn ray_points8(origin: &[[f64; 8]; 3], dir: &[[f64; 8]; 3], t: &[f64; 8]) -> [DVec3; 8] {
-    std::array::from_fn(|l| {
-        DVec3::new(origin[0][l], origin[1][l], origin[2][l])
-            + DVec3::new(dir[0][l], dir[1][l], dir[2][l]) * t[l]
-    })
-}
-
 /// Lanes a [`Marched`] batch marches side by side when its field refills lanes
-/// ([`DistanceField::refills_lanes`]): four packets, evaluated together by
-/// [`DistanceField::distance32_rays`].
+/// ([`DistanceField::refills_lanes`]), and the lanes of a [`PointBlock`]: four packets.
 pub const WIDE: usize = 4 * PACKET;
 
-/// Rays by component for [`DistanceField::distance32_rays`]: `[a][l]` is component `a`
-/// of lane `l` (lane `l % 8` of packet `l / 8`).
+/// What the lanes of a [`PointBlock`] hold.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BlockKind {
+    /// Marching lanes: lane `l` is the point `origin + dir * t` of its ray, to within
+    /// `tol[l]`, computed as `DVec3` arithmetic does (`o + d * t` per component, rounded
+    /// after the product and the sum; [`PointBlock::point`]). Each lane's value must be
+    /// what [`DistanceField::distance`] gives at that point alone.
+    Rays,
+    /// Normal stencils ([`gradient_normal`]): lanes `4 k .. 4 k + 4` are the four points
+    /// of stencil `k` (in `origin`; `dir` and `t` unused), all to within `tol[4 k]`. The
+    /// four points of a stencil are evaluated alike: a field may answer them from a
+    /// faster evaluator only where it is precise enough for all four, else all four from
+    /// its precise one (so that the gradient sees one smooth function).
+    Stencils,
+}
+
+/// Points by component for the bulk call ([`DistanceField::distances`]): `[a][l]` is
+/// component `a` of lane `l` (lane `l % 8` of packet `l / 8`).
 pub type Rays32 = [[f64; WIDE]; 3];
 
-/// One number per lane for [`DistanceField::distance32_rays`].
+/// One number per lane of a [`PointBlock`].
 pub type Lanes32 = [f64; WIDE];
 
-/// [`ray_points8`] for [`WIDE`] rays.
-#[inline]
-pub fn ray_points32(origin: &Rays32, dir: &Rays32, t: &Lanes32) -> [DVec3; WIDE] {
-    std::array::from_fn(|l| ray_point32(origin, dir, t, l))
+/// A structure-of-arrays block of up to [`WIDE`] points, the one bulk call of a field
+/// ([`DistanceField::distances`]): the marcher packs its lanes (or its normal stencils)
+/// into it, the field writes each active lane's distance into `out`.
+#[derive(Clone, Debug)]
+pub struct PointBlock {
+    /// What the lanes hold.
+    pub kind: BlockKind,
+    /// Ray origins by component ([`BlockKind::Rays`]), or the points themselves
+    /// ([`BlockKind::Stencils`]).
+    pub origin: Rays32,
+    /// Ray directions by component ([`BlockKind::Rays`]).
+    pub dir: Rays32,
+    /// Ray parameters ([`BlockKind::Rays`]).
+    pub t: Lanes32,
+    /// The tolerance of each lane (world units): its value may be off by a quarter of it.
+    pub tol: Lanes32,
+    /// Bit `l` set: lane `l` is evaluated. A field evaluates lanes by packets of
+    /// [`PACKET`] (those with an active lane); the values of other lanes are not used.
+    /// [`BlockKind::Stencils`] are active in whole stencils, from lane 0 up.
+    pub active: u32,
+    /// The distances, written by [`DistanceField::distances`] for the active lanes.
+    pub out: Lanes32,
 }
 
-/// Lane `l`'s point of [`ray_points32`].
-#[inline]
-pub fn ray_point32(origin: &Rays32, dir: &Rays32, t: &Lanes32, l: usize) -> DVec3 {
-    DVec3::new(origin[0][l], origin[1][l], origin[2][l]) + DVec3::new(dir[0][l], dir[1][l], dir[2][l]) * t[l]
-}
-
-/// [`DistanceField::distance32_rays`] packet by packet: [`DistanceField::distance8_rays`]
-/// for each packet `g` with bit `g` of `packets` set (the others' values are 0, unused).
-pub fn distance32_by_packets<F>(
-    field: &F,
-    o: &Rays32,
-    d: &Rays32,
-    t: &Lanes32,
-    tol: &Lanes32,
-    packets: u32,
-) -> Lanes32
-where
-    F: DistanceField + ?Sized,
-{
-    let mut out = [0.0; WIDE];
-    for g in 0..WIDE / PACKET {
-        if packets & (1 << g) == 0 {
-            continue;
+impl PointBlock {
+    /// An empty block of `kind` (no active lane, every number 0).
+    pub fn new(kind: BlockKind) -> Self {
+        PointBlock {
+            kind,
+            origin: [[0.0; WIDE]; 3],
+            dir: [[0.0; WIDE]; 3],
+            t: [0.0; WIDE],
+            tol: [0.0; WIDE],
+            active: 0,
+            out: [0.0; WIDE],
         }
-        let part = |a: &[f64; WIDE]| -> [f64; PACKET] { std::array::from_fn(|l| a[PACKET * g + l]) };
-        let v = field.distance8_rays(&o.each_ref().map(part), &d.each_ref().map(part), &part(t), &part(tol));
-        out[PACKET * g..PACKET * (g + 1)].copy_from_slice(&v);
     }
-    out
+
+    /// A block of the `N` normal stencils `stencils` (stencil `k` to within
+    /// `tolerances[k]`), `N` at most 8.
+    pub fn stencils<const N: usize>(stencils: &[[DVec3; 4]; N], tolerances: &[f64; N]) -> Self {
+        let mut b = PointBlock::new(BlockKind::Stencils);
+        b.set_stencils(stencils, tolerances);
+        b
+    }
+
+    /// Makes this block hold the `N` normal stencils `stencils` (stencil `k` to within
+    /// `tolerances[k]`), `N` at most 8, as [`Self::stencils`] builds them; lanes past
+    /// them are left as they were and inactive.
+    #[inline]
+    pub fn set_stencils<const N: usize>(&mut self, stencils: &[[DVec3; 4]; N], tolerances: &[f64; N]) {
+        let b = self;
+        b.kind = BlockKind::Stencils;
+        for (k, s) in stencils.iter().enumerate() {
+            for (j, p) in s.iter().enumerate() {
+                let l = 4 * k + j;
+                (b.origin[0][l], b.origin[1][l], b.origin[2][l]) = (p.x, p.y, p.z);
+                b.tol[l] = tolerances[k];
+            }
+        }
+        b.active = (1u64 << (4 * N)).wrapping_sub(1) as u32;
+    }
+
+    /// Lane `l`'s point: the ray point `origin + dir * t` ([`BlockKind::Rays`], as `DVec3`
+    /// arithmetic computes it) or the stencil point.
+    #[inline]
+    pub fn point(&self, l: usize) -> DVec3 {
+        let o = DVec3::new(self.origin[0][l], self.origin[1][l], self.origin[2][l]);
+        match self.kind {
+            BlockKind::Rays => o + DVec3::new(self.dir[0][l], self.dir[1][l], self.dir[2][l]) * self.t[l],
+            BlockKind::Stencils => o,
+        }
+    }
+
+    /// The points of packet `g` (lanes `8 g ..`), [`Self::point`] lane by lane.
+    #[inline]
+    pub fn packet_points(&self, g: usize) -> [DVec3; PACKET] {
+        std::array::from_fn(|l| self.point(PACKET * g + l))
+    }
+
+    /// Bit `g` set: packet `g` has an active lane.
+    #[inline]
+    pub fn packets(&self) -> u32 {
+        (0..WIDE / PACKET).filter(|g| self.active >> (PACKET * g) & 0xff != 0).fold(0, |p, g| p | 1 << g)
+    }
+
+    /// The number of stencils of a [`BlockKind::Stencils`] block.
+    #[inline]
+    pub fn stencil_count(&self) -> usize {
+        self.active.count_ones() as usize / 4
+    }
+
+    /// Writes `f(point, tolerance)` into `out` for each lane of the packets with an active
+    /// lane: the lane-by-lane evaluation of a field without a faster one.
+    #[inline]
+    pub fn fill_each(&mut self, f: impl Fn(DVec3, f64) -> f64) {
+        let packets = self.packets();
+        for g in 0..WIDE / PACKET {
+            if packets & 1 << g != 0 {
+                for l in PACKET * g..PACKET * (g + 1) {
+                    self.out[l] = f(self.point(l), self.tol[l]);
+                }
+            }
+        }
+    }
 }
 
-/// [`DistanceField::distance4x8_within`] two stencils at a time
-/// ([`DistanceField::distance4x2_within`]).
-pub fn distance4x8_by_pairs<F>(field: &F, stencils: &[[DVec3; 4]; 8], tolerances: &[f64; 8]) -> [[f64; 4]; 8]
-where
-    F: DistanceField + ?Sized,
-{
-    let mut out = [[0.0; 4]; 8];
-    for k in (0..8).step_by(2) {
-        (out[k], out[k + 1]) =
-            field.distance4x2_within(&stencils[k], tolerances[k], &stencils[k + 1], tolerances[k + 1]);
-    }
-    out
+thread_local! {
+    /// Per-thread block of [`Marched::stencils`], built once.
+    static STENCILS: std::cell::RefCell<PointBlock> = std::cell::RefCell::new(PointBlock::new(BlockKind::Stencils));
 }
 
 /// A distance field that [`Marched`] sphere traces, in world space.
 pub trait DistanceField: Send + Sync {
-    /// The distance marched at world point `p`: signed (negative inside) or unsigned, and
-    /// already scaled so that a step of this length never crosses the surface (an exact
-    /// distance, a Lipschitz-1 lower bound, or a field times a safety factor).
-    fn distance(&self, p: DVec3) -> f64;
+    /// The distance marched at world point `p`, with an error of at most a quarter of
+    /// `tolerance` (world units): signed (negative inside) or unsigned, and already scaled
+    /// so that a step of this length never crosses the surface (an exact distance, a
+    /// Lipschitz-1 lower bound, or a field times a safety factor). A field may answer from
+    /// a faster, less precise evaluator where that is enough (the f32 tape of an analytic
+    /// SDF).
+    fn distance(&self, p: DVec3, tolerance: f64) -> f64;
 
-    /// [`Self::distance`] with an error of at most a quarter of `tolerance` (world units):
-    /// a field may answer from a faster, less precise evaluator where that is enough (the
-    /// f32 tape of an analytic SDF). The default is [`Self::distance`].
-    #[inline]
-    fn distance_within(&self, p: DVec3, tolerance: f64) -> f64 {
-        let _ = tolerance;
-        self.distance(p)
-    }
+    /// The bulk call: the distances of the active lanes of `block` into `block.out`
+    /// (see [`BlockKind`] for what each lane's value must be). The marcher owns all
+    /// packing into lanes; a field evaluates them in its own wide kernels or lane by lane
+    /// ([`PointBlock::fill_each`]).
+    fn distances(&self, block: &mut PointBlock);
 
     /// Whether [`Self::distance`] is signed. An unsigned field (a triangle, which has no
     /// inside) has no gradient on the surface itself: its march takes no refinement step
@@ -119,44 +185,9 @@ pub trait DistanceField: Send + Sync {
     fn is_signed(&self) -> bool;
 
     /// Whether the field evaluates eight points at once faster than one by one
-    /// ([`Self::distance8_within`]), so that packets of rays should be marched together.
+    /// ([`Self::distances`]), so that packets of rays should be marched together.
     fn prefers_packets(&self) -> bool {
         false
-    }
-
-    /// [`Self::distance_within`] at eight points at once, each with its own tolerance
-    /// (a packet of marches, [`Marched`]'s [`Geometry::closest_hits`]); each lane's value
-    /// must be what [`Self::distance_within`] gives at that point alone. The default
-    /// evaluates them one by one.
-    #[inline]
-    fn distance8_within(&self, points: &[DVec3; 8], tolerances: &[f64; 8]) -> [f64; 8] {
-        std::array::from_fn(|i| self.distance_within(points[i], tolerances[i]))
-    }
-
-    /// [`Self::distance8_within`] at the points `origin + dir * t[l]` of eight rays
-    /// (`origin[a][l]` is component `a` of lane `l`), each computed as `DVec3` arithmetic
-    /// does (`o + d * t` per component, rounded after the product and the sum). A field may
-    /// compute the points in its own 8-wide kernel; the default builds them and calls
-    /// [`Self::distance8_within`].
-    #[inline]
-    fn distance8_rays(
-        &self,
-        origin: &[[f64; 8]; 3],
-        dir: &[[f64; 8]; 3],
-        t: &[f64; 8],
-        tolerances: &[f64; 8],
-    ) -> [f64; 8] {
-        self.distance8_within(&ray_points8(origin, dir, t), tolerances)
-    }
-
-    /// [`Self::distance8_rays`] for four packets at once (lane `8 g + l` is lane `l` of
-    /// packet `g`: rays `o`, `d` at `t` to within `tol`), for the packets `g` whose bit is
-    /// set in `packets`; the other packets' values are not used. A field that evaluates 32
-    /// lanes faster than four packets of eight overrides it; the default evaluates each
-    /// packet asked for ([`distance32_by_packets`]).
-    #[inline]
-    fn distance32_rays(&self, o: &Rays32, d: &Rays32, t: &Lanes32, tol: &Lanes32, packets: u32) -> Lanes32 {
-        distance32_by_packets(self, o, d, t, tol, packets)
     }
 
     /// Whether a packet lane whose march ends takes the next ray of the batch at once
@@ -166,30 +197,6 @@ pub trait DistanceField: Send + Sync {
     /// region its lanes fall in; refilled lanes march at different depths).
     fn refills_lanes(&self) -> bool {
         true
-    }
-
-    /// [`Self::distance_within`] at four points at once (the stencil of
-    /// [`gradient_normal`]). The default evaluates them one by one.
-    #[inline]
-    fn distance4_within(&self, points: &[DVec3; 4], tolerance: f64) -> [f64; 4] {
-        points.map(|p| self.distance_within(p, tolerance))
-    }
-
-    /// [`Self::distance4_within`] at two stencils at once (the normals of two hits of a
-    /// packet, [`gradient_normals`]), each as [`Self::distance4_within`] gives it alone.
-    /// The default evaluates them one after the other.
-    #[inline]
-    fn distance4x2_within(&self, a: &[DVec3; 4], ta: f64, b: &[DVec3; 4], tb: f64) -> ([f64; 4], [f64; 4]) {
-        (self.distance4_within(a, ta), self.distance4_within(b, tb))
-    }
-
-    /// [`Self::distance4_within`] at eight stencils at once (`stencils[k]` to within
-    /// `tolerances[k]`: the normals of eight hits of a batch, [`gradient_normals`]), each as
-    /// [`Self::distance4_within`] gives it alone. The default takes them two at a time
-    /// ([`Self::distance4x2_within`]).
-    #[inline]
-    fn distance4x8_within(&self, stencils: &[[DVec3; 4]; 8], tolerances: &[f64; 8]) -> [[f64; 4]; 8] {
-        distance4x8_by_pairs(self, stencils, tolerances)
     }
 
     /// Whether the field is the exact Euclidean distance everywhere (false: a bound).
@@ -305,7 +312,7 @@ impl<F: DistanceField> Marched<F> {
     /// the bounds when there are any, and keeps hits with `t` in `[t_min, t_max]`.
     fn march(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<MarchHit> {
         let segment = self.segment(ray, t_min, t_max)?;
-        let f = |p: DVec3, tolerance: f64| self.field.distance_within(p, tolerance);
+        let f = |p: DVec3, tolerance: f64| self.field.distance(p, tolerance);
         let hit = sphere_trace(&f, &segment, self.size, &self.march, self.field.is_signed(), stats)?;
         (hit.t >= t_min as f64 && hit.t <= t_max as f64).then_some(hit)
     }
@@ -313,7 +320,7 @@ impl<F: DistanceField> Marched<F> {
     /// Marches the rays `rays[i]` over `[t_min, reach(i)]` (not at all where `reach(i)` is
     /// `None`) side by side, one field evaluation per step for all lanes. A field that
     /// refills lanes ([`DistanceField::refills_lanes`]) marches [`WIDE`] lanes, four
-    /// packets evaluated together ([`DistanceField::distance32_rays`]), and a lane whose
+    /// packets evaluated together ([`DistanceField::distances`]), and a lane whose
     /// march ends takes the next ray of the batch, so lanes idle only once the batch runs
     /// out (a packet would wait for its slowest ray). Otherwise a packet of [`PACKET`]
     /// lanes marches until its last lane is done before it takes the next rays. Each lane
@@ -332,19 +339,15 @@ impl<F: DistanceField> Marched<F> {
         // A batch of one packet has no rays to refill lanes with, and marches in eight
         // lanes rather than setting up 32 (the objects of a large union take packets).
         if self.field.refills_lanes() && rays.len() > PACKET {
-            let eval =
-                |o: &_, d: &_, t: &_, tol: &_, packets| self.field.distance32_rays(o, d, t, tol, packets);
-            self.march_lanes::<WIDE>(rays, t_min, reach, stats, on_hit, true, eval);
+            self.march_lanes::<WIDE>(rays, t_min, reach, stats, on_hit, true);
         } else {
-            let eval = |o: &_, d: &_, t: &_, tol: &_, _| self.field.distance8_rays(o, d, t, tol);
-            self.march_lanes::<PACKET>(rays, t_min, reach, stats, on_hit, false, eval);
+            self.march_lanes::<PACKET>(rays, t_min, reach, stats, on_hit, false);
         }
     }
 
-    /// [`Marched::march_batch`] in `W` lanes (a multiple of [`PACKET`]), refilled as marches
-    /// end or not, `eval` evaluating the field at the lanes' points for the packets whose
-    /// bits are set.
-    #[allow(clippy::too_many_arguments)]
+    /// [`Marched::march_batch`] in `W` lanes (a multiple of [`PACKET`], at most [`WIDE`]),
+    /// refilled as marches end or not, the field evaluated at the lanes' points in one
+    /// [`PointBlock`] per step ([`DistanceField::distances`]).
     #[inline]
     fn march_lanes<const W: usize>(
         &self,
@@ -354,8 +357,15 @@ impl<F: DistanceField> Marched<F> {
         stats: &mut RayStats,
         mut on_hit: impl FnMut(usize, MarchHit, &mut RayStats),
         refill: bool,
-        eval: impl Fn(&[[f64; W]; 3], &[[f64; W]; 3], &[f64; W], &[f64; W], u32) -> [f64; W],
     ) {
+        // The lanes' rays are copied into the block as lanes take them (`sync`), their
+        // parameters and tolerances at each step.
+        let mut block = PointBlock::new(BlockKind::Rays);
+        let sync = |block: &mut PointBlock, lanes: &MarchLanes<W>, l: usize| {
+            for a in 0..3 {
+                (block.origin[a][l], block.dir[a][l]) = (lanes.origin[a][l], lanes.dir[a][l]);
+            }
+        };
         // Each lane's state, its ray by component and its ray's index and end included
         // (`MarchLanes::ray`, `MarchLanes::reach`), lives in `lanes`.
         let mut lanes = MarchLanes::<W>::new(&self.march, self.size, self.field.is_signed());
@@ -397,6 +407,7 @@ impl<F: DistanceField> Marched<F> {
                     let i = chunk + k;
                     let seg = Segment::along(&rays[i], clipped.t0[k] as f64, clipped.t1[k] as f64);
                     lanes.start(l, &seg, stats);
+                    sync(&mut block, &lanes, l);
                     lanes.assign(l, i, ends[k]);
                 }
             }
@@ -415,6 +426,7 @@ impl<F: DistanceField> Marched<F> {
                         break;
                     }
                     lanes.move_lane(from, to);
+                    sync(&mut block, &lanes, to);
                     (idle, marching) = ((idle & !(1 << to)) | 1 << from, (marching & !(1 << from)) | 1 << to);
                 }
             }
@@ -435,8 +447,16 @@ impl<F: DistanceField> Marched<F> {
                 let l = rest.trailing_zeros() as usize;
                 rest &= rest - 1;
                 lanes.copy_point(first, l);
+                sync(&mut block, &lanes, l);
             }
-            let d = eval(&lanes.origin, &lanes.dir, &lanes.t, &lanes.tol, packets);
+            let active = (0..W / PACKET)
+                .filter(|g| packets & 1 << g != 0)
+                .fold(0, |m, g| m | ONE_PACKET << (PACKET * g));
+            block.t[..W].copy_from_slice(&lanes.t);
+            block.tol[..W].copy_from_slice(&lanes.tol);
+            block.active = active;
+            self.field.distances(&mut block);
+            let d: [f64; W] = std::array::from_fn(|l| block.out[l]);
             let mut ended = lanes.feed(&d, marching, stats);
             idle |= ended;
             while ended != 0 {
@@ -486,25 +506,31 @@ impl<F: DistanceField> Marched<F> {
         // stencil with an error of at most h / 20 (a quarter of the tolerance asked), so
         // the normal's direction is off by at most a few percent where the evaluator's
         // error bound is reached, far less in practice.
-        let f4 = |q: &[DVec3; 4]| self.field.distance4_within(q, 0.2 * h);
+        let f4 = |q: &[DVec3; 4]| self.stencils(&[*q], &[0.2 * h])[0];
         let normal = gradient_normal(&f4, p, h, stats);
         self.record(hit.t, p, eps, normal)
     }
 
     /// [`Marched::hit`] for `N` converged marches at once, their normals' stencils evaluated
-    /// together by `f(stencils, tolerances)` ([`DistanceField::distance4x2_within`],
-    /// [`DistanceField::distance4x8_within`]); each record is bit for bit the one
-    /// [`Marched::hit`] gives alone.
-    fn hits<const N: usize>(
-        &self,
-        found: [(&Ray, MarchHit); N],
-        f: impl FnOnce(&[[DVec3; 4]; N], &[f64; N]) -> [[f64; 4]; N],
-        stats: &mut RayStats,
-    ) -> [Hit; N] {
+    /// together in one [`PointBlock`] ([`Marched::stencils`]); each record is bit for bit
+    /// the one [`Marched::hit`] gives alone.
+    fn hits<const N: usize>(&self, found: [(&Ray, MarchHit); N], stats: &mut RayStats) -> [Hit; N] {
         let at = found.map(|(ray, mh)| self.hit_point(ray, mh));
         let tolerances = at.map(|(_, _, h)| 0.2 * h);
-        let normals = gradient_normals(|s| f(s, &tolerances), at.map(|(p, _, h)| (p, h)), stats);
+        let normals = gradient_normals(|s| self.stencils(s, &tolerances), at.map(|(p, _, h)| (p, h)), stats);
         std::array::from_fn(|k| self.record(found[k].1.t, at[k].0, at[k].1, normals[k]))
+    }
+
+    /// The field at `N` (at most 8) normal stencils, stencil `k` to within
+    /// `tolerances[k]`, in one bulk call ([`BlockKind::Stencils`]).
+    #[inline]
+    fn stencils<const N: usize>(&self, stencils: &[[DVec3; 4]; N], tolerances: &[f64; N]) -> [[f64; 4]; N] {
+        STENCILS.with(|b| {
+            let mut block = b.borrow_mut();
+            block.set_stencils(stencils, tolerances);
+            self.field.distances(&mut block);
+            std::array::from_fn(|k| std::array::from_fn(|j| block.out[4 * k + j]))
+        })
     }
 }
 
@@ -535,7 +561,7 @@ impl<F: DistanceField> Geometry for Marched<F> {
     ) {
         debug_assert!(t_max.len() == rays.len() && hits.len() == rays.len());
         // The hit records eight at a time, as the marches end: their normals' stencils in
-        // one evaluation ([`DistanceField::distance4x8_within`]); the last ones two at a
+        // one evaluation ([`Marched::stencils`]); the last ones two at a
         // time, then alone.
         const EIGHT: usize = 8;
         let mut pending = [(0usize, MarchHit { t: 0.0, residual: 0.0 }); EIGHT];
@@ -546,7 +572,7 @@ impl<F: DistanceField> Geometry for Marched<F> {
             if n == EIGHT {
                 n = 0;
                 let found = pending.map(|(j, mh)| (&rays[j], mh));
-                let done = self.hits(found, |s, tol| self.field.distance4x8_within(s, tol), stats);
+                let done = self.hits(found, stats);
                 for ((j, _), h) in pending.iter().zip(done) {
                     hits[*j] = Some(h);
                 }
@@ -555,11 +581,7 @@ impl<F: DistanceField> Geometry for Marched<F> {
         self.march_batch(rays, t_min, |i| Some(t_max[i]), stats, &mut record);
         for pair in pending[..n].chunks(2) {
             if let [(i, a), (j, b)] = *pair {
-                let pair_of = |s: &[[DVec3; 4]; 2], tol: &[f64; 2]| {
-                    let (da, db) = self.field.distance4x2_within(&s[0], tol[0], &s[1], tol[1]);
-                    [da, db]
-                };
-                let [ha, hb] = self.hits([(&rays[i], a), (&rays[j], b)], pair_of, stats);
+                let [ha, hb] = self.hits([(&rays[i], a), (&rays[j], b)], stats);
                 (hits[i], hits[j]) = (Some(ha), Some(hb));
             } else if let [(i, a)] = *pair {
                 hits[i] = Some(self.hit(&rays[i], a, stats));
@@ -721,28 +743,54 @@ mod tests {
         }
     }
 
-    /// The bulk call of a field equals its scalar distance lane by lane, bit for bit.
+    /// The bulk call of a field equals its scalar distance lane by lane, bit for bit, for
+    /// 32 lanes, for one packet, and for the normal stencils (1, 2 and 8 of them, each all
+    /// from the field's fast evaluator or all from its precise one).
     fn bulk_equals_scalar<F: DistanceField>(field: &F, o: [f64; 3], dirs: &[[f64; 3]], ts: &[f64], tol: f64) {
         let lane = |l: usize| l % dirs.len();
-        let o32: Rays32 = [[o[0]; WIDE], [o[1]; WIDE], [o[2]; WIDE]];
-        let d32: Rays32 = std::array::from_fn(|a| std::array::from_fn(|l| dirs[lane(l)][a]));
-        let t32: Lanes32 = std::array::from_fn(|l| ts[l % ts.len()]);
-        let tol32: Lanes32 = std::array::from_fn(|l| tol * (1.0 + (l % 3) as f64));
-        let wide = field.distance32_rays(&o32, &d32, &t32, &tol32, 0b1111);
+        let mut block = PointBlock::new(BlockKind::Rays);
+        block.origin = [[o[0]; WIDE], [o[1]; WIDE], [o[2]; WIDE]];
+        block.dir = std::array::from_fn(|a| std::array::from_fn(|l| dirs[lane(l)][a]));
+        block.t = std::array::from_fn(|l| ts[l % ts.len()]);
+        block.tol = std::array::from_fn(|l| tol * (1.0 + (l % 3) as f64));
+        block.active = u32::MAX;
+        field.distances(&mut block);
+        let wide = block.out;
         for l in 0..WIDE {
-            let p = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| o32[a][l] + d32[a][l] * t32[l]));
-            let one = field.distance_within(p, tol32[l]);
+            let p = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| {
+                block.origin[a][l] + block.dir[a][l] * block.t[l]
+            }));
+            assert_eq!(block.point(l), p);
+            let one = field.distance(p, block.tol[l]);
             assert_eq!(wide[l].to_bits(), one.to_bits(), "lane {l} at {p}: {} vs {one}", wide[l]);
         }
-        let part = |a: &[f64; WIDE]| -> [f64; PACKET] { std::array::from_fn(|l| a[l]) };
-        let eight = field.distance8_rays(
-            &o32.each_ref().map(part),
-            &d32.each_ref().map(part),
-            &part(&t32),
-            &part(&tol32),
-        );
+        block.active = 0xff;
+        block.out = [f64::NAN; WIDE];
+        field.distances(&mut block);
         for l in 0..PACKET {
-            assert_eq!(eight[l].to_bits(), wide[l].to_bits(), "packet lane {l}");
+            assert_eq!(block.out[l].to_bits(), wide[l].to_bits(), "packet lane {l}");
+        }
+        // Stencils: eight and two at a time, each as it is alone.
+        let stencils: [[DVec3; 4]; 8] =
+            std::array::from_fn(|k| std::array::from_fn(|j| block.point(4 * k + j)));
+        let tols: [f64; 8] = std::array::from_fn(|k| block.tol[4 * k]);
+        let one = |k: usize| {
+            let mut b = PointBlock::stencils(&[stencils[k]], &[tols[k]]);
+            field.distances(&mut b);
+            [b.out[0], b.out[1], b.out[2], b.out[3]]
+        };
+        let mut eight = PointBlock::stencils(&stencils, &tols);
+        field.distances(&mut eight);
+        let mut two = PointBlock::stencils(&[stencils[2], stencils[3]], &[tols[2], tols[3]]);
+        field.distances(&mut two);
+        for k in 0..8 {
+            let alone = one(k);
+            for j in 0..4 {
+                assert_eq!(eight.out[4 * k + j].to_bits(), alone[j].to_bits(), "stencil {k} point {j}");
+                if (2..4).contains(&k) {
+                    assert_eq!(two.out[4 * (k - 2) + j].to_bits(), alone[j].to_bits(), "pair {k} point {j}");
+                }
+            }
         }
     }
 

@@ -16,9 +16,7 @@ use glam::{DVec3, Vec3};
 use crate::geometry::grid::SdfGrid;
 use crate::geometry::grid::band::BandGrid;
 use crate::geometry::march::MarchParams;
-use crate::geometry::marched::{
-    DistanceField, Lanes32, Marched, Rays32, WIDE, distance32_by_packets, ray_points8,
-};
+use crate::geometry::marched::{BlockKind, DistanceField, Marched, PointBlock, WIDE};
 use crate::geometry::{
     Aabb, Census, Geometry, Hit, MaterialId, PACKET, Ray, RayStats, Shared, aabb, box_distance,
     distance_by_projection,
@@ -269,67 +267,35 @@ impl GridField {
 
 impl DistanceField for GridField {
     #[inline]
-    fn distance(&self, p: DVec3) -> f64 {
+    fn distance(&self, p: DVec3, _tolerance: f64) -> f64 {
         self.field(p) * GRID_STEP_SCALE
     }
 
-    /// True: [`Self::distance8_within`] interpolates eight points in one 8-wide kernel.
-    fn prefers_packets(&self) -> bool {
-        true
-    }
-
+    /// Packet by packet: a dense grid in world space interpolates a packet of rays with
+    /// the points computed in its kernel ([`SdfGrid::trilinear8_rays`]); other grids and
+    /// stencils go through [`GridField::field8`]. Every lane is its scalar value.
     #[inline]
-    fn distance8_within(&self, points: &[DVec3; 8], _tolerances: &[f64; 8]) -> [f64; 8] {
-        self.field8(points).map(|v| v * GRID_STEP_SCALE)
-    }
-
-    /// A dense grid in world space computes the points in its interpolation kernel
-    /// ([`SdfGrid::trilinear8_rays`]); other grids go through [`GridField::field8`].
-    #[inline]
-    fn distance8_rays(
-        &self,
-        origin: &[[f64; 8]; 3],
-        dir: &[[f64; 8]; 3],
-        t: &[f64; 8],
-        _tolerances: &[f64; 8],
-    ) -> [f64; 8] {
-        if let (None, GridStore::Dense(g)) = (&self.placement, &*self.grid) {
-            return g.trilinear8_rays(origin, dir, t, 0).map(|v| v as f64 * GRID_STEP_SCALE);
-        }
-        self.field8(&ray_points8(origin, dir, t)).map(|v| v * GRID_STEP_SCALE)
-    }
-
-    /// A dense grid in world space interpolates each packet from the 32 lanes in place
-    /// ([`SdfGrid::trilinear8_rays`]); other grids go packet by packet.
-    #[inline]
-    fn distance32_rays(&self, o: &Rays32, d: &Rays32, t: &Lanes32, tol: &Lanes32, packets: u32) -> Lanes32 {
-        let (None, GridStore::Dense(g)) = (&self.placement, &*self.grid) else {
-            return distance32_by_packets(self, o, d, t, tol, packets);
-        };
-        let mut out = [0.0; WIDE];
-        for p in 0..WIDE / PACKET {
-            if packets & 1 << p != 0 {
-                let v = g.trilinear8_rays(o, d, t, PACKET * p);
-                for (x, v) in out[PACKET * p..PACKET * (p + 1)].iter_mut().zip(v) {
-                    *x = v as f64 * GRID_STEP_SCALE;
+    fn distances(&self, block: &mut PointBlock) {
+        let packets = block.packets();
+        for g in 0..WIDE / PACKET {
+            if packets & 1 << g == 0 {
+                continue;
+            }
+            let v = match (block.kind, &self.placement, &*self.grid) {
+                (BlockKind::Rays, None, GridStore::Dense(grid)) => {
+                    grid.trilinear8_rays(&block.origin, &block.dir, &block.t, PACKET * g).map(|v| v as f64)
                 }
+                _ => self.field8(&block.packet_points(g)),
+            };
+            for (x, v) in block.out[PACKET * g..PACKET * (g + 1)].iter_mut().zip(v) {
+                *x = v * GRID_STEP_SCALE;
             }
         }
-        out
     }
 
-    #[inline]
-    fn distance4_within(&self, points: &[DVec3; 4], _tolerance: f64) -> [f64; 4] {
-        // The stencil twice over: one 8-wide evaluation instead of four scalar ones.
-        let v = self.field8(&std::array::from_fn(|i| points[i % 4]));
-        std::array::from_fn(|i| v[i] * GRID_STEP_SCALE)
-    }
-
-    #[inline]
-    fn distance4x2_within(&self, a: &[DVec3; 4], _ta: f64, b: &[DVec3; 4], _tb: f64) -> ([f64; 4], [f64; 4]) {
-        // Both stencils in one 8-wide evaluation.
-        let v = self.field8(&std::array::from_fn(|i| if i < 4 { a[i] } else { b[i - 4] }));
-        (std::array::from_fn(|i| v[i] * GRID_STEP_SCALE), std::array::from_fn(|i| v[i + 4] * GRID_STEP_SCALE))
+    /// True: [`Self::distances`] interpolates eight points in one 8-wide kernel.
+    fn prefers_packets(&self) -> bool {
+        true
     }
 
     fn is_signed(&self) -> bool {

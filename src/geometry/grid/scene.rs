@@ -24,8 +24,8 @@ use glam::{DVec3, UVec3, Vec3};
 use super::band::{BRICK, BRICK_SAMPLES, BS, BandGrid};
 use super::object::{GRID_STEP_SCALE, GridStore};
 use crate::geometry::march::MarchParams;
-use crate::geometry::marched::{DistanceField, Marched};
-use crate::geometry::{Aabb, Census, MaterialId, Shared, aabb, box_distance, distance_by_projection};
+use crate::geometry::marched::{DistanceField, Marched, PointBlock, WIDE};
+use crate::geometry::{Aabb, Census, MaterialId, PACKET, Shared, aabb, box_distance, distance_by_projection};
 
 /// `brick_material` entry bit of a brick whose samples name their material one by one.
 const MIXED: u32 = 1 << 31;
@@ -205,28 +205,33 @@ impl SceneGridObject {
 
 impl DistanceField for SceneGridField {
     #[inline]
-    fn distance(&self, p: DVec3) -> f64 {
+    fn distance(&self, p: DVec3, _tolerance: f64) -> f64 {
         self.grid.grid.march_distance(p.as_vec3()) as f64 * GRID_STEP_SCALE
+    }
+
+    /// Packet by packet, the band interpolating eight points in one 8-wide kernel
+    /// ([`BandGrid::march_distance8`]), each lane its scalar value.
+    #[inline]
+    fn distances(&self, block: &mut PointBlock) {
+        let packets = block.packets();
+        for g in 0..WIDE / PACKET {
+            if packets & 1 << g == 0 {
+                continue;
+            }
+            let points = block.packet_points(g);
+            let xs = points.map(|p| p.x as f32);
+            let ys = points.map(|p| p.y as f32);
+            let zs = points.map(|p| p.z as f32);
+            let v = self.grid.grid.march_distance8(&xs, &ys, &zs);
+            for (x, v) in block.out[PACKET * g..PACKET * (g + 1)].iter_mut().zip(v) {
+                *x = v as f64 * GRID_STEP_SCALE;
+            }
+        }
     }
 
     /// True: the band interpolates eight points in one 8-wide kernel.
     fn prefers_packets(&self) -> bool {
         true
-    }
-
-    #[inline]
-    fn distance8_within(&self, points: &[DVec3; 8], _tolerances: &[f64; 8]) -> [f64; 8] {
-        let xs = points.map(|p| p.x as f32);
-        let ys = points.map(|p| p.y as f32);
-        let zs = points.map(|p| p.z as f32);
-        self.grid.grid.march_distance8(&xs, &ys, &zs).map(|v| v as f64 * GRID_STEP_SCALE)
-    }
-
-    #[inline]
-    fn distance4_within(&self, points: &[DVec3; 4], tolerance: f64) -> [f64; 4] {
-        // The stencil twice over: one 8-wide evaluation instead of four scalar ones.
-        let v = self.distance8_within(&std::array::from_fn(|i| points[i % 4]), &[tolerance; 8]);
-        std::array::from_fn(|i| v[i])
     }
 
     fn is_signed(&self) -> bool {

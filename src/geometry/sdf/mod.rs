@@ -12,10 +12,7 @@ pub mod prune;
 pub mod tape;
 
 use crate::geometry::march::MarchParams;
-use crate::geometry::marched::{
-    DistanceField, Lanes32, Marched, Rays32, WIDE, distance4x8_by_pairs, distance32_by_packets, ray_point32,
-    ray_points32,
-};
+use crate::geometry::marched::{BlockKind, DistanceField, Lanes32, Marched, PointBlock, Rays32, WIDE};
 use crate::geometry::scene::SceneGeometry;
 use crate::geometry::{
     Census, Geometry, Hit, PACKET, Ray, RayStats, distance_by_projection, f32_error, max_abs,
@@ -566,7 +563,7 @@ pub const MAX_TAPE_OPS: usize = 1 << 16;
 /// The analytic field the marcher traces: the f64 [`SdfTree`] and, for a compound object
 /// (CSG, repetition) whose tape is not too long ([`MAX_TAPE_OPS`]), its compiled f32
 /// [`Tape`](tape::Tape). Each distance asked for
-/// with a tolerance ([`DistanceField::distance_within`]) comes from the tape when the
+/// with a tolerance ([`DistanceField::distance`]) comes from the tape when the
 /// tape's error bound at that point ([`tape::Tape::error_bound`] of `|p - origin|`) is at
 /// most a quarter of the tolerance, from the tree otherwise.
 #[derive(Clone, Debug)]
@@ -661,7 +658,7 @@ impl SdfField {
     }
 
     /// Whether the tape's error bound over `points` (a normal's stencil) is within a
-    /// quarter of `tolerance`, so that its values serve ([`DistanceField::distance4_within`]);
+    /// quarter of `tolerance`, so that its values serve ([`SdfField::stencil`]);
     /// else the stencil takes the tree.
     #[inline]
     fn tape_resolves(&self, tape: &tape::Tape, points: &[DVec3; 4], tolerance: f64) -> bool {
@@ -944,6 +941,68 @@ impl Kernel for TapeInputs32<'_> {
     }
 }
 
+impl SdfField {
+    /// [`DistanceField::distance`] at eight points at once, each with its own tolerance,
+    /// each lane deciding as it does alone (the tape's lanes equal its scalar values bit
+    /// for bit).
+    fn distance8_within(&self, points: &[DVec3; 8], tolerances: &[f64; 8]) -> [f64; 8] {
+        let Some(tape) = self.tape.as_ref() else {
+            return points.map(|p| self.tree.distance(p));
+        };
+        let d = self.eval_tape8(tape, points);
+        std::array::from_fn(|i| self.choose(points[i], tolerances[i], |_| d[i] as f64))
+    }
+
+    /// The [`BlockKind::Rays`] lanes of [`DistanceField::distances`].
+    #[inline]
+    fn ray_distances(&self, block: &mut PointBlock) {
+        let packets = block.packets();
+        let Some(tape) = self.tape.as_ref().filter(|_| packets == (1 << (WIDE / PACKET)) - 1) else {
+            for g in 0..WIDE / PACKET {
+                if packets & 1 << g != 0 {
+                    let tol: [f64; PACKET] = std::array::from_fn(|l| block.tol[PACKET * g + l]);
+                    let v = self.distance8_within(&block.packet_points(g), &tol);
+                    block.out[PACKET * g..PACKET * (g + 1)].copy_from_slice(&v);
+                }
+            }
+            return;
+        };
+        let PointBlock { origin: o, dir: d, t, tol, .. } = &*block;
+        let (rel, resolved) = tape_inputs32(tape, o, d, t, tol);
+        let v = self.eval_tape32(tape, &rel, || std::array::from_fn(|i| block.point(i)));
+        let out: Lanes32 = std::array::from_fn(|i| {
+            if resolved >> i & 1 != 0 {
+                return v[i] as f64;
+            }
+            self.choose(block.point(i), tol[i], |_| v[i] as f64)
+        });
+        block.out = out;
+    }
+
+    /// One normal stencil: all four points from the tape where it resolves them all, else
+    /// all four from the tree.
+    #[inline]
+    fn stencil(&self, points: &[DVec3; 4], tolerance: f64) -> [f64; 4] {
+        let Some(tape) = self.tape.as_ref().filter(|t| self.tape_resolves(t, points, tolerance)) else {
+            return points.map(|p| self.tree.distance(p));
+        };
+        let d = self.eval_tape8(tape, points);
+        [d[0] as f64, d[1] as f64, d[2] as f64, d[3] as f64]
+    }
+
+    /// Two stencils in one 8-wide tape evaluation where the tape resolves both (each lane's
+    /// value is what it is alone); else one after the other ([`SdfField::stencil`]).
+    #[inline]
+    fn stencil_pair(&self, a: &[DVec3; 4], ta: f64, b: &[DVec3; 4], tb: f64) -> ([f64; 4], [f64; 4]) {
+        let both = |t: &&tape::Tape| self.tape_resolves(t, a, ta) && self.tape_resolves(t, b, tb);
+        let Some(tape) = self.tape.as_ref().filter(both) else {
+            return (self.stencil(a, ta), self.stencil(b, tb));
+        };
+        let d = self.eval_tape8(tape, &[a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3]]);
+        (std::array::from_fn(|i| d[i] as f64), std::array::from_fn(|i| d[i + 4] as f64))
+    }
+}
+
 /// The 32 world `points` relative to the tape's origin, rounded to f32
 /// ([`tape::Tape::relative`]), by component (`[a][g][l]`: component `a` of lane `8 g + l`).
 fn relative32(tape: &tape::Tape, points: &[DVec3; WIDE]) -> [tape::X32; 3] {
@@ -962,13 +1021,54 @@ fn relative32(tape: &tape::Tape, points: &[DVec3; WIDE]) -> [tape::X32; 3] {
 /// are); the material of the nearest surface at a hit from the tree.
 impl DistanceField for SdfField {
     #[inline]
-    fn distance(&self, p: DVec3) -> f64 {
-        self.tree.distance(p)
+    fn distance(&self, p: DVec3, tolerance: f64) -> f64 {
+        self.choose(p, tolerance, |tape| self.eval_tape(tape, p))
     }
 
-    #[inline]
-    fn distance_within(&self, p: DVec3, tolerance: f64) -> f64 {
-        self.choose(p, tolerance, |tape| self.eval_tape(tape, p))
+    /// Rays: all four packets in one 32-lane tape evaluation ([`SdfField::eval_tape32`])
+    /// when all four are active (else packet by packet, [`SdfField::distance8_within`]: in
+    /// a batch's last steps, evaluating idle packets along costs more); each lane decides as
+    /// [`DistanceField::distance`] at its point alone. Stencils: the eight in one 32-lane
+    /// tape evaluation where the tape resolves each, else two at a time
+    /// ([`SdfField::stencil_pair`]).
+    fn distances(&self, block: &mut PointBlock) {
+        match block.kind {
+            BlockKind::Rays => self.ray_distances(block),
+            BlockKind::Stencils => {
+                let n = block.stencil_count();
+                if n == 1 {
+                    let d = self.stencil(
+                        &[block.point(0), block.point(1), block.point(2), block.point(3)],
+                        block.tol[0],
+                    );
+                    block.out[..4].copy_from_slice(&d);
+                    return;
+                }
+                let stencils: [[DVec3; 4]; 8] =
+                    std::array::from_fn(|k| std::array::from_fn(|j| block.point(4 * k + j)));
+                let tol: [f64; 8] = std::array::from_fn(|k| block.tol[4 * k]);
+                let resolves = |t: &&tape::Tape| (0..n).all(|k| self.tape_resolves(t, &stencils[k], tol[k]));
+                if n == 8
+                    && let Some(tape) = self.tape.as_ref().filter(resolves)
+                {
+                    let points: [DVec3; WIDE] = std::array::from_fn(|i| stencils[i / 4][i % 4]);
+                    let v = self.eval_tape32(tape, &relative32(tape, &points), || points);
+                    block.out = v.map(|x| x as f64);
+                    return;
+                }
+                for k in (0..n).step_by(2) {
+                    let (a, ta) = (stencils[k], tol[k]);
+                    let v = if k + 1 < n {
+                        let (da, db) = self.stencil_pair(&a, ta, &stencils[k + 1], tol[k + 1]);
+                        [da[0], da[1], da[2], da[3], db[0], db[1], db[2], db[3]]
+                    } else {
+                        let d = self.stencil(&a, ta);
+                        [d[0], d[1], d[2], d[3], 0.0, 0.0, 0.0, 0.0]
+                    };
+                    block.out[4 * k..4 * k + 8].copy_from_slice(&v);
+                }
+            }
+        }
     }
 
     fn prefers_packets(&self) -> bool {
@@ -980,64 +1080,6 @@ impl DistanceField for SdfField {
     /// (measured: a smooth union of 64 spheres took 13% more instructions per frame).
     fn refills_lanes(&self) -> bool {
         self.regions.is_none()
-    }
-
-    fn distance8_within(&self, points: &[DVec3; 8], tolerances: &[f64; 8]) -> [f64; 8] {
-        let Some(tape) = self.tape.as_ref() else {
-            return points.map(|p| self.tree.distance(p));
-        };
-        // Each lane decides as `distance_within` at its point alone; the tape's lanes equal
-        // its scalar values bit for bit.
-        let d = self.eval_tape8(tape, points);
-        std::array::from_fn(|i| self.choose(points[i], tolerances[i], |_| d[i] as f64))
-    }
-
-    /// All four packets in one 32-lane tape evaluation ([`SdfField::eval_tape32`]) when all
-    /// four are asked for (else packet by packet: in a batch's last steps, evaluating idle
-    /// packets along costs more); each lane decides as `distance_within` at its point alone.
-    fn distance32_rays(&self, o: &Rays32, d: &Rays32, t: &Lanes32, tol: &Lanes32, packets: u32) -> Lanes32 {
-        let Some(tape) = self.tape.as_ref().filter(|_| packets == (1 << (WIDE / PACKET)) - 1) else {
-            return distance32_by_packets(self, o, d, t, tol, packets);
-        };
-        let (rel, resolved) = tape_inputs32(tape, o, d, t, tol);
-        let v = self.eval_tape32(tape, &rel, || ray_points32(o, d, t));
-        std::array::from_fn(|i| {
-            if resolved >> i & 1 != 0 {
-                return v[i] as f64;
-            }
-            self.choose(ray_point32(o, d, t, i), tol[i], |_| v[i] as f64)
-        })
-    }
-
-    fn distance4_within(&self, points: &[DVec3; 4], tolerance: f64) -> [f64; 4] {
-        let Some(tape) = self.tape.as_ref().filter(|t| self.tape_resolves(t, points, tolerance)) else {
-            return points.map(|p| self.tree.distance(p));
-        };
-        let d = self.eval_tape8(tape, points);
-        [d[0] as f64, d[1] as f64, d[2] as f64, d[3] as f64]
-    }
-
-    /// Both stencils in one 8-wide tape evaluation where the tape resolves both (each lane's
-    /// value is what it is alone); else one after the other.
-    fn distance4x2_within(&self, a: &[DVec3; 4], ta: f64, b: &[DVec3; 4], tb: f64) -> ([f64; 4], [f64; 4]) {
-        let both = |t: &&tape::Tape| self.tape_resolves(t, a, ta) && self.tape_resolves(t, b, tb);
-        let Some(tape) = self.tape.as_ref().filter(both) else {
-            return (self.distance4_within(a, ta), self.distance4_within(b, tb));
-        };
-        let d = self.eval_tape8(tape, &[a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3]]);
-        (std::array::from_fn(|i| d[i] as f64), std::array::from_fn(|i| d[i + 4] as f64))
-    }
-
-    /// The eight stencils in one 32-lane tape evaluation ([`SdfField::eval_tape32`]) where
-    /// the tape resolves each (each lane's value is what it is alone); else two at a time.
-    fn distance4x8_within(&self, stencils: &[[DVec3; 4]; 8], tolerances: &[f64; 8]) -> [[f64; 4]; 8] {
-        let resolves = |t: &&tape::Tape| (0..8).all(|k| self.tape_resolves(t, &stencils[k], tolerances[k]));
-        let Some(tape) = self.tape.as_ref().filter(resolves) else {
-            return distance4x8_by_pairs(self, stencils, tolerances);
-        };
-        let points: [DVec3; WIDE] = std::array::from_fn(|i| stencils[i / 4][i % 4]);
-        let v = self.eval_tape32(tape, &relative32(tape, &points), || points);
-        std::array::from_fn(|k| std::array::from_fn(|j| v[4 * k + j] as f64))
     }
 
     fn is_signed(&self) -> bool {
