@@ -8,8 +8,160 @@
 
 use glam::DVec3;
 
-use crate::geometry::{Ray, RayStats};
+use crate::geometry::{PACKET, Ray, RayStats};
 use crate::simd::{Kernel, Lane64, Simd};
+
+/// Lanes a [`crate::geometry::marched::Marched`] batch marches side by side when its field
+/// refills lanes, and the lanes of a stencil [`PointBlock`]: four packets.
+pub const WIDE: usize = 4 * PACKET;
+
+/// What the lanes of a [`PointBlock`] hold.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BlockKind {
+    /// Marching lanes: lane `l` is the point `origin + dir * t` of its ray, to within
+    /// `tol[l]`, computed as `DVec3` arithmetic does (`o + d * t` per component, rounded
+    /// after the product and the sum; [`PointBlock::point`]). Each lane's value must be
+    /// what the field's scalar distance gives at that point alone.
+    Rays,
+    /// Normal stencils ([`gradient_normal`], a [`PointBlock`] of [`WIDE`] lanes): lanes
+    /// `4 k .. 4 k + 4` are the four points of stencil `k` (in `origin`; `dir` and `t`
+    /// unused), all to within `tol[4 k]`. The four points of a stencil are evaluated
+    /// alike: a field may answer them from a faster evaluator only where it is precise
+    /// enough for all four, else all four from its precise one (so that the gradient sees
+    /// one smooth function).
+    Stencils,
+}
+
+/// Points by component for the bulk call: `[a][l]` is component `a` of lane `l` (lane
+/// `l % 8` of packet `l / 8`).
+pub type Rays32 = [[f64; WIDE]; 3];
+
+/// One number per lane of a [`WIDE`] block.
+pub type Lanes32 = [f64; WIDE];
+
+/// A structure-of-arrays block of `W` points (a multiple of [`PACKET`], at most [`WIDE`]; a
+/// scalar march's one lane is never evaluated in bulk), the one bulk call of a field
+/// (`DistanceField::distances`): a batch's lanes live in it ([`MarchLanes::pts`], so
+/// nothing is copied to evaluate them), or the marcher packs its normal stencils into it;
+/// the field writes each active lane's distance into `out`.
+#[derive(Clone, Debug)]
+pub struct PointBlock<const W: usize = WIDE> {
+    /// What the lanes hold.
+    pub kind: BlockKind,
+    /// Ray origins by component ([`BlockKind::Rays`]), or the points themselves
+    /// ([`BlockKind::Stencils`]).
+    pub origin: [[f64; W]; 3],
+    /// Ray directions by component ([`BlockKind::Rays`]).
+    pub dir: [[f64; W]; 3],
+    /// Ray parameters ([`BlockKind::Rays`]).
+    pub t: [f64; W],
+    /// The tolerance of each lane (world units): its value may be off by a quarter of it.
+    pub tol: [f64; W],
+    /// Bit `l` set: lane `l` is evaluated. A field evaluates lanes by packets of
+    /// [`PACKET`] (those with an active lane); the values of other lanes are not used.
+    /// [`BlockKind::Stencils`] are active in whole stencils, from lane 0 up.
+    pub active: u32,
+    /// The distances, written by the bulk call for the active lanes.
+    pub out: [f64; W],
+}
+
+impl<const W: usize> PointBlock<W> {
+    /// An empty block of `kind` (no active lane, every number 0, tolerances infinite).
+    pub fn new(kind: BlockKind) -> Self {
+        PointBlock {
+            kind,
+            origin: [[0.0; W]; 3],
+            dir: [[0.0; W]; 3],
+            t: [0.0; W],
+            tol: [f64::INFINITY; W],
+            active: 0,
+            out: [0.0; W],
+        }
+    }
+
+    /// Lane `l`'s point: the ray point `origin + dir * t` ([`BlockKind::Rays`], as `DVec3`
+    /// arithmetic computes it) or the stencil point.
+    #[inline]
+    pub fn point(&self, l: usize) -> DVec3 {
+        let o = DVec3::new(self.origin[0][l], self.origin[1][l], self.origin[2][l]);
+        match self.kind {
+            BlockKind::Rays => o + DVec3::new(self.dir[0][l], self.dir[1][l], self.dir[2][l]) * self.t[l],
+            BlockKind::Stencils => o,
+        }
+    }
+
+    /// The points of packet `g` (lanes `8 g ..`), [`Self::point`] lane by lane.
+    #[inline]
+    pub fn packet_points(&self, g: usize) -> [DVec3; PACKET] {
+        std::array::from_fn(|l| self.point(PACKET * g + l))
+    }
+
+    /// Bit `g` set: packet `g` has an active lane.
+    #[inline]
+    pub fn packets(&self) -> u32 {
+        (0..W / PACKET).filter(|g| self.active >> (PACKET * g) & 0xff != 0).fold(0, |p, g| p | 1 << g)
+    }
+
+    /// This block as a [`WIDE`] one, where `W` is [`WIDE`] (for a field's 32-lane kernels).
+    #[inline]
+    pub fn wide(&self) -> Option<&PointBlock<WIDE>> {
+        (self as &dyn std::any::Any).downcast_ref()
+    }
+
+    /// [`Self::wide`], mutable.
+    #[inline]
+    pub fn wide_mut(&mut self) -> Option<&mut PointBlock<WIDE>> {
+        (self as &mut dyn std::any::Any).downcast_mut()
+    }
+
+    /// Writes `f(point, tolerance)` into `out` for each lane of the packets with an active
+    /// lane: the lane-by-lane evaluation of a field without a faster one.
+    #[inline]
+    pub fn fill_each(&mut self, f: impl Fn(DVec3, f64) -> f64) {
+        let packets = self.packets();
+        for g in 0..W / PACKET {
+            if packets & 1 << g != 0 {
+                for l in PACKET * g..PACKET * (g + 1) {
+                    self.out[l] = f(self.point(l), self.tol[l]);
+                }
+            }
+        }
+    }
+}
+
+impl PointBlock<WIDE> {
+    /// A block of the `N` normal stencils `stencils` (stencil `k` to within
+    /// `tolerances[k]`), `N` at most 8.
+    pub fn stencils<const N: usize>(stencils: &[[DVec3; 4]; N], tolerances: &[f64; N]) -> Self {
+        let mut b = PointBlock::new(BlockKind::Stencils);
+        b.set_stencils(stencils, tolerances);
+        b
+    }
+
+    /// Makes this block hold the `N` normal stencils `stencils` (stencil `k` to within
+    /// `tolerances[k]`), `N` at most 8, as [`Self::stencils`] builds them; lanes past
+    /// them are left as they were and inactive.
+    #[inline]
+    pub fn set_stencils<const N: usize>(&mut self, stencils: &[[DVec3; 4]; N], tolerances: &[f64; N]) {
+        const { assert!(N <= 8) };
+        let b = self;
+        b.kind = BlockKind::Stencils;
+        for (k, s) in stencils.iter().enumerate() {
+            for (j, p) in s.iter().enumerate() {
+                let l = 4 * k + j;
+                (b.origin[0][l], b.origin[1][l], b.origin[2][l]) = (p.x, p.y, p.z);
+                b.tol[l] = tolerances[k];
+            }
+        }
+        b.active = (1u64 << (4 * N)).wrapping_sub(1) as u32;
+    }
+
+    /// The number of stencils of a [`BlockKind::Stencils`] block.
+    #[inline]
+    pub fn stencil_count(&self) -> usize {
+        self.active.count_ones() as usize / 4
+    }
+}
 
 /// Sphere-tracing parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -107,7 +259,7 @@ pub fn sphere_trace(
     let mut lane = MarchLanes::<1>::new(params, size, refine);
     lane.start(0, seg, stats);
     loop {
-        let raw = f(seg.origin + seg.dir * lane.t[0], lane.tol[0]);
+        let raw = f(seg.origin + seg.dir * lane.pts.t[0], lane.pts.tol[0]);
         // [`MarchLanes::feed`] for the one lane, its common step taken directly.
         if lane.special == 0 && lane.plain_step(0, raw) {
             stats.march_steps += 1;
@@ -149,16 +301,11 @@ pub fn sphere_trace(
 /// are accepted on convergence, unrefined.
 #[derive(Clone, Debug)]
 pub struct MarchLanes<const W: usize> {
-    /// Ray parameter where each lane's distance is needed next.
-    pub t: [f64; W],
-    /// The hit tolerance at [`Self::t`]: what the field's evaluation must resolve there
-    /// (world units; infinite for a lane that marches nothing).
-    pub tol: [f64; W],
-    /// Each lane's ray by component (`origin[a][l]` is component `a` of lane `l`'s
-    /// [`Segment::origin`]): the field is evaluated at `origin + dir * t`.
-    pub origin: [[f64; W]; 3],
-    /// Each lane's [`Segment::dir`] by component.
-    pub dir: [[f64; W]; 3],
+    /// Each lane's ray by component, the ray parameter where its distance is needed next
+    /// (`t`) and the tolerance it must be resolved to there (`tol`, world units; infinite
+    /// for a lane that marches nothing): the field is evaluated at `origin + dir * t`,
+    /// this block as it stands (the bulk call of a batch, with `active` set by the caller).
+    pub pts: PointBlock<W>,
     /// The caller's index of each lane's ray ([`Self::assign`]), moved with the lane.
     pub ray: [usize; W],
     /// The caller's end of each lane's ray ([`Self::assign`]), moved with the lane.
@@ -229,10 +376,7 @@ impl<const W: usize> MarchLanes<W> {
     pub fn new(params: &MarchParams, size: f64, refine: bool) -> Self {
         const { assert!(W >= 1 && W <= 32) };
         MarchLanes {
-            t: [0.0; W],
-            tol: [f64::INFINITY; W],
-            origin: [[0.0; W]; 3],
-            dir: [[0.0; W]; 3],
+            pts: PointBlock::new(BlockKind::Rays),
             ray: [0; W],
             reach: [0.0; W],
             spread: [0.0; W],
@@ -261,9 +405,9 @@ impl<const W: usize> MarchLanes<W> {
     #[inline]
     pub fn start(&mut self, l: usize, seg: &Segment, stats: &mut RayStats) {
         stats.marched_rays += 1;
-        self.t[l] = seg.t0;
+        self.pts.t[l] = seg.t0;
         for a in 0..3 {
-            (self.origin[a][l], self.dir[a][l]) = (seg.origin[a], seg.dir[a]);
+            (self.pts.origin[a][l], self.pts.dir[a][l]) = (seg.origin[a], seg.dir[a]);
         }
         self.spread[l] = seg.spread;
         (self.t0[l], self.t1[l]) = (seg.t0, seg.t1);
@@ -274,7 +418,7 @@ impl<const W: usize> MarchLanes<W> {
         (self.iterations[l], self.touches[l]) = (0, 0);
         self.first_touch[l] = MarchHit { t: seg.t0, residual: 0.0 };
         self.set_phase(l, Phase::March);
-        self.tol[l] = self.march_tolerance(l);
+        self.pts.tol[l] = self.march_tolerance(l);
     }
 
     /// Records the caller's index `ray` and end `reach` of lane `l`'s ray
@@ -288,16 +432,16 @@ impl<const W: usize> MarchLanes<W> {
     /// parameter, origin and direction.
     #[inline]
     pub fn copy_point(&mut self, from: usize, l: usize) {
-        self.t[l] = self.t[from];
+        self.pts.t[l] = self.pts.t[from];
         for a in 0..3 {
-            (self.origin[a][l], self.dir[a][l]) = (self.origin[a][from], self.dir[a][from]);
+            (self.pts.origin[a][l], self.pts.dir[a][l]) = (self.pts.origin[a][from], self.pts.dir[a][from]);
         }
     }
 
     /// Lane `l` marches nothing (its tolerance is infinite, [`Self::tol`]).
     #[inline]
     pub fn stop(&mut self, l: usize) {
-        self.tol[l] = f64::INFINITY;
+        self.pts.tol[l] = f64::INFINITY;
     }
 
     /// Lane `to` (idle) takes over lane `from`'s march where it stands, and `from` marches
@@ -306,7 +450,7 @@ impl<const W: usize> MarchLanes<W> {
     pub fn move_lane(&mut self, from: usize, to: usize) {
         self.copy_point(from, to);
         (self.ray[to], self.reach[to]) = (self.ray[from], self.reach[from]);
-        self.tol[to] = self.tol[from];
+        self.pts.tol[to] = self.pts.tol[from];
         self.spread[to] = self.spread[from];
         (self.t0[to], self.t1[to]) = (self.t0[from], self.t1[from]);
         self.sign[to] = self.sign[from];
@@ -330,7 +474,7 @@ impl<const W: usize> MarchLanes<W> {
     /// [`MarchParams::tolerance`] at lane `l`'s [`Self::t`].
     #[inline]
     fn march_tolerance(&self, l: usize) -> f64 {
-        self.tol_scale * (self.spread[l] + self.t[l]).max(self.tol_floor)
+        self.tol_scale * (self.spread[l] + self.pts.t[l]).max(self.tol_floor)
     }
 
     #[inline]
@@ -369,7 +513,7 @@ impl<const W: usize> MarchLanes<W> {
                 self.outcome[l] = outcome;
                 ended |= 1 << l;
             } else {
-                self.tol[l] = match self.phase[l] {
+                self.pts.tol[l] = match self.phase[l] {
                     Phase::Probe { eps, .. } | Phase::Refine { eps, .. } => eps,
                     Phase::March => self.march_tolerance(l),
                 };
@@ -413,11 +557,11 @@ impl<const W: usize> MarchLanes<W> {
             1.0
         };
         let omega = if self.iterations[l] == 0 { self.params.relaxation } else { self.omega[l] };
-        let (t, d) = (self.t[l], sign * raw);
+        let (t, d) = (self.pts.t[l], sign * raw);
         let (r, next) = (d.abs(), t + d * omega);
         let fallback = omega > 1.0 && self.prev_r[l] + r < t - self.prev_t[l];
         if fallback
-            || !(r >= self.tol[l])
+            || !(r >= self.pts.tol[l])
             || !(next <= self.t1[l])
             || self.iterations[l] >= self.params.max_steps.saturating_sub(1)
         {
@@ -425,10 +569,10 @@ impl<const W: usize> MarchLanes<W> {
         }
         (self.sign[l], self.omega[l]) = (sign, omega);
         (self.prev_t[l], self.prev_r[l], self.r[l], self.r_t[l]) = (t, r, r, t);
-        self.t[l] = next;
+        self.pts.t[l] = next;
         self.iterations[l] += 1;
         self.touches[l] = 0;
-        self.tol[l] = self.march_tolerance(l);
+        self.pts.tol[l] = self.march_tolerance(l);
         true
     }
 
@@ -441,8 +585,8 @@ impl<const W: usize> MarchLanes<W> {
                 // Kept where the field is smaller than at the converged point and not
                 // before the segment.
                 let r2 = raw.abs();
-                return Some(Some(if r2 <= r && self.t[l] >= self.t0[l] - eps {
-                    MarchHit { t: self.t[l], residual: r2 }
+                return Some(Some(if r2 <= r && self.pts.t[l] >= self.t0[l] - eps {
+                    MarchHit { t: self.pts.t[l], residual: r2 }
                 } else {
                     MarchHit { t, residual: r }
                 }));
@@ -454,7 +598,7 @@ impl<const W: usize> MarchLanes<W> {
                     // the secant's zero (two evaluations: the probe and the refinement).
                     stats.march_steps += 2;
                     self.set_phase(l, Phase::Refine { t, r: d, eps });
-                    self.t[l] = t + (self.t[l] - t) * d / (d - dp);
+                    self.pts.t[l] = t + (self.pts.t[l] - t) * d / (d - dp);
                     return None;
                 }
                 // Only touching zero: march on from the probe, with plain steps.
@@ -466,7 +610,7 @@ impl<const W: usize> MarchLanes<W> {
                 self.omega[l] = 1.0;
                 self.prev_t[l] = t;
                 self.prev_r[l] = d;
-                if self.t[l] > self.t1[l] {
+                if self.pts.t[l] > self.t1[l] {
                     return Some(None);
                 }
             }
@@ -482,7 +626,7 @@ impl<const W: usize> MarchLanes<W> {
         }
         self.iterations[l] += 1;
         stats.march_steps += 1;
-        let t = self.t[l];
+        let t = self.pts.t[l];
         let eps = self.march_tolerance(l);
         if self.sign[l] == 0.0 {
             self.sign[l] = if raw < 0.0 { -1.0 } else { 1.0 };
@@ -495,7 +639,7 @@ impl<const W: usize> MarchLanes<W> {
         // to the plain step from the previous point.
         if self.omega[l] > 1.0 && self.prev_r[l] + r < t - self.prev_t[l] {
             self.omega[l] = 1.0;
-            self.t[l] = self.prev_t[l] + self.prev_r[l];
+            self.pts.t[l] = self.prev_t[l] + self.prev_r[l];
             return self.budget(l, stats);
         }
         if r >= eps {
@@ -512,7 +656,7 @@ impl<const W: usize> MarchLanes<W> {
                 // Already past the surface: crossed. One refinement step back onto it.
                 stats.march_steps += 1;
                 self.set_phase(l, Phase::Refine { t, r, eps });
-                self.t[l] = t + d;
+                self.pts.t[l] = t + d;
                 return None;
             }
             if self.iterations[l] >= self.params.max_steps {
@@ -521,17 +665,17 @@ impl<const W: usize> MarchLanes<W> {
             // The probe is counted as a step when it is marched on from (`step`), or with
             // the refinement when it confirms the crossing.
             self.set_phase(l, Phase::Probe { t, d, eps });
-            self.t[l] = t + d + 0.5 * eps * f64::from(1u32 << self.touches[l].min(15));
+            self.pts.t[l] = t + d + 0.5 * eps * f64::from(1u32 << self.touches[l].min(15));
             return None;
         }
         (self.prev_t[l], self.prev_r[l]) = (t, r);
-        self.t[l] = t + d * self.omega[l];
-        if self.t[l] > self.t1[l] {
+        self.pts.t[l] = t + d * self.omega[l];
+        if self.pts.t[l] > self.t1[l] {
             // A relaxed step past the end may have jumped a surface near the end: retry it
             // as a plain step, which is safe.
             if self.omega[l] > 1.0 && self.prev_t[l] + self.prev_r[l] <= self.t1[l] {
                 self.omega[l] = 1.0;
-                self.t[l] = self.prev_t[l] + self.prev_r[l];
+                self.pts.t[l] = self.prev_t[l] + self.prev_r[l];
                 return self.budget(l, stats);
             }
             return Some(None);
@@ -585,7 +729,7 @@ impl<const W: usize> Kernel for PlainSteps<'_, W> {
             if want == 0 {
                 continue;
             }
-            let (t, x, sign0) = (s.load4_at(&m.t, i), s.load4_at(raw, i), s.load4_at(&m.sign, i));
+            let (t, x, sign0) = (s.load4_at(&m.pts.t, i), s.load4_at(raw, i), s.load4_at(&m.sign, i));
             let (fresh, budget) = s.u32_masks4(&m.iterations, i, limit);
             let negative = x.cmp_lt(zero);
             let first_sign = S::F64x4::select(negative, s.splat4(-1.0), one);
@@ -596,7 +740,7 @@ impl<const W: usize> Kernel for PlainSteps<'_, W> {
             let next = t + d * omega;
             let covered = s.load4_at(&m.prev_r, i) + r;
             let fallback = omega.cmp_gt(one).and(covered.cmp_lt(t - s.load4_at(&m.prev_t, i)));
-            let moves = r.cmp_ge(s.load4_at(&m.tol, i)).and(next.cmp_le(s.load4_at(&m.t1, i)));
+            let moves = r.cmp_ge(s.load4_at(&m.pts.tol, i)).and(next.cmp_le(s.load4_at(&m.t1, i)));
             let go = fallback.andnot(moves).and(budget);
             let k = go.movemask() & want;
             if k == 0 {
@@ -617,9 +761,9 @@ impl<const W: usize> Kernel for PlainSteps<'_, W> {
             store!(&mut m.prev_r, r);
             store!(&mut m.r, r);
             store!(&mut m.r_t, t);
-            store!(&mut m.t, next);
+            store!(&mut m.pts.t, next);
             let spread = s.load4_at(&m.spread, i);
-            store!(&mut m.tol, scale * (spread + next).vmax(floor));
+            store!(&mut m.pts.tol, scale * (spread + next).vmax(floor));
             let mut taken = k;
             while taken != 0 {
                 let l = i + taken.trailing_zeros() as usize;
@@ -717,7 +861,7 @@ mod tests {
         let tolerance_at_start = |s: &Segment| {
             let mut lane = MarchLanes::<1>::new(&params, size, false);
             lane.start(0, s, &mut RayStats::default());
-            lane.tol[0]
+            lane.pts.tol[0]
         };
         assert_eq!(tolerance_at_start(&s), params.tolerance(0.0, size));
         let mut stats = RayStats::default();
@@ -829,7 +973,7 @@ mod tests {
             let raw = std::array::from_fn(|l| {
                 let s = &segs[ray_of[l]];
                 if marching & 1 << l != 0 {
-                    rough(s.origin + s.dir * lanes.t[l], lanes.tol[l])
+                    rough(s.origin + s.dir * lanes.pts.t[l], lanes.pts.tol[l])
                 } else {
                     f64::NAN
                 }

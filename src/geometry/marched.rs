@@ -17,146 +17,13 @@
 use crate::simd::{Kernel, Lane, Lane8, Simd, dispatch};
 use glam::{DVec3, Vec3};
 
+pub use crate::geometry::march::{BlockKind, Lanes32, PointBlock, Rays32, WIDE};
 use crate::geometry::march::{
     MarchHit, MarchLanes, MarchParams, Segment, gradient_normal, gradient_normals, sphere_trace,
 };
 use crate::geometry::{
     Aabb, Census, Geometry, Hit, MaterialId, PACKET, Ray, RayStats, Shared, f32_error, max_abs,
 };
-
-/// Lanes a [`Marched`] batch marches side by side when its field refills lanes
-/// ([`DistanceField::refills_lanes`]), and the lanes of a [`PointBlock`]: four packets.
-pub const WIDE: usize = 4 * PACKET;
-
-/// What the lanes of a [`PointBlock`] hold.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum BlockKind {
-    /// Marching lanes: lane `l` is the point `origin + dir * t` of its ray, to within
-    /// `tol[l]`, computed as `DVec3` arithmetic does (`o + d * t` per component, rounded
-    /// after the product and the sum; [`PointBlock::point`]). Each lane's value must be
-    /// what [`DistanceField::distance`] gives at that point alone.
-    Rays,
-    /// Normal stencils ([`gradient_normal`]): lanes `4 k .. 4 k + 4` are the four points
-    /// of stencil `k` (in `origin`; `dir` and `t` unused), all to within `tol[4 k]`. The
-    /// four points of a stencil are evaluated alike: a field may answer them from a
-    /// faster evaluator only where it is precise enough for all four, else all four from
-    /// its precise one (so that the gradient sees one smooth function).
-    Stencils,
-}
-
-/// Points by component for the bulk call ([`DistanceField::distances`]): `[a][l]` is
-/// component `a` of lane `l` (lane `l % 8` of packet `l / 8`).
-pub type Rays32 = [[f64; WIDE]; 3];
-
-/// One number per lane of a [`PointBlock`].
-pub type Lanes32 = [f64; WIDE];
-
-/// A structure-of-arrays block of up to [`WIDE`] points, the one bulk call of a field
-/// ([`DistanceField::distances`]): the marcher packs its lanes (or its normal stencils)
-/// into it, the field writes each active lane's distance into `out`.
-#[derive(Clone, Debug)]
-pub struct PointBlock {
-    /// What the lanes hold.
-    pub kind: BlockKind,
-    /// Ray origins by component ([`BlockKind::Rays`]), or the points themselves
-    /// ([`BlockKind::Stencils`]).
-    pub origin: Rays32,
-    /// Ray directions by component ([`BlockKind::Rays`]).
-    pub dir: Rays32,
-    /// Ray parameters ([`BlockKind::Rays`]).
-    pub t: Lanes32,
-    /// The tolerance of each lane (world units): its value may be off by a quarter of it.
-    pub tol: Lanes32,
-    /// Bit `l` set: lane `l` is evaluated. A field evaluates lanes by packets of
-    /// [`PACKET`] (those with an active lane); the values of other lanes are not used.
-    /// [`BlockKind::Stencils`] are active in whole stencils, from lane 0 up.
-    pub active: u32,
-    /// The distances, written by [`DistanceField::distances`] for the active lanes.
-    pub out: Lanes32,
-}
-
-impl PointBlock {
-    /// An empty block of `kind` (no active lane, every number 0).
-    pub fn new(kind: BlockKind) -> Self {
-        PointBlock {
-            kind,
-            origin: [[0.0; WIDE]; 3],
-            dir: [[0.0; WIDE]; 3],
-            t: [0.0; WIDE],
-            tol: [0.0; WIDE],
-            active: 0,
-            out: [0.0; WIDE],
-        }
-    }
-
-    /// A block of the `N` normal stencils `stencils` (stencil `k` to within
-    /// `tolerances[k]`), `N` at most 8.
-    pub fn stencils<const N: usize>(stencils: &[[DVec3; 4]; N], tolerances: &[f64; N]) -> Self {
-        let mut b = PointBlock::new(BlockKind::Stencils);
-        b.set_stencils(stencils, tolerances);
-        b
-    }
-
-    /// Makes this block hold the `N` normal stencils `stencils` (stencil `k` to within
-    /// `tolerances[k]`), `N` at most 8, as [`Self::stencils`] builds them; lanes past
-    /// them are left as they were and inactive.
-    #[inline]
-    pub fn set_stencils<const N: usize>(&mut self, stencils: &[[DVec3; 4]; N], tolerances: &[f64; N]) {
-        let b = self;
-        b.kind = BlockKind::Stencils;
-        for (k, s) in stencils.iter().enumerate() {
-            for (j, p) in s.iter().enumerate() {
-                let l = 4 * k + j;
-                (b.origin[0][l], b.origin[1][l], b.origin[2][l]) = (p.x, p.y, p.z);
-                b.tol[l] = tolerances[k];
-            }
-        }
-        b.active = (1u64 << (4 * N)).wrapping_sub(1) as u32;
-    }
-
-    /// Lane `l`'s point: the ray point `origin + dir * t` ([`BlockKind::Rays`], as `DVec3`
-    /// arithmetic computes it) or the stencil point.
-    #[inline]
-    pub fn point(&self, l: usize) -> DVec3 {
-        let o = DVec3::new(self.origin[0][l], self.origin[1][l], self.origin[2][l]);
-        match self.kind {
-            BlockKind::Rays => o + DVec3::new(self.dir[0][l], self.dir[1][l], self.dir[2][l]) * self.t[l],
-            BlockKind::Stencils => o,
-        }
-    }
-
-    /// The points of packet `g` (lanes `8 g ..`), [`Self::point`] lane by lane.
-    #[inline]
-    pub fn packet_points(&self, g: usize) -> [DVec3; PACKET] {
-        std::array::from_fn(|l| self.point(PACKET * g + l))
-    }
-
-    /// Bit `g` set: packet `g` has an active lane.
-    #[inline]
-    pub fn packets(&self) -> u32 {
-        (0..WIDE / PACKET).filter(|g| self.active >> (PACKET * g) & 0xff != 0).fold(0, |p, g| p | 1 << g)
-    }
-
-    /// The number of stencils of a [`BlockKind::Stencils`] block.
-    #[inline]
-    pub fn stencil_count(&self) -> usize {
-        self.active.count_ones() as usize / 4
-    }
-
-    /// Writes `f(point, tolerance)` into `out` for each lane of the packets with an active
-    /// lane: the lane-by-lane evaluation of a field without a faster one.
-    #[inline]
-    pub fn fill_each(&mut self, f: impl Fn(DVec3, f64) -> f64) {
-        let packets = self.packets();
-        for g in 0..WIDE / PACKET {
-            if packets & 1 << g != 0 {
-                for l in PACKET * g..PACKET * (g + 1) {
-                    self.out[l] = f(self.point(l), self.tol[l]);
-                }
-            }
-        }
-    }
-}
 
 thread_local! {
     /// Per-thread block of [`Marched::stencils`], built once.
@@ -177,50 +44,53 @@ pub trait DistanceField: Send + Sync {
     /// (see [`BlockKind`] for what each lane's value must be). The marcher owns all
     /// packing into lanes; a field evaluates them in its own wide kernels or lane by lane
     /// ([`PointBlock::fill_each`]).
-    fn distances(&self, block: &mut PointBlock);
+    fn distances<const W: usize>(&self, block: &mut PointBlock<W>);
 
-    /// Whether [`Self::distance`] is signed. An unsigned field (a triangle, which has no
-    /// inside) has no gradient on the surface itself: its march takes no refinement step
-    /// onto the surface, and its normal is sampled closer than the hit's own distance.
-    fn is_signed(&self) -> bool;
+    /// What the marcher needs to know of the field as a whole (cheap: asked per batch).
+    fn facts(&self) -> FieldFacts;
 
-    /// Whether the field evaluates eight points at once faster than one by one
-    /// ([`Self::distances`]), so that packets of rays should be marched together.
-    fn prefers_packets(&self) -> bool {
-        false
-    }
+    /// The gradient step for the normal and the material at hit point `p`, whose error
+    /// bound is `eps` (the march tolerance at the hit, or its residual if larger).
+    fn surface(&self, p: DVec3, eps: f64) -> SurfacePoint;
+}
 
-    /// Whether a packet lane whose march ends takes the next ray of the batch at once
-    /// (true, the default: no lane idles while rays wait), or only once every lane's march
-    /// has ended (false: for a field whose 8-wide evaluation costs more when its lanes are
-    /// far apart, such as a field pruned by region, whose packet is evaluated once per
-    /// region its lanes fall in; refilled lanes march at different depths).
-    fn refills_lanes(&self) -> bool {
-        true
-    }
-
+/// What [`Marched`] needs to know of a [`DistanceField`] as a whole
+/// ([`DistanceField::facts`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FieldFacts {
+    /// Whether [`DistanceField::distance`] is signed. An unsigned field (a triangle, which
+    /// has no inside) has no gradient on the surface itself: its march takes no refinement
+    /// step onto the surface, and its normal is sampled closer than the hit's own distance.
+    pub signed: bool,
     /// Whether the field is the exact Euclidean distance everywhere (false: a bound).
-    fn is_exact(&self) -> bool;
+    pub exact: bool,
+    /// Whether the field evaluates eight points at once faster than one by one
+    /// ([`DistanceField::distances`]), so that packets of rays should be marched together.
+    pub packets: bool,
+    /// Whether a packet lane whose march ends takes the next ray of the batch at once
+    /// (true: no lane idles while rays wait), or only once every lane's march has ended
+    /// (false: for a field whose 8-wide evaluation costs more when its lanes are far
+    /// apart, such as a field pruned by region, whose packet is evaluated once per region
+    /// its lanes fall in; refilled lanes march at different depths).
+    pub refills_lanes: bool,
+}
 
-    /// The step of the tetrahedron gradient ([`gradient_normal`]) at hit point `p`, whose
-    /// error bound is `eps` (the march tolerance at the hit, or its residual if larger),
-    /// scene units.
-    fn normal_step(&self, p: DVec3, eps: f64) -> f64;
+/// A hit point's surface as a field sees it ([`DistanceField::surface`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfacePoint {
+    /// The step of the tetrahedron gradient ([`gradient_normal`]), scene units.
+    pub normal_step: f64,
+    /// The material of the surface there.
+    pub material: MaterialId,
+}
 
-    /// The material of the surface at hit point `p`.
-    fn material(&self, p: DVec3) -> MaterialId;
-
-    /// Bytes the field holds beyond its own struct (which [`Marched`] counts as part of
-    /// itself).
-    fn heap_bytes(&self) -> usize;
-
-    /// What the field stores, for measurement tables ([`Geometry::census`]).
-    fn census(&self) -> Census;
-
-    /// Data the field shares with other fields ([`Geometry::shared`]); `None` by default.
-    fn shared(&self) -> Option<Shared> {
-        None
-    }
+/// How a marched object measures, counts and describes itself: what [`Marched`]'s
+/// [`Geometry`] reports beyond tracing (the marcher itself never asks).
+pub trait FieldObject {
+    /// What the field holds beyond its own struct (which [`Marched`] counts as part of
+    /// itself), for [`Geometry::bytes_used`], [`Geometry::census`] and
+    /// [`Geometry::shared`].
+    fn storage(&self) -> Storage;
 
     /// Unsigned distance from `p` to the field's surface, for measuring error
     /// ([`Geometry::surface_distance`]); `size` is the object's characteristic size.
@@ -228,6 +98,17 @@ pub trait DistanceField: Send + Sync {
 
     /// How the object is traced ([`Geometry::describe`]), given its label.
     fn describe(&self, label: &str) -> String;
+}
+
+/// What a field stores ([`FieldObject::storage`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Storage {
+    /// Bytes the field holds beyond its own struct.
+    pub heap_bytes: usize,
+    /// What the field stores, for measurement tables ([`Geometry::census`]).
+    pub census: Census,
+    /// Data the field shares with other fields ([`Geometry::shared`]).
+    pub shared: Option<Shared>,
 }
 
 /// A distance field ray marched inside its bounds: the one marched [`Geometry`].
@@ -270,7 +151,7 @@ impl<F: DistanceField> Marched<F> {
 
     /// Whether the distance is exact (false: a bound).
     pub fn is_exact(&self) -> bool {
-        self.field.is_exact()
+        self.field.facts().exact
     }
 
     /// The piece of `ray` to march: clipped to the bounds when there are any, `None` when
@@ -313,7 +194,7 @@ impl<F: DistanceField> Marched<F> {
     fn march(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<MarchHit> {
         let segment = self.segment(ray, t_min, t_max)?;
         let f = |p: DVec3, tolerance: f64| self.field.distance(p, tolerance);
-        let hit = sphere_trace(&f, &segment, self.size, &self.march, self.field.is_signed(), stats)?;
+        let hit = sphere_trace(&f, &segment, self.size, &self.march, self.field.facts().signed, stats)?;
         (hit.t >= t_min as f64 && hit.t <= t_max as f64).then_some(hit)
     }
 
@@ -338,7 +219,7 @@ impl<F: DistanceField> Marched<F> {
     ) {
         // A batch of one packet has no rays to refill lanes with, and marches in eight
         // lanes rather than setting up 32 (the objects of a large union take packets).
-        if self.field.refills_lanes() && rays.len() > PACKET {
+        if self.field.facts().refills_lanes && rays.len() > PACKET {
             self.march_lanes::<WIDE>(rays, t_min, reach, stats, on_hit, true);
         } else {
             self.march_lanes::<PACKET>(rays, t_min, reach, stats, on_hit, false);
@@ -358,17 +239,10 @@ impl<F: DistanceField> Marched<F> {
         mut on_hit: impl FnMut(usize, MarchHit, &mut RayStats),
         refill: bool,
     ) {
-        // The lanes' rays are copied into the block as lanes take them (`sync`), their
-        // parameters and tolerances at each step.
-        let mut block = PointBlock::new(BlockKind::Rays);
-        let sync = |block: &mut PointBlock, lanes: &MarchLanes<W>, l: usize| {
-            for a in 0..3 {
-                (block.origin[a][l], block.dir[a][l]) = (lanes.origin[a][l], lanes.dir[a][l]);
-            }
-        };
         // Each lane's state, its ray by component and its ray's index and end included
-        // (`MarchLanes::ray`, `MarchLanes::reach`), lives in `lanes`.
-        let mut lanes = MarchLanes::<W>::new(&self.march, self.size, self.field.is_signed());
+        // (`MarchLanes::ray`, `MarchLanes::reach`), lives in `lanes`; the field evaluates
+        // their points where they stand ([`MarchLanes::pts`]).
+        let mut lanes = MarchLanes::<W>::new(&self.march, self.size, self.field.facts().signed);
         // The rays are clipped to the bounds eight at a time ([`Marched::segments8`]) as the
         // lanes reach them: `ready` has bit `k` set where ray `chunk + k` is asked for, has a
         // segment and waits for a lane; `next` is the first ray not clipped yet. `idle`
@@ -407,7 +281,6 @@ impl<F: DistanceField> Marched<F> {
                     let i = chunk + k;
                     let seg = Segment::along(&rays[i], clipped.t0[k] as f64, clipped.t1[k] as f64);
                     lanes.start(l, &seg, stats);
-                    sync(&mut block, &lanes, l);
                     lanes.assign(l, i, ends[k]);
                 }
             }
@@ -426,7 +299,6 @@ impl<F: DistanceField> Marched<F> {
                         break;
                     }
                     lanes.move_lane(from, to);
-                    sync(&mut block, &lanes, to);
                     (idle, marching) = ((idle & !(1 << to)) | 1 << from, (marching & !(1 << from)) | 1 << to);
                 }
             }
@@ -447,16 +319,13 @@ impl<F: DistanceField> Marched<F> {
                 let l = rest.trailing_zeros() as usize;
                 rest &= rest - 1;
                 lanes.copy_point(first, l);
-                sync(&mut block, &lanes, l);
             }
             let active = (0..W / PACKET)
                 .filter(|g| packets & 1 << g != 0)
                 .fold(0, |m, g| m | ONE_PACKET << (PACKET * g));
-            block.t[..W].copy_from_slice(&lanes.t);
-            block.tol[..W].copy_from_slice(&lanes.tol);
-            block.active = active;
-            self.field.distances(&mut block);
-            let d: [f64; W] = std::array::from_fn(|l| block.out[l]);
+            lanes.pts.active = active;
+            self.field.distances(&mut lanes.pts);
+            let d = lanes.pts.out;
             let mut ended = lanes.feed(&d, marching, stats);
             idle |= ended;
             while ended != 0 {
@@ -473,20 +342,20 @@ impl<F: DistanceField> Marched<F> {
     }
 
     /// Where the normal of a converged march of `ray` is taken: the hit point, its error
-    /// bound `eps` and the gradient step `h`.
+    /// bound `eps`, and the field's gradient step and material there.
     #[inline]
-    fn hit_point(&self, ray: &Ray, hit: MarchHit) -> (DVec3, f64, f64) {
+    fn hit_point(&self, ray: &Ray, hit: MarchHit) -> (DVec3, f64, SurfacePoint) {
         let MarchHit { t, residual } = hit;
         let p = ray.origin.as_dvec3() + ray.dir.as_dvec3() * t;
         let eps = self.march.tolerance(ray.spread as f64 + t, self.size).max(residual);
-        (p, eps, self.field.normal_step(p, eps))
+        (p, eps, self.field.surface(p, eps))
     }
 
-    /// The hit record at `p` (error bound `eps`) of a march converged at `t`, with `normal`.
+    /// The hit record at `p` (error bound `eps`, `material`) of a march converged at `t`,
+    /// with `normal`.
     #[inline]
-    fn record(&self, t: f64, p: DVec3, eps: f64, normal: DVec3) -> Hit {
+    fn record(&self, t: f64, p: DVec3, eps: f64, material: MaterialId, normal: DVec3) -> Hit {
         let normal = normal.as_vec3();
-        let material = self.field.material(p);
         let point: Vec3 = p.as_vec3();
         Hit {
             t: t as f32,
@@ -501,14 +370,15 @@ impl<F: DistanceField> Marched<F> {
     /// The hit record of a converged march of `ray`: point, normal from the gradient,
     /// material and error bound.
     fn hit(&self, ray: &Ray, hit: MarchHit, stats: &mut RayStats) -> Hit {
-        let (p, eps, h) = self.hit_point(ray, hit);
+        let (p, eps, at) = self.hit_point(ray, hit);
+        let h = at.normal_step;
         // The gradient's error is about the distance error over h: a field evaluates the
         // stencil with an error of at most h / 20 (a quarter of the tolerance asked), so
         // the normal's direction is off by at most a few percent where the evaluator's
         // error bound is reached, far less in practice.
         let f4 = |q: &[DVec3; 4]| self.stencils(&[*q], &[0.2 * h])[0];
         let normal = gradient_normal(&f4, p, h, stats);
-        self.record(hit.t, p, eps, normal)
+        self.record(hit.t, p, eps, at.material, normal)
     }
 
     /// [`Marched::hit`] for `N` converged marches at once, their normals' stencils evaluated
@@ -516,9 +386,13 @@ impl<F: DistanceField> Marched<F> {
     /// the one [`Marched::hit`] gives alone.
     fn hits<const N: usize>(&self, found: [(&Ray, MarchHit); N], stats: &mut RayStats) -> [Hit; N] {
         let at = found.map(|(ray, mh)| self.hit_point(ray, mh));
-        let tolerances = at.map(|(_, _, h)| 0.2 * h);
-        let normals = gradient_normals(|s| self.stencils(s, &tolerances), at.map(|(p, _, h)| (p, h)), stats);
-        std::array::from_fn(|k| self.record(found[k].1.t, at[k].0, at[k].1, normals[k]))
+        let tolerances = at.map(|(_, _, s)| 0.2 * s.normal_step);
+        let normals = gradient_normals(
+            |s| self.stencils(s, &tolerances),
+            at.map(|(p, _, s)| (p, s.normal_step)),
+            stats,
+        );
+        std::array::from_fn(|k| self.record(found[k].1.t, at[k].0, at[k].1, at[k].2.material, normals[k]))
     }
 
     /// The field at `N` (at most 8) normal stencils, stencil `k` to within
@@ -534,7 +408,7 @@ impl<F: DistanceField> Marched<F> {
     }
 }
 
-impl<F: DistanceField> Geometry for Marched<F> {
+impl<F: DistanceField + FieldObject> Geometry for Marched<F> {
     fn bounds(&self) -> Option<Aabb> {
         self.bounded.then_some(self.bounds)
     }
@@ -545,7 +419,7 @@ impl<F: DistanceField> Geometry for Marched<F> {
     }
 
     fn prefers_packets(&self) -> bool {
-        self.field.prefers_packets()
+        self.field.facts().packets
     }
 
     /// Marches the batch's rays side by side ([`Marched::march_batch`]); each lane takes
@@ -612,7 +486,7 @@ impl<F: DistanceField> Geometry for Marched<F> {
     }
 
     fn bytes_used(&self) -> usize {
-        std::mem::size_of::<Self>() + self.field.heap_bytes() + self.label.capacity()
+        std::mem::size_of::<Self>() + self.field.storage().heap_bytes + self.label.capacity()
     }
 
     fn describe(&self) -> String {
@@ -620,11 +494,11 @@ impl<F: DistanceField> Geometry for Marched<F> {
     }
 
     fn census(&self) -> Census {
-        self.field.census()
+        self.field.storage().census
     }
 
     fn shared(&self) -> Option<Shared> {
-        self.field.shared()
+        self.field.storage().shared
     }
 
     fn surface_distance(&self, p: DVec3) -> f64 {

@@ -16,7 +16,9 @@ use glam::{DVec3, Vec3};
 use crate::geometry::grid::SdfGrid;
 use crate::geometry::grid::band::BandGrid;
 use crate::geometry::march::MarchParams;
-use crate::geometry::marched::{BlockKind, DistanceField, Marched, PointBlock, WIDE};
+use crate::geometry::marched::{
+    BlockKind, DistanceField, FieldFacts, FieldObject, Marched, PointBlock, Storage, SurfacePoint,
+};
 use crate::geometry::{
     Aabb, Census, Geometry, Hit, MaterialId, PACKET, Ray, RayStats, Shared, aabb, box_distance,
     distance_by_projection,
@@ -275,9 +277,9 @@ impl DistanceField for GridField {
     /// the points computed in its kernel ([`SdfGrid::trilinear8_rays`]); other grids and
     /// stencils go through [`GridField::field8`]. Every lane is its scalar value.
     #[inline]
-    fn distances(&self, block: &mut PointBlock) {
+    fn distances<const W: usize>(&self, block: &mut PointBlock<W>) {
         let packets = block.packets();
-        for g in 0..WIDE / PACKET {
+        for g in 0..W / PACKET {
             if packets & 1 << g == 0 {
                 continue;
             }
@@ -293,46 +295,36 @@ impl DistanceField for GridField {
         }
     }
 
-    /// True: [`Self::distances`] interpolates eight points in one 8-wide kernel.
-    fn prefers_packets(&self) -> bool {
-        true
+    /// Signed, not exact (the interpolation of exact samples is not itself a distance),
+    /// in packets ([`Self::distances`] interpolates eight points in one 8-wide kernel).
+    fn facts(&self) -> FieldFacts {
+        FieldFacts { signed: true, exact: false, packets: true, refills_lanes: true }
     }
 
-    fn is_signed(&self) -> bool {
-        true
-    }
-
-    /// False: the interpolation of exact samples is not itself a distance.
-    fn is_exact(&self) -> bool {
-        false
-    }
-
-    fn normal_step(&self, _p: DVec3, _eps: f64) -> f64 {
-        // Half a voxel: the interpolant is piecewise, so smaller steps see cell seams.
+    /// Half a voxel for the normal (the interpolant is piecewise, so smaller steps see
+    /// cell seams); one material.
+    fn surface(&self, _p: DVec3, _eps: f64) -> SurfacePoint {
         let voxel = self.grid.voxel() as f64 * self.placement.map_or(1.0, |m| m.scale);
-        0.5 * voxel
+        SurfacePoint { normal_step: 0.5 * voxel, material: self.material }
     }
+}
 
-    fn material(&self, _p: DVec3) -> MaterialId {
-        self.material
-    }
-
-    fn heap_bytes(&self) -> usize {
+/// The grid's samples, shared or its own; its error measured on the interpolated surface.
+impl FieldObject for GridField {
+    fn storage(&self) -> Storage {
+        let census = Census { triangles: 0, grid_samples: self.grid.stored_values(), accel_bytes: 0 };
         match &self.grid {
             // The store's own struct is part of the field's.
-            Samples::Own(g) => g.bytes_used() - std::mem::size_of::<GridStore>(),
-            Samples::Shared(g) => g.bytes_used(),
-        }
-    }
-
-    fn census(&self) -> Census {
-        Census { triangles: 0, grid_samples: self.grid.stored_values(), accel_bytes: 0 }
-    }
-
-    fn shared(&self) -> Option<Shared> {
-        match &self.grid {
-            Samples::Own(_) => None,
-            Samples::Shared(g) => Some(Shared::of(g, g.bytes_used(), self.census())),
+            Samples::Own(g) => Storage {
+                heap_bytes: g.bytes_used() - std::mem::size_of::<GridStore>(),
+                census,
+                shared: None,
+            },
+            Samples::Shared(g) => Storage {
+                heap_bytes: g.bytes_used(),
+                census,
+                shared: Some(Shared::of(g, g.bytes_used(), census)),
+            },
         }
     }
 

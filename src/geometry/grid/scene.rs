@@ -24,7 +24,9 @@ use glam::{DVec3, UVec3, Vec3};
 use super::band::{BRICK, BRICK_SAMPLES, BS, BandGrid};
 use super::object::{GRID_STEP_SCALE, GridStore};
 use crate::geometry::march::MarchParams;
-use crate::geometry::marched::{DistanceField, Marched, PointBlock, WIDE};
+use crate::geometry::marched::{
+    DistanceField, FieldFacts, FieldObject, Marched, PointBlock, Storage, SurfacePoint,
+};
 use crate::geometry::{Aabb, Census, MaterialId, PACKET, Shared, aabb, box_distance, distance_by_projection};
 
 /// `brick_material` entry bit of a brick whose samples name their material one by one.
@@ -212,9 +214,9 @@ impl DistanceField for SceneGridField {
     /// Packet by packet, the band interpolating eight points in one 8-wide kernel
     /// ([`BandGrid::march_distance8`]), each lane its scalar value.
     #[inline]
-    fn distances(&self, block: &mut PointBlock) {
+    fn distances<const W: usize>(&self, block: &mut PointBlock<W>) {
         let packets = block.packets();
-        for g in 0..WIDE / PACKET {
+        for g in 0..W / PACKET {
             if packets & 1 << g == 0 {
                 continue;
             }
@@ -229,39 +231,31 @@ impl DistanceField for SceneGridField {
         }
     }
 
-    /// True: the band interpolates eight points in one 8-wide kernel.
-    fn prefers_packets(&self) -> bool {
-        true
+    /// Signed, not exact (the interpolation of exact samples is not itself a distance),
+    /// in packets (the band interpolates eight points in one 8-wide kernel).
+    fn facts(&self) -> FieldFacts {
+        FieldFacts { signed: true, exact: false, packets: true, refills_lanes: true }
     }
 
-    fn is_signed(&self) -> bool {
-        true
+    /// Half a voxel for the normal, as a grid object's (the interpolant is piecewise);
+    /// the material of the band at `p`.
+    fn surface(&self, p: DVec3, _eps: f64) -> SurfacePoint {
+        SurfacePoint {
+            normal_step: 0.5 * self.grid.band().voxel as f64,
+            material: self.grid.material(p.as_vec3()),
+        }
     }
+}
 
-    /// False: the interpolation of exact samples is not itself a distance.
-    fn is_exact(&self) -> bool {
-        false
-    }
-
-    fn normal_step(&self, _p: DVec3, _eps: f64) -> f64 {
-        // Half a voxel, as a grid object's: the interpolant is piecewise.
-        0.5 * self.grid.band().voxel as f64
-    }
-
-    fn material(&self, p: DVec3) -> MaterialId {
-        self.grid.material(p.as_vec3())
-    }
-
-    fn heap_bytes(&self) -> usize {
-        self.grid.bytes_used()
-    }
-
-    fn census(&self) -> Census {
-        Census { triangles: 0, grid_samples: self.grid.band().stored_values(), accel_bytes: 0 }
-    }
-
-    fn shared(&self) -> Option<Shared> {
-        Some(Shared::of(&self.grid, self.grid.bytes_used(), self.census()))
+/// One object's share of the scene grid; its error measured on the interpolated surface.
+impl FieldObject for SceneGridField {
+    fn storage(&self) -> Storage {
+        let census = Census { triangles: 0, grid_samples: self.grid.band().stored_values(), accel_bytes: 0 };
+        Storage {
+            heap_bytes: self.grid.bytes_used(),
+            census,
+            shared: Some(Shared::of(&self.grid, self.grid.bytes_used(), census)),
+        }
     }
 
     fn surface_distance(&self, p: DVec3, _size: f64) -> f64 {

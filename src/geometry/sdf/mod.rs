@@ -12,7 +12,10 @@ pub mod prune;
 pub mod tape;
 
 use crate::geometry::march::MarchParams;
-use crate::geometry::marched::{BlockKind, DistanceField, Lanes32, Marched, PointBlock, Rays32, WIDE};
+use crate::geometry::marched::{
+    BlockKind, DistanceField, FieldFacts, FieldObject, Lanes32, Marched, PointBlock, Rays32, Storage,
+    SurfacePoint, WIDE,
+};
 use crate::geometry::scene::SceneGeometry;
 use crate::geometry::{
     Census, Geometry, Hit, PACKET, Ray, RayStats, distance_by_projection, f32_error, max_abs,
@@ -953,30 +956,44 @@ impl SdfField {
         std::array::from_fn(|i| self.choose(points[i], tolerances[i], |_| d[i] as f64))
     }
 
-    /// The [`BlockKind::Rays`] lanes of [`DistanceField::distances`].
+    /// The [`BlockKind::Rays`] lanes of [`DistanceField::distances`]: a block of all four
+    /// packets in one 32-lane tape evaluation ([`SdfField::eval_tape32`]), else packet by
+    /// packet ([`SdfField::distance8_within`]: in a batch's last steps, evaluating idle
+    /// packets along costs more).
     #[inline]
-    fn ray_distances(&self, block: &mut PointBlock) {
+    fn ray_distances<const W: usize>(&self, block: &mut PointBlock<W>) {
         let packets = block.packets();
-        let Some(tape) = self.tape.as_ref().filter(|_| packets == (1 << (WIDE / PACKET)) - 1) else {
-            for g in 0..WIDE / PACKET {
-                if packets & 1 << g != 0 {
-                    let tol: [f64; PACKET] = std::array::from_fn(|l| block.tol[PACKET * g + l]);
-                    let v = self.distance8_within(&block.packet_points(g), &tol);
-                    block.out[PACKET * g..PACKET * (g + 1)].copy_from_slice(&v);
-                }
+        let all = packets == (1 << (WIDE / PACKET)) - 1;
+        if let (true, Some(tape)) = (all, self.tape.as_ref())
+            && let Some(wide) = block.wide_mut()
+        {
+            return self.ray_distances32(tape, wide);
+        }
+        for g in 0..W / PACKET {
+            if packets & 1 << g != 0 {
+                let tol: [f64; PACKET] = std::array::from_fn(|l| block.tol[PACKET * g + l]);
+                let v = self.distance8_within(&block.packet_points(g), &tol);
+                block.out[PACKET * g..PACKET * (g + 1)].copy_from_slice(&v);
             }
-            return;
-        };
-        let PointBlock { origin: o, dir: d, t, tol, .. } = &*block;
+        }
+    }
+
+    /// The 32 lanes of a full block in one tape evaluation, each lane deciding as
+    /// [`DistanceField::distance`] at its point alone.
+    #[inline]
+    fn ray_distances32(&self, tape: &tape::Tape, block: &mut PointBlock) {
+        let PointBlock { origin: o, dir: d, t, tol, out, .. } = block;
         let (rel, resolved) = tape_inputs32(tape, o, d, t, tol);
-        let v = self.eval_tape32(tape, &rel, || std::array::from_fn(|i| block.point(i)));
-        let out: Lanes32 = std::array::from_fn(|i| {
-            if resolved >> i & 1 != 0 {
-                return v[i] as f64;
-            }
-            self.choose(block.point(i), tol[i], |_| v[i] as f64)
-        });
-        block.out = out;
+        let point =
+            |i: usize| DVec3::new(o[0][i], o[1][i], o[2][i]) + DVec3::new(d[0][i], d[1][i], d[2][i]) * t[i];
+        let v = self.eval_tape32(tape, &rel, || std::array::from_fn(point));
+        for i in 0..WIDE {
+            out[i] = if resolved >> i & 1 != 0 {
+                v[i] as f64
+            } else {
+                self.choose(point(i), tol[i], |_| v[i] as f64)
+            };
+        }
     }
 
     /// One normal stencil: all four points from the tape where it resolves them all, else
@@ -1031,29 +1048,32 @@ impl DistanceField for SdfField {
     /// [`DistanceField::distance`] at its point alone. Stencils: the eight in one 32-lane
     /// tape evaluation where the tape resolves each, else two at a time
     /// ([`SdfField::stencil_pair`]).
-    fn distances(&self, block: &mut PointBlock) {
-        match block.kind {
-            BlockKind::Rays => self.ray_distances(block),
-            BlockKind::Stencils => {
+    fn distances<const W: usize>(&self, block: &mut PointBlock<W>) {
+        match (block.kind, block.wide_mut()) {
+            (BlockKind::Rays, _) => self.ray_distances(block),
+            // Stencils are only packed into WIDE blocks (`PointBlock::set_stencils`).
+            (BlockKind::Stencils, None) => block.fill_each(|p, tol| self.distance(p, tol)),
+            (BlockKind::Stencils, Some(block)) => {
                 let n = block.stencil_count();
+                let o = &block.origin;
+                let stencils: [[DVec3; 4]; 8] = std::array::from_fn(|k| {
+                    std::array::from_fn(|j| DVec3::new(o[0][4 * k + j], o[1][4 * k + j], o[2][4 * k + j]))
+                });
+                let tol: [f64; 8] = std::array::from_fn(|k| block.tol[4 * k]);
                 if n == 1 {
-                    let d = self.stencil(
-                        &[block.point(0), block.point(1), block.point(2), block.point(3)],
-                        block.tol[0],
-                    );
+                    let d = self.stencil(&stencils[0], tol[0]);
                     block.out[..4].copy_from_slice(&d);
                     return;
                 }
-                let stencils: [[DVec3; 4]; 8] =
-                    std::array::from_fn(|k| std::array::from_fn(|j| block.point(4 * k + j)));
-                let tol: [f64; 8] = std::array::from_fn(|k| block.tol[4 * k]);
-                let resolves = |t: &&tape::Tape| (0..n).all(|k| self.tape_resolves(t, &stencils[k], tol[k]));
                 if n == 8
-                    && let Some(tape) = self.tape.as_ref().filter(resolves)
+                    && let Some(tape) = self.tape.as_ref()
+                    && (0..8).all(|k| self.tape_resolves(tape, &stencils[k], tol[k]))
                 {
                     let points: [DVec3; WIDE] = std::array::from_fn(|i| stencils[i / 4][i % 4]);
                     let v = self.eval_tape32(tape, &relative32(tape, &points), || points);
-                    block.out = v.map(|x| x as f64);
+                    for (x, v) in block.out.iter_mut().zip(v) {
+                        *x = v as f64;
+                    }
                     return;
                 }
                 for k in (0..n).step_by(2) {
@@ -1071,45 +1091,41 @@ impl DistanceField for SdfField {
         }
     }
 
-    fn prefers_packets(&self) -> bool {
-        self.tape.is_some()
+    /// Signed and exact as the tree is; in packets where there is a tape; lanes refilled
+    /// as marches end except where the tape is pruned by region (lanes refilled as marches
+    /// end march at different depths, so a packet falls in more regions, each evaluated
+    /// on its own; measured: a smooth union of 64 spheres took 13% more instructions per
+    /// frame).
+    fn facts(&self) -> FieldFacts {
+        FieldFacts {
+            signed: self.tree.signed,
+            exact: self.tree.exact,
+            packets: self.tape.is_some(),
+            refills_lanes: self.regions.is_none(),
+        }
     }
 
-    /// Not where the tape is pruned by region: lanes refilled as marches end march at
-    /// different depths, so a packet falls in more regions, each evaluated on its own
-    /// (measured: a smooth union of 64 spheres took 13% more instructions per frame).
-    fn refills_lanes(&self) -> bool {
-        self.regions.is_none()
-    }
-
-    fn is_signed(&self) -> bool {
-        self.tree.signed
-    }
-
-    fn is_exact(&self) -> bool {
-        self.tree.exact
-    }
-
-    fn normal_step(&self, p: DVec3, eps: f64) -> f64 {
+    /// Half the hit's error bound for the normal; an unsigned field (a triangle) has no
+    /// gradient on the surface, so it samples closer than the point's own distance, so
+    /// that every sample lies on the ray's side. The material of the nearest surface.
+    fn surface(&self, p: DVec3, eps: f64) -> SurfacePoint {
         let floor = 1e-9 * (1.0 + p.abs().max_element());
-        // An unsigned field (a triangle) has no gradient on the surface: sample closer than
-        // the point's own distance so every sample lies on the ray's side.
-        if self.tree.signed { 0.5 * eps } else { (0.25 * self.tree.distance(p).abs()).min(0.5 * eps) }
-            .max(floor)
+        let step =
+            if self.tree.signed { 0.5 * eps } else { (0.25 * self.tree.distance(p).abs()).min(0.5 * eps) };
+        SurfacePoint {
+            normal_step: step.max(floor),
+            material: self.uniform_material.unwrap_or_else(|| self.tree.distance_material(p).1),
+        }
     }
+}
 
-    fn material(&self, p: DVec3) -> MaterialId {
-        self.uniform_material.unwrap_or_else(|| self.tree.distance_material(p).1)
-    }
-
-    fn heap_bytes(&self) -> usize {
-        self.tree.bytes_used() - std::mem::size_of::<SdfTree>()
+/// The tree, tape and regions the field holds; its error measured on the tree's surface.
+impl FieldObject for SdfField {
+    fn storage(&self) -> Storage {
+        let heap_bytes = self.tree.bytes_used() - std::mem::size_of::<SdfTree>()
             + self.tape.as_ref().map_or(0, |t| t.bytes_used())
-            + self.regions.as_ref().map_or(0, |r| r.bytes_used())
-    }
-
-    fn census(&self) -> Census {
-        Census::default()
+            + self.regions.as_ref().map_or(0, |r| r.bytes_used());
+        Storage { heap_bytes, census: Census::default(), shared: None }
     }
 
     fn surface_distance(&self, p: DVec3, size: f64) -> f64 {

@@ -730,6 +730,7 @@ impl Tape {
     /// The value of primitive operation `op` (one of this tape's) at point `local` of its
     /// point register, for interval bounds ([`super::prune`]); `None` when `op` is not a
     /// primitive. `scratch` must fit the tape.
+    #[inline]
     pub(crate) fn primitive_at(&self, op: &Op, local: [f32; 3], scratch: &mut TapeScratch) -> Option<f32> {
         let (p, out) = op.primitive_registers()?;
         scratch.pts[p as usize] = local;
