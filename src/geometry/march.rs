@@ -79,15 +79,22 @@ impl<const W: usize> PointBlock<W> {
         }
     }
 
-    /// Lane `l`'s point: the ray point `origin + dir * t` ([`BlockKind::Rays`], as `DVec3`
-    /// arithmetic computes it) or the stencil point.
+    /// Lane `l`'s point: the ray point ([`Self::ray_point`], [`BlockKind::Rays`]) or the
+    /// stencil point.
     #[inline]
     pub fn point(&self, l: usize) -> DVec3 {
-        let o = DVec3::new(self.origin[0][l], self.origin[1][l], self.origin[2][l]);
         match self.kind {
-            BlockKind::Rays => o + DVec3::new(self.dir[0][l], self.dir[1][l], self.dir[2][l]) * self.t[l],
-            BlockKind::Stencils => o,
+            BlockKind::Rays => self.ray_point(l),
+            BlockKind::Stencils => DVec3::new(self.origin[0][l], self.origin[1][l], self.origin[2][l]),
         }
+    }
+
+    /// Lane `l`'s ray point `origin + dir * t`, as `DVec3` arithmetic computes it (for a
+    /// block known to hold [`BlockKind::Rays`]).
+    #[inline]
+    pub fn ray_point(&self, l: usize) -> DVec3 {
+        DVec3::new(self.origin[0][l], self.origin[1][l], self.origin[2][l])
+            + DVec3::new(self.dir[0][l], self.dir[1][l], self.dir[2][l]) * self.t[l]
     }
 
     /// The points of packet `g` (lanes `8 g ..`), [`Self::point`] lane by lane.
@@ -269,8 +276,8 @@ pub fn sphere_trace(
     }
 }
 
-/// `W` sphere traces side by side, each a state machine in its lane: [`MarchLanes::t`] is
-/// where a lane's distance is needed next, to within [`MarchLanes::tol`], and
+/// `W` sphere traces side by side, each a state machine in its lane: `MarchLanes::pts.t` is
+/// where a lane's distance is needed next, to within `MarchLanes::pts.tol`, and
 /// [`MarchLanes::feed`] takes the distances of the lanes marching and says whose marches
 /// are over. Scalar marching ([`sphere_trace`]) uses one lane; a batch
 /// ([`crate::geometry::marched::Marched`]) feeds 8 or 32 lanes from one wide evaluation.
@@ -438,7 +445,7 @@ impl<const W: usize> MarchLanes<W> {
         }
     }
 
-    /// Lane `l` marches nothing (its tolerance is infinite, [`Self::tol`]).
+    /// Lane `l` marches nothing (its tolerance is infinite, `Self::pts.tol`).
     #[inline]
     pub fn stop(&mut self, l: usize) {
         self.pts.tol[l] = f64::INFINITY;
@@ -471,7 +478,7 @@ impl<const W: usize> MarchLanes<W> {
         self.outcome[l]
     }
 
-    /// [`MarchParams::tolerance`] at lane `l`'s [`Self::t`].
+    /// [`MarchParams::tolerance`] at lane `l`'s `Self::pts.t`.
     #[inline]
     fn march_tolerance(&self, l: usize) -> f64 {
         self.tol_scale * (self.spread[l] + self.pts.t[l]).max(self.tol_floor)
@@ -484,9 +491,9 @@ impl<const W: usize> MarchLanes<W> {
         self.special = if phase == Phase::March { self.special & !bit } else { self.special | bit };
     }
 
-    /// Takes the field's values `raw[l]` at [`Self::t`] for the lanes `l` whose bits are
+    /// Takes the field's values `raw[l]` at `Self::pts.t` for the lanes `l` whose bits are
     /// set in `marching`; returns the lanes whose marches are over ([`Self::outcome`]).
-    /// Every other marching lane has its next [`Self::t`] and [`Self::tol`].
+    /// Every other marching lane has its next `Self::pts.t` and `Self::pts.tol`.
     ///
     /// The common step runs for all lanes at once: a lane in [`Phase::March`] whose step
     /// neither converges, nor falls back from over-relaxation, nor leaves the segment, nor
@@ -501,7 +508,7 @@ impl<const W: usize> MarchLanes<W> {
     }
 
     /// [`Self::feed_lane`] for each lane set in `lanes` (those whose step is not plain);
-    /// returns the lanes whose marches are over, and sets the others' [`Self::tol`].
+    /// returns the lanes whose marches are over, and sets the others' `Self::pts.tol`.
     #[inline(always)]
     fn feed_lanes(&mut self, raw: &[f64; W], lanes: u32, stats: &mut RayStats) -> u32 {
         let mut ended = 0;
@@ -542,7 +549,7 @@ impl<const W: usize> MarchLanes<W> {
         plain
     }
 
-    /// Lane `l`'s step with the field's value `raw` at [`Self::t`] if it is plain: the
+    /// Lane `l`'s step with the field's value `raw` at `Self::pts.t` if it is plain: the
     /// lane is in [`Phase::March`], and [`Self::step`] would neither fall back from
     /// over-relaxation, nor converge, nor leave the segment, nor spend the step budget, but
     /// only move on by `d * omega`. Then takes it, as [`Self::step`] does (same
@@ -618,7 +625,7 @@ impl<const W: usize> MarchLanes<W> {
         self.step(l, raw, stats)
     }
 
-    /// One sphere-tracing step of lane `l` with the field's value `raw` at [`Self::t`].
+    /// One sphere-tracing step of lane `l` with the field's value `raw` at `Self::pts.t`.
     #[inline(always)]
     fn step(&mut self, l: usize, raw: f64, stats: &mut RayStats) -> Step {
         if self.iterations[l] == 0 {

@@ -1,18 +1,22 @@
 //! One marcher for every ray-marched representation. A [`DistanceField`] says what is
-//! marched: the distance at a point (already scaled to be a safe step), whether it is
-//! signed and exact, the gradient step for normals, the material at a hit, and how the
-//! object measures, describes and counts itself. [`Marched`] owns everything else, once:
+//! marched, in four calls: the distance at a point (already scaled to be a safe step) to
+//! within a tolerance, the same in bulk over a [`PointBlock`] of up to 32 lanes, the
+//! field's facts (signed, exact, packets, lane refills), and the normal's gradient step and
+//! material at a hit. How the object measures, describes and counts itself is a separate
+//! [`FieldObject`], which the marcher never asks. [`Marched`] owns everything else, once:
 //! the bounds the march is clipped to, the characteristic size that tolerances scale with,
-//! the [`MarchParams`], sphere tracing ([`sphere_trace`]) with its refinement step, the
-//! normal by [`gradient_normal`], the [`Hit`] record and its error bound, and the work
-//! counters. Analytic SDFs ([`crate::geometry::sdf::SdfObject`], a [`Marched`] over an
+//! the [`MarchParams`], sphere tracing ([`sphere_trace`]) with its refinement step, all
+//! packing of rays into 8 and 32 lanes and of normal stencils into blocks, the normal by
+//! [`gradient_normal`], the [`Hit`] record and its error bound, and the work counters.
+//! Analytic SDFs ([`crate::geometry::sdf::SdfObject`], a [`Marched`] over an
 //! [`SdfTree`](crate::geometry::sdf::SdfTree)) and SDF grids
 //! ([`crate::geometry::grid::object::GridObject`], a [`Marched`] over a
-//! [`GridField`](crate::geometry::grid::object::GridField)) are the two fields plugged in
+//! [`GridField`](crate::geometry::grid::object::GridField)) are the fields plugged in
 //! today; a new marched representation is a new field, not a new marcher. A field that
-//! evaluates eight points at once ([`DistanceField::distances`]) gets packets of
-//! primary rays marched side by side ([`Geometry::closest_hits`]), each lane taking exactly
-//! the steps of its own scalar march ([`sphere_trace`] and the batch share [`MarchLanes`]).
+//! evaluates eight points at once ([`FieldFacts::packets`]) gets packets of primary rays
+//! marched side by side ([`Geometry::closest_hits`]), each lane taking exactly the steps of
+//! its own scalar march ([`sphere_trace`] and the batch share [`MarchLanes`], whose lanes
+//! live in the block the field evaluates).
 
 use crate::simd::{Kernel, Lane, Lane8, Simd, dispatch};
 use glam::{DVec3, Vec3};
@@ -630,19 +634,28 @@ mod tests {
         block.active = u32::MAX;
         field.distances(&mut block);
         let wide = block.out;
-        for l in 0..WIDE {
+        for (l, w) in wide.iter().enumerate() {
             let p = DVec3::from(std::array::from_fn::<f64, 3, _>(|a| {
                 block.origin[a][l] + block.dir[a][l] * block.t[l]
             }));
             assert_eq!(block.point(l), p);
             let one = field.distance(p, block.tol[l]);
-            assert_eq!(wide[l].to_bits(), one.to_bits(), "lane {l} at {p}: {} vs {one}", wide[l]);
+            assert_eq!(w.to_bits(), one.to_bits(), "lane {l} at {p}: {w} vs {one}");
         }
+        // One packet of the 32, and a block of one packet (a batch of eight lanes).
         block.active = 0xff;
         block.out = [f64::NAN; WIDE];
         field.distances(&mut block);
-        for l in 0..PACKET {
-            assert_eq!(block.out[l].to_bits(), wide[l].to_bits(), "packet lane {l}");
+        let mut eight = PointBlock::<PACKET>::new(BlockKind::Rays);
+        eight.origin = std::array::from_fn(|a| std::array::from_fn(|l| block.origin[a][l]));
+        eight.dir = std::array::from_fn(|a| std::array::from_fn(|l| block.dir[a][l]));
+        eight.t = std::array::from_fn(|l| block.t[l]);
+        eight.tol = std::array::from_fn(|l| block.tol[l]);
+        eight.active = 0xff;
+        field.distances(&mut eight);
+        for (l, w) in wide.iter().enumerate().take(PACKET) {
+            assert_eq!(block.out[l].to_bits(), w.to_bits(), "packet lane {l}");
+            assert_eq!(eight.out[l].to_bits(), w.to_bits(), "eight-lane block, lane {l}");
         }
         // Stencils: eight and two at a time, each as it is alone.
         let stencils: [[DVec3; 4]; 8] =
@@ -659,10 +672,10 @@ mod tests {
         field.distances(&mut two);
         for k in 0..8 {
             let alone = one(k);
-            for j in 0..4 {
-                assert_eq!(eight.out[4 * k + j].to_bits(), alone[j].to_bits(), "stencil {k} point {j}");
+            for (j, a) in alone.iter().enumerate() {
+                assert_eq!(eight.out[4 * k + j].to_bits(), a.to_bits(), "stencil {k} point {j}");
                 if (2..4).contains(&k) {
-                    assert_eq!(two.out[4 * (k - 2) + j].to_bits(), alone[j].to_bits(), "pair {k} point {j}");
+                    assert_eq!(two.out[4 * (k - 2) + j].to_bits(), a.to_bits(), "pair {k} point {j}");
                 }
             }
         }

@@ -972,7 +972,7 @@ impl SdfField {
         for g in 0..W / PACKET {
             if packets & 1 << g != 0 {
                 let tol: [f64; PACKET] = std::array::from_fn(|l| block.tol[PACKET * g + l]);
-                let v = self.distance8_within(&block.packet_points(g), &tol);
+                let v = self.distance8_within(&std::array::from_fn(|l| block.ray_point(PACKET * g + l)), &tol);
                 block.out[PACKET * g..PACKET * (g + 1)].copy_from_slice(&v);
             }
         }
