@@ -166,6 +166,7 @@ impl BoxRay {
 /// into the boxes the BVH was built from) in every leaf the ray enters before `t_max`.
 /// `leaf` returns a new, smaller `t_max` when it finds a closer hit, and `Err(())` to stop
 /// the walk (any-hit). Counts visited nodes in `stats.bvh_nodes`.
+#[inline]
 pub fn traverse(
     bvh: &Bvh2,
     ray: &Ray,
@@ -242,6 +243,7 @@ pub fn traverse(
 
 /// Whether `hit(primitive, t_max, stats)` is true for any primitive in a leaf the ray
 /// enters before `t_max`; stops at the first (shadow rays).
+#[inline]
 pub fn traverse_any(
     bvh: &Bvh2,
     ray: &Ray,

@@ -972,7 +972,8 @@ impl SdfField {
         for g in 0..W / PACKET {
             if packets & 1 << g != 0 {
                 let tol: [f64; PACKET] = std::array::from_fn(|l| block.tol[PACKET * g + l]);
-                let v = self.distance8_within(&std::array::from_fn(|l| block.ray_point(PACKET * g + l)), &tol);
+                let v =
+                    self.distance8_within(&std::array::from_fn(|l| block.ray_point(PACKET * g + l)), &tol);
                 block.out[PACKET * g..PACKET * (g + 1)].copy_from_slice(&v);
             }
         }
@@ -1056,15 +1057,17 @@ impl DistanceField for SdfField {
             (BlockKind::Stencils, Some(block)) => {
                 let n = block.stencil_count();
                 let o = &block.origin;
-                let stencils: [[DVec3; 4]; 8] = std::array::from_fn(|k| {
+                let stencil = |k: usize| -> [DVec3; 4] {
                     std::array::from_fn(|j| DVec3::new(o[0][4 * k + j], o[1][4 * k + j], o[2][4 * k + j]))
-                });
-                let tol: [f64; 8] = std::array::from_fn(|k| block.tol[4 * k]);
+                };
+                // One stencil (a single ray's hit): no more unpacked than it.
                 if n == 1 {
-                    let d = self.stencil(&stencils[0], tol[0]);
+                    let d = self.stencil(&stencil(0), block.tol[0]);
                     block.out[..4].copy_from_slice(&d);
                     return;
                 }
+                let stencils: [[DVec3; 4]; 8] = std::array::from_fn(stencil);
+                let tol: [f64; 8] = std::array::from_fn(|k| block.tol[4 * k]);
                 if n == 8
                     && let Some(tape) = self.tape.as_ref()
                     && (0..8).all(|k| self.tape_resolves(tape, &stencils[k], tol[k]))
