@@ -1,6 +1,6 @@
-//! The AVX2 backend's lane types: [`A8`] (eight f32 lanes in a `__m256`) and [`A8x4`]
-//! (four of them run alike), each operation one intrinsic, and the [`Simd`] implementation
-//! of the [`Avx2`] token.
+//! The AVX2 backend's lane types: [`A8`] (eight f32 lanes in a `__m256`), its mask
+//! [`AvxMask8`], [`A8x4`] (four of them run alike) and [`A4d`], each operation one
+//! intrinsic, and the [`Simd`] implementation of the [`Avx2`] token.
 //!
 //! Soundness: an `A8` is made only through an [`Avx2`] token (its loads, [`Lane::splat`],
 //! [`Simd::regs8`]), and a token exists only after the CPU check found AVX2, FMA, POPCNT
@@ -14,12 +14,13 @@
 //! minus infinity, `abs` and negation touch the sign bit only, and nothing is fused.
 
 use core::arch::x86_64::*;
-use std::ops::{Add, Div, Mul, Neg, Sub};
+use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Sub};
 
 use super::Avx2;
 use super::Backend;
 use super::backend::Simd;
-use super::lane::{Lane, Lane8, Lane32, Lane64};
+use super::f4::Sse4;
+use super::lane::{Lane, Lane8, Lane32, Lane64, Mask8};
 use super::portable::{F8, F8x4};
 
 /// Eight f32 lanes in a `__m256` (see the module documentation for why its safe methods
@@ -27,6 +28,12 @@ use super::portable::{F8, F8x4};
 #[derive(Clone, Copy, Debug)]
 #[repr(transparent)]
 pub struct A8(__m256);
+
+/// A mask over eight [`A8`] lanes (all bits of a lane set, or none): the AVX2 backend's
+/// [`Mask8`], made only by the comparisons of an [`A8`].
+#[derive(Clone, Copy, Debug)]
+#[repr(transparent)]
+pub struct AvxMask8(__m256);
 
 /// Four [`A8`]s run alike: four packets with one dispatch per operation. Each packet's
 /// lanes get exactly the operations of an [`A8`] evaluation.
@@ -54,6 +61,7 @@ impl Simd for Avx2 {
     type F32x8 = A8;
     type F32x32 = A8x4;
     type F64x4 = A4d;
+    type F32x4 = Sse4;
 
     #[inline(always)]
     fn splat4(self, x: f64) -> A4d {
@@ -96,6 +104,30 @@ impl Simd for Avx2 {
         A8(unsafe { _mm256_loadu_ps(a.as_ptr()) })
     }
     #[inline(always)]
+    fn halves8(self, lo: &[f32; 4], hi: &[f32; 4]) -> A8 {
+        // SAFETY: the token proves AVX; unaligned loads of the 16 bytes of `lo` and `hi`.
+        A8(unsafe { _mm256_set_m128(_mm_loadu_ps(hi.as_ptr()), _mm_loadu_ps(lo.as_ptr())) })
+    }
+    #[inline(always)]
+    fn splat_halves8(self, lo: f32, hi: f32) -> A8 {
+        // SAFETY: the token proves AVX.
+        A8(unsafe { _mm256_set_m128(_mm_set1_ps(hi), _mm_set1_ps(lo)) })
+    }
+    #[inline(always)]
+    fn both8(self, a: &[f32; 4]) -> A8 {
+        // SAFETY: the token proves AVX; `[f32; 4]` has the size of `__m128`, and the
+        // broadcast reads it unaligned.
+        A8(unsafe { _mm256_broadcast_ps(&*(a as *const [f32; 4] as *const __m128)) })
+    }
+    #[inline(always)]
+    fn splat4f(self, x: f32) -> Sse4 {
+        Sse4::splat(x)
+    }
+    #[inline(always)]
+    fn load4f(self, a: &[f32; 4]) -> Sse4 {
+        Sse4::load(a)
+    }
+    #[inline(always)]
     fn load32(self, a: &[[f32; 8]; 4]) -> A8x4 {
         A8x4([self.load8(&a[0]), self.load8(&a[1]), self.load8(&a[2]), self.load8(&a[3])])
     }
@@ -123,9 +155,9 @@ impl Simd for Avx2 {
     }
 }
 
-// SAFETY (every `unsafe` block from here on, unless it says otherwise): an `A8` exists
-// only where the CPU has AVX2 and FMA (module documentation); the intrinsics only read
-// and write registers.
+// SAFETY (every `unsafe` block from here on, unless it says otherwise): an `A8` (and an
+// `AvxMask8`, made only from `A8`s) exists only where the CPU has AVX2 and FMA (module
+// documentation); the intrinsics only read and write registers.
 
 macro_rules! binary {
     ($tr:ident, $f:ident, $op:ident) => {
@@ -193,6 +225,41 @@ impl Lane for A8 {
 }
 
 impl Lane8 for A8 {
+    type Mask = AvxMask8;
+    #[inline(always)]
+    fn mul_sub(self, b: A8, c: A8) -> A8 {
+        // (FMA.)
+        A8(unsafe { _mm256_fmsub_ps(self.0, b.0, c.0) })
+    }
+    #[inline(always)]
+    fn mask_le(self, b: A8) -> AvxMask8 {
+        AvxMask8(unsafe { _mm256_cmp_ps::<_CMP_LE_OQ>(self.0, b.0) })
+    }
+    #[inline(always)]
+    fn mask_eq(self, b: A8) -> AvxMask8 {
+        AvxMask8(unsafe { _mm256_cmp_ps::<_CMP_EQ_OQ>(self.0, b.0) })
+    }
+    #[inline(always)]
+    fn order_keys(self) -> [u32; 8] {
+        let mut d = [0u32; 8];
+        // SAFETY: as above (AVX2); an unaligned store into the 32 bytes of `d`.
+        unsafe {
+            let bits = _mm256_castps_si256(self.0);
+            let flip = _mm256_or_si256(_mm256_srai_epi32::<31>(bits), _mm256_set1_epi32(i32::MIN));
+            _mm256_storeu_si256(d.as_mut_ptr() as *mut __m256i, _mm256_xor_si256(bits, flip));
+        }
+        d
+    }
+    #[inline(always)]
+    fn min_halves(self) -> [f32; 4] {
+        let mut a = [0.0f32; 4];
+        // SAFETY: as above; an unaligned store into the 16 bytes of `a`.
+        unsafe {
+            let m = _mm_min_ps(_mm256_castps256_ps128(self.0), _mm256_extractf128_ps::<1>(self.0));
+            _mm_storeu_ps(a.as_mut_ptr(), m);
+        }
+        a
+    }
     #[inline(always)]
     fn store(self) -> [f32; 8] {
         let mut r = [0.0f32; 8];
@@ -231,6 +298,38 @@ impl Lane8 for A8 {
     #[inline(always)]
     fn movemask(self) -> u32 {
         (unsafe { _mm256_movemask_ps(self.0) }) as u32
+    }
+}
+
+impl BitAnd for AvxMask8 {
+    type Output = AvxMask8;
+    #[inline(always)]
+    fn bitand(self, b: AvxMask8) -> AvxMask8 {
+        AvxMask8(unsafe { _mm256_and_ps(self.0, b.0) })
+    }
+}
+
+impl BitOr for AvxMask8 {
+    type Output = AvxMask8;
+    #[inline(always)]
+    fn bitor(self, b: AvxMask8) -> AvxMask8 {
+        AvxMask8(unsafe { _mm256_or_ps(self.0, b.0) })
+    }
+}
+
+impl Mask8 for AvxMask8 {
+    type Lanes = A8;
+    #[inline(always)]
+    fn and_not(self, b: AvxMask8) -> AvxMask8 {
+        AvxMask8(unsafe { _mm256_andnot_ps(b.0, self.0) })
+    }
+    #[inline(always)]
+    fn bits(self) -> u32 {
+        (unsafe { _mm256_movemask_ps(self.0) }) as u32
+    }
+    #[inline(always)]
+    fn select(self, a: A8, b: A8) -> A8 {
+        A8(unsafe { _mm256_blendv_ps(b.0, a.0, self.0) })
     }
 }
 

@@ -1,7 +1,9 @@
 //! [`Simd`], the trait of the backend tokens ([`Portable`] and [`Avx2`]) that names each
-//! backend's lane types and makes their values, and [`dispatch`], which runs a [`Kernel`]
-//! on the backend [`super::backend`] selected, compiled for it.
+//! backend's lane types and makes their values, and [`dispatch`], the crate's one
+//! dispatcher, which runs a [`Kernel`] (the marcher's, the distance fields', the mesh
+//! tracer's) on the backend [`super::backend`] selected, compiled for it.
 
+use super::f4::{F4, Lanes4};
 use super::lane::{Lane, Lane8, Lane32, Lane64};
 use super::portable::D4;
 use super::portable::{F8, F8x4, Portable};
@@ -20,6 +22,8 @@ pub trait Simd: Copy + Send + Sync + 'static {
     type F32x32: Lane32<Token = Self>;
     /// Four f64 lanes.
     type F64x4: Lane64;
+    /// Four f32 lanes (the mesh tracer's one-packet triangle test).
+    type F32x4: Lanes4;
 
     /// `x` in every lane of a packet.
     #[inline(always)]
@@ -37,6 +41,19 @@ pub trait Simd: Copy + Send + Sync + 'static {
     fn u32_masks4(self, v: &[u32], i: usize, limit: i32) -> (Self::F64x4, Self::F64x4);
     /// Loads a packet.
     fn load8(self, a: &[f32; 8]) -> Self::F32x8;
+    /// A packet of lanes 0..4 from `lo` and lanes 4..8 from `hi`.
+    fn halves8(self, lo: &[f32; 4], hi: &[f32; 4]) -> Self::F32x8;
+    /// A packet of `lo` in lanes 0..4 and `hi` in lanes 4..8.
+    fn splat_halves8(self, lo: f32, hi: f32) -> Self::F32x8;
+    /// A packet of `a` in both halves (lanes 0..4 and 4..8).
+    #[inline(always)]
+    fn both8(self, a: &[f32; 4]) -> Self::F32x8 {
+        self.halves8(a, a)
+    }
+    /// `x` in four f32 lanes.
+    fn splat4f(self, x: f32) -> Self::F32x4;
+    /// Loads four f32 lanes.
+    fn load4f(self, a: &[f32; 4]) -> Self::F32x4;
     /// Loads four packets.
     fn load32(self, a: &[[f32; 8]; 4]) -> Self::F32x32;
     /// A register file of portable packets viewed as this backend's packets (same size and
@@ -61,14 +78,28 @@ pub trait Kernel {
 }
 
 /// Runs `k` on the backend [`super::backend`] selected: with the [`Avx2`] token inside a
-/// function compiled for AVX2 and FMA where that backend is selected, else with
-/// [`Portable`].
+/// function compiled for AVX2, FMA, POPCNT and BMI1 where that backend is selected, else
+/// with [`Portable`], out of line.
+///
+/// The kernel's body is called from the target-feature function directly, not through a
+/// closure as [`super::Avx2::vectorize`] takes: a closure is compiled for the features of
+/// the function that defines it, and a large one is left out of line, where none of the
+/// lane operations it calls would be inlined (measured: a mesh frame seven times slower).
+/// The portable body is out of line too: inlined, it would make every caller as large as
+/// the kernel (a frame of kilobytes set up on each call, for either backend) and keep the
+/// dispatch from being inlined into it (measured: 2% of the mesh tracer's primary rays).
 #[inline(always)]
 pub fn dispatch<K: Kernel>(k: K) -> K::Output {
     match super::avx2() {
         Some(a) => a.run(k),
-        None => k.run(Portable),
+        None => run_portable(k),
     }
+}
+
+/// [`Kernel::run`] on [`Portable`], out of line (see [`dispatch`]).
+#[inline(never)]
+fn run_portable<K: Kernel>(k: K) -> K::Output {
+    k.run(Portable)
 }
 
 impl Simd for Portable {
@@ -76,6 +107,7 @@ impl Simd for Portable {
     type F32x8 = F8;
     type F32x32 = F8x4;
     type F64x4 = D4;
+    type F32x4 = F4;
 
     #[inline(always)]
     fn splat4(self, x: f64) -> D4 {
@@ -98,6 +130,22 @@ impl Simd for Portable {
     #[inline(always)]
     fn load8(self, a: &[f32; 8]) -> F8 {
         F8(*a)
+    }
+    #[inline(always)]
+    fn halves8(self, lo: &[f32; 4], hi: &[f32; 4]) -> F8 {
+        F8([lo[0], lo[1], lo[2], lo[3], hi[0], hi[1], hi[2], hi[3]])
+    }
+    #[inline(always)]
+    fn splat_halves8(self, lo: f32, hi: f32) -> F8 {
+        F8([lo, lo, lo, lo, hi, hi, hi, hi])
+    }
+    #[inline(always)]
+    fn splat4f(self, x: f32) -> F4 {
+        F4([x; 4])
+    }
+    #[inline(always)]
+    fn load4f(self, a: &[f32; 4]) -> F4 {
+        F4(*a)
     }
     #[inline(always)]
     fn load32(self, a: &[[f32; 8]; 4]) -> F8x4 {

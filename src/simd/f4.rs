@@ -2,7 +2,7 @@
 //! (the portable backend), and [`Sse4`], one SSE register (the AVX2 backend's, VEX-encoded
 //! inside its kernels). Both implement [`Lanes4`] with IEEE single precision lane by lane,
 //! so their results equal the scalar ones bit for bit. A kernel gets them from its backend
-//! ([`super::MeshSimd::lanes4`], [`super::MeshSimd::load_lanes4`]).
+//! ([`super::Simd::splat4f`], [`super::Simd::load4f`]).
 
 use std::ops::{Add, Div, Mul, Sub};
 

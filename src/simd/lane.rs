@@ -1,13 +1,14 @@
 //! The lane traits the kernels are written against: [`Lane`] (any number of `f32` lanes
-//! evaluated alike, `f32` itself included), [`Lane8`] (eight lanes, one packet) and
-//! [`Lane32`] (four packets of eight, the marcher's 32 lanes).
+//! evaluated alike, `f32` itself included), [`Lane8`] (eight lanes, one packet) with its
+//! [`Mask8`], [`Lane32`] (four packets of eight, the marcher's 32 lanes) and [`Lane64`]
+//! (four f64 lanes); the mesh kernels' four-lane type is [`super::Lanes4`].
 //!
 //! A lane value of a vector backend can only be made through that backend's token
 //! ([`Lane::splat`] and the loads of [`crate::simd::Simd`] take one), so a value of an AVX2
 //! lane type proves that the CPU has AVX2: that is what makes the safe methods of the AVX2
 //! lane types sound.
 
-use std::ops::{Add, Div, Mul, Neg, Sub};
+use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Sub};
 
 /// A number of f32 lanes evaluated alike: `f32` (one), eight ([`Lane8`]) or 32
 /// ([`Lane32`]). Every operation is the same IEEE single-precision operation on every lane,
@@ -36,8 +37,13 @@ pub trait Lane:
     fn select_lt(a: Self, b: Self, x: Self, y: Self) -> Self;
 }
 
-/// Eight f32 lanes (one packet).
+/// Eight f32 lanes (one packet): the one eight-lane type of each backend, for the
+/// marcher's packets and the mesh kernels alike. Besides [`Lane`]'s arithmetic, masks in
+/// two forms: mask lanes of the type itself (`cmp_*`, `and`, `or`, `movemask`) and the
+/// backend's [`Mask8`] (`mask_*`, for the mesh kernels' hit masks).
 pub trait Lane8: Lane {
+    /// The backend's mask over eight lanes.
+    type Mask: Mask8<Lanes = Self>;
     /// The eight lanes.
     fn store(self) -> [f32; 8];
     /// Bit `l` set where lane `l` has `a < b` (false with a NaN).
@@ -56,6 +62,32 @@ pub trait Lane8: Lane {
     fn andnot(self, b: Self) -> Self;
     /// Bit `l` set where lane `l`'s sign bit is.
     fn movemask(self) -> u32;
+    /// Lane-wise `a * b - c`, rounded once: one FMA instruction on AVX2, exact `f64`
+    /// arithmetic rounded to odd and then to `f32` on the portable backend (the same bits,
+    /// slower). The one fused operation of the lanes.
+    fn mul_sub(self, b: Self, c: Self) -> Self;
+    /// The lanes where `a <= b` (false with a NaN).
+    fn mask_le(self, b: Self) -> Self::Mask;
+    /// The lanes where `a == b` (false with a NaN).
+    fn mask_eq(self, b: Self) -> Self::Mask;
+    /// Per lane, the bits of `x` mapped so that unsigned integer order is the order of the
+    /// floats (negative floats have their bits flipped, others their sign bit set).
+    fn order_keys(self) -> [u32; 8];
+    /// Lane-wise `vmin` of the two halves (lanes 0..4 against 4..8).
+    fn min_halves(self) -> [f32; 4];
+}
+
+/// A mask over eight lanes of a [`Lane8`] (the mesh kernels' hit masks): bit operations,
+/// the lanes as bits, and a select.
+pub trait Mask8: Copy + BitAnd<Output = Self> + BitOr<Output = Self> {
+    /// The lanes it selects between.
+    type Lanes: Copy;
+    /// Lanes set in `self` and not in `b`.
+    fn and_not(self, b: Self) -> Self;
+    /// Bit `l` set where lane `l` is.
+    fn bits(self) -> u32;
+    /// Per lane, `a` where the mask is set, else `b`.
+    fn select(self, a: Self::Lanes, b: Self::Lanes) -> Self::Lanes;
 }
 
 /// Four f64 lanes. Comparisons give mask lanes (every bit set where true, none where

@@ -19,24 +19,22 @@ mod f4;
 #[cfg(target_arch = "x86_64")]
 mod grid;
 mod lane;
-mod mesh;
+mod mask;
 mod portable;
 mod stack;
 
 #[cfg(target_arch = "x86_64")]
-pub use avx2::{A4d, A8, A8x4};
+pub use avx2::{A4d, A8, A8x4, AvxMask8};
 pub use backend::{Kernel, Simd, dispatch};
 #[cfg(target_arch = "x86_64")]
 pub use f4::Sse4;
 pub use f4::{F4, Lanes4};
 #[cfg(target_arch = "x86_64")]
 pub use grid::{BAND_BRICK, BAND_BRICK_SAMPLES, BAND_BS, BAND_EMPTY, BandLayout, Lattice};
-pub use lane::{Lane, Lane8, Lane32, Lane64};
-pub use mesh::{Arr8, Bits8, Lanes8, Mask8, MeshKernel, MeshSimd, dispatch_mesh};
-#[cfg(target_arch = "x86_64")]
-pub use mesh::{Avx8, AvxMask8};
+pub use lane::{Lane, Lane8, Lane32, Lane64, Mask8};
+pub use mask::Bits8;
 pub use portable::{D4, F8, F8x4, Portable};
-pub use stack::WalkStack;
+pub use stack::{WalkStack, at_byte_offset};
 
 use std::sync::OnceLock;
 

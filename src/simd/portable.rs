@@ -6,6 +6,7 @@
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
 use super::lane::{Lane, Lane8, Lane32, Lane64};
+use super::mask::{Bits8, mul_sub8};
 
 /// The portable backend's token: always available.
 #[derive(Clone, Copy, Debug, Default)]
@@ -140,9 +141,34 @@ impl F8 {
 }
 
 impl Lane8 for F8 {
+    type Mask = Bits8;
     #[inline(always)]
     fn store(self) -> [f32; 8] {
         self.0
+    }
+    #[inline(always)]
+    fn mul_sub(self, b: Self, c: Self) -> Self {
+        F8(mul_sub8(&self.0, &b.0, &c.0))
+    }
+    #[inline(always)]
+    fn mask_le(self, b: Self) -> Bits8 {
+        Bits8((0..8).fold(0, |m, l| m | u32::from(self.0[l] <= b.0[l]) << l))
+    }
+    #[inline(always)]
+    fn mask_eq(self, b: Self) -> Bits8 {
+        Bits8((0..8).fold(0, |m, l| m | u32::from(self.0[l] == b.0[l]) << l))
+    }
+    #[inline(always)]
+    fn order_keys(self) -> [u32; 8] {
+        self.0.map(|x| {
+            let b = x.to_bits();
+            b ^ ((((b as i32) >> 31) as u32) | 0x8000_0000)
+        })
+    }
+    #[inline(always)]
+    fn min_halves(self) -> [f32; 4] {
+        let a = self.0;
+        std::array::from_fn(|l| if a[l] < a[l + 4] { a[l] } else { a[l + 4] })
     }
     #[inline(always)]
     fn lt_mask(self, b: Self) -> u32 {

@@ -21,7 +21,7 @@
 //! [`GROUP_MAX`] nearby points in one walk (a node is opened when any of them needs it,
 //! each prunes by its own best), which shares the node loads and overlaps the points'
 //! independent arithmetic; its node and leaf tests take two points per eight-lane
-//! operation of the backend that [`crate::simd::dispatch_mesh`] picks (one instruction with
+//! operation of the backend that [`crate::simd::dispatch`] picks (one instruction with
 //! AVX2), with the same operations in the same order as the one-point tests (so the same
 //! results on both backends). Neither allocates: the caller passes a
 //! reusable [`NodeStack`] or [`GroupStack`]. The two walks over one tree are kept apart on
@@ -39,7 +39,7 @@ use crate::geometry::bvh2;
 use crate::geometry::mesh::triangle::closest_point_on_triangle;
 use crate::geometry::{Aabb, aabb};
 use crate::mesh::TriangleMesh;
-use crate::simd::{Lanes8, Mask8, MeshKernel, MeshSimd, dispatch_mesh};
+use crate::simd::{Kernel, Lane, Lane8, Mask8, Simd, dispatch};
 
 /// A reusable traversal stack: per entry, the bits of the squared distance bound of a node
 /// (high 32 bits) and its index (low). Keep one per thread; it grows to the BVH's depth
@@ -591,8 +591,8 @@ fn collapse(bvh: &Bvh2, corners: &[[Vec3A; 3]]) -> (Vec<Node4>, Vec<ClosestPacke
 /// The group's points in pairs, in the lanes of backend `s`: entry `j` holds point `2 j`
 /// in the low four lanes and point `2 j + 1` in the high four, per coordinate.
 #[inline(always)]
-fn pair_coordinates<S: MeshSimd>(s: S, qa: &[Vec3A; GROUP_MAX]) -> [[S::F8; 3]; GROUP_MAX / 2] {
-    let mut out = [[s.lanes8(0.0); 3]; GROUP_MAX / 2];
+fn pair_coordinates<S: Simd>(s: S, qa: &[Vec3A; GROUP_MAX]) -> [[S::F32x8; 3]; GROUP_MAX / 2] {
+    let mut out = [[s.splat8(0.0); 3]; GROUP_MAX / 2];
     for (j, pair) in out.iter_mut().enumerate() {
         for (a, x) in pair.iter_mut().enumerate() {
             *x = s.splat_halves8(qa[2 * j][a], qa[2 * j + 1][a]);
@@ -609,7 +609,7 @@ fn masked_best(best2: &[f32; GROUP_MAX], mask: u32, t: usize) -> f32 {
 
 /// The lanes of `v` in both halves of eight.
 #[inline(always)]
-fn both<S: MeshSimd>(s: S, v: &Vec4) -> S::F8 {
+fn both<S: Simd>(s: S, v: &Vec4) -> S::F32x8 {
     s.both8(v.as_ref())
 }
 
@@ -619,15 +619,15 @@ fn both<S: MeshSimd>(s: S, v: &Vec4) -> S::F8 {
 /// the points it is within (else infinity). The same operations in the same order as
 /// [`Node4::distances2`] (box, then cylinder as [`Cyl4::distances2`]), so the same bits.
 #[inline(always)]
-fn node_within<S: MeshSimd>(
+fn node_within<S: Simd>(
     s: S,
     n: &Node4,
-    qs8: &[[S::F8; 3]; GROUP_MAX / 2],
+    qs8: &[[S::F32x8; 3]; GROUP_MAX / 2],
     best2: &[f32; GROUP_MAX],
     mask: u32,
 ) -> (u32, Vec4) {
-    let inf = s.lanes8(f32::INFINITY);
-    let zero = s.lanes8(0.0);
+    let inf = s.splat8(f32::INFINITY);
+    let zero = s.splat8(0.0);
     let mut within_all = 0u32;
     let mut nearest = inf;
     let mut pairs = (mask | mask >> 1) & 0x55;
@@ -638,7 +638,7 @@ fn node_within<S: MeshSimd>(
         // Box.
         let mut box2 = zero;
         for (a, &qa) in q.iter().enumerate() {
-            let d = (both(s, &n.lo[a]) - qa).max(qa - both(s, &n.hi[a])).max(zero);
+            let d = (both(s, &n.lo[a]) - qa).vmax(qa - both(s, &n.hi[a])).vmax(zero);
             box2 = box2 + d * d;
         }
         // Cylinder (as `Cyl4::distances2`).
@@ -647,36 +647,36 @@ fn node_within<S: MeshSimd>(
         let nn = [both(s, &c.n[0]), both(s, &c.n[1]), both(s, &c.n[2])];
         let h = nn[0] * v[0] + nn[1] * v[1] + nn[2] * v[2];
         let w = [v[0] - h * nn[0], v[1] - h * nn[1], v[2] - h * nn[2]];
-        let rho = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
-        let dr = (rho - both(s, &c.r)).max(zero);
-        let dh = (h.abs() - both(s, &c.t)).max(zero);
-        let cyl2 = (dr * dr + dh * dh) * s.lanes8(CYL_SHRINK);
-        let d2 = box2.max(cyl2);
+        let rho = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).vsqrt();
+        let dr = (rho - both(s, &c.r)).vmax(zero);
+        let dh = (h.vabs() - both(s, &c.t)).vmax(zero);
+        let cyl2 = (dr * dr + dh * dh) * s.splat8(CYL_SHRINK);
+        let d2 = box2.vmax(cyl2);
         // Points outside `mask` (the second of a pair may be) get a negative best: no
         // child is within it (the bounds are not NaN).
         let b = s.splat_halves8(masked_best(best2, mask, p), masked_best(best2, mask, p + 1));
-        let within = d2.le(b);
+        let within = d2.mask_le(b);
         within_all |= within.bits() << (4 * p);
-        nearest = nearest.min(within.select(d2, inf));
+        nearest = nearest.vmin(within.select(d2, inf));
     }
     (within_all, Vec4::from_array(nearest.min_halves()))
 }
 
 /// `u - v` per coordinate.
 #[inline(always)]
-fn sub3<L: Lanes8>(u: [L; 3], v: [L; 3]) -> [L; 3] {
+fn sub3<L: Lane8>(u: [L; 3], v: [L; 3]) -> [L; 3] {
     [u[0] - v[0], u[1] - v[1], u[2] - v[2]]
 }
 
 /// `u . v` summed `(x + y) + z`, as glam's `dot` on `Vec3A` and [`dot`].
 #[inline(always)]
-fn dot3<L: Lanes8>(u: [L; 3], v: [L; 3]) -> L {
+fn dot3<L: Lane8>(u: [L; 3], v: [L; 3]) -> L {
     u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
 }
 
 /// `a + e s` per coordinate.
 #[inline(always)]
-fn along3<L: Lanes8>(a: [L; 3], e: [L; 3], s: L) -> [L; 3] {
+fn along3<L: Lane8>(a: [L; 3], e: [L; 3], s: L) -> [L; 3] {
     [a[0] + e[0] * s, a[1] + e[1] * s, a[2] + e[2] * s]
 }
 
@@ -690,7 +690,7 @@ fn select3_lanes<M: Mask8>(m: M, u: [M::Lanes; 3], v: [M::Lanes; 3]) -> [M::Lane
 /// `2 j + 1` in the high four, as [`pair_coordinates`] gives them): the same operations in
 /// the same order, so the same bits.
 #[inline(always)]
-fn tri_closest<S: MeshSimd>(s: S, t: &PointTri4, q: &[S::F8; 3]) -> (S::F8, [S::F8; 3]) {
+fn tri_closest<S: Simd>(s: S, t: &PointTri4, q: &[S::F32x8; 3]) -> (S::F32x8, [S::F32x8; 3]) {
     let q = *q;
     let a = [both(s, &t.a[0]), both(s, &t.a[1]), both(s, &t.a[2])];
     let b = [both(s, &t.b[0]), both(s, &t.b[1]), both(s, &t.b[2])];
@@ -710,15 +710,15 @@ fn tri_closest<S: MeshSimd>(s: S, t: &PointTri4, q: &[S::F8; 3]) -> (S::F8, [S::
     let vc = d1 * d4 - d3 * d2;
     let vb = d5 * d2 - d1 * d6;
     let va = d3 * d6 - d5 * d4;
-    let zero = s.lanes8(0.0);
+    let zero = s.splat8(0.0);
     // The regions, each as the scalar code tests it (see `PointTri4::closest`).
-    let in_a = d1.le(zero) & d2.le(zero);
-    let in_b = zero.le(d3) & d4.le(d3);
-    let in_ab = vc.le(zero) & zero.le(d1) & d3.le(zero);
-    let in_c = zero.le(d6) & d5.le(d6);
-    let in_ac = vb.le(zero) & zero.le(d2) & d6.le(zero);
+    let in_a = d1.mask_le(zero) & d2.mask_le(zero);
+    let in_b = zero.mask_le(d3) & d4.mask_le(d3);
+    let in_ab = vc.mask_le(zero) & zero.mask_le(d1) & d3.mask_le(zero);
+    let in_c = zero.mask_le(d6) & d5.mask_le(d6);
+    let in_ac = vb.mask_le(zero) & zero.mask_le(d2) & d6.mask_le(zero);
     let (e, f) = (d4 - d3, d5 - d6);
-    let in_bc = va.le(zero) & zero.le(e) & zero.le(f);
+    let in_bc = va.mask_le(zero) & zero.mask_le(e) & zero.mask_le(f);
     let tt = dot3(ap, n) / both(s, &t.nn);
     let x = [q[0] - n[0] * tt, q[1] - n[1] * tt, q[2] - n[2] * tt];
     let x = select3_lanes(in_bc, along3(b, sub3(c, b), e / (e + f)), x);
@@ -734,10 +734,10 @@ fn tri_closest<S: MeshSimd>(s: S, t: &PointTri4, q: &[S::F8; 3]) -> (S::F8, [S::
 /// [`ClosestPacket::improve`] for points `p` and `p + 1` (`p` even; those in `mask`) of a
 /// group walk at once, in the lanes of backend `s`.
 #[inline(always)]
-fn improve_pair<S: MeshSimd>(
+fn improve_pair<S: Simd>(
     s: S,
     packet: &ClosestPacket,
-    q: &[S::F8; 3],
+    q: &[S::F32x8; 3],
     p: usize,
     mask: u32,
     best2: &mut [f32; GROUP_MAX],
@@ -746,11 +746,11 @@ fn improve_pair<S: MeshSimd>(
     let (d2, x) = tri_closest(s, &packet.tri, q);
     // Points outside `mask` get a negative best: no lane is within it.
     let b = s.splat_halves8(masked_best(best2, mask, p), masked_best(best2, mask, p + 1));
-    let bits = d2.le(b).bits();
+    let bits = d2.mask_le(b).bits();
     if bits == 0 {
         return;
     }
-    let d = d2.to_array();
+    let d = d2.store();
     for h in 0..2 {
         let mut lanes = bits >> (4 * h) & 0xf;
         if lanes == 0 {
@@ -766,13 +766,13 @@ fn improve_pair<S: MeshSimd>(
                 found = l;
             }
         }
-        let xs = [x[0].to_array(), x[1].to_array(), x[2].to_array()];
+        let xs = [x[0].store(), x[1].store(), x[2].store()];
         let i = 4 * h + found;
         best[t] = (packet.slot[found], Vec3A::new(xs[0][i], xs[1][i], xs[2][i]));
     }
 }
 
-/// [`TriangleBvh::nearest_group`] as a [`MeshKernel`].
+/// [`TriangleBvh::nearest_group`] as a [`Kernel`].
 struct GroupWalk<'a> {
     tree: &'a TriangleBvh,
     points: &'a [Vec3],
@@ -782,10 +782,10 @@ struct GroupWalk<'a> {
     visited: &'a mut u64,
 }
 
-impl MeshKernel for GroupWalk<'_> {
+impl Kernel for GroupWalk<'_> {
     type Output = ();
     #[inline(always)]
-    fn run<S: MeshSimd>(self, s: S) {
+    fn run<S: Simd>(self, s: S) {
         self.tree.group_walk(s, self.points, self.hints, self.out, self.stack, self.visited)
     }
 }
@@ -959,14 +959,14 @@ impl TriangleBvh {
         stack: &mut GroupStack,
         visited: &mut u64,
     ) {
-        dispatch_mesh(GroupWalk { tree: self, points, hints, out, stack, visited })
+        dispatch(GroupWalk { tree: self, points, hints, out, stack, visited })
     }
 
     /// [`TriangleBvh::nearest_group`] on backend `s` (for comparing backends: the results
     /// and the work are the same, bit for bit). Call it for [`crate::simd::Avx2`] inside
     /// [`crate::simd::Avx2::vectorize`], which compiles it for AVX2.
     #[inline(always)]
-    pub fn nearest_group_on<S: MeshSimd>(
+    pub fn nearest_group_on<S: Simd>(
         &self,
         s: S,
         points: &[Vec3],
@@ -982,12 +982,12 @@ impl TriangleBvh {
     /// walk: each point's best improved by the leaf's triangles, as [`ClosestPacket::improve`]
     /// does (two points per eight-lane operation, the same bits).
     #[inline(always)]
-    fn group_leaf<S: MeshSimd>(
+    fn group_leaf<S: Simd>(
         &self,
         s: S,
         r: u32,
         mask: u32,
-        qs8: &[[S::F8; 3]; GROUP_MAX / 2],
+        qs8: &[[S::F32x8; 3]; GROUP_MAX / 2],
         best2: &mut [f32; GROUP_MAX],
         best: &mut [(u32, Vec3A); GROUP_MAX],
     ) {
@@ -1008,7 +1008,7 @@ impl TriangleBvh {
     }
 
     #[inline(always)]
-    fn group_walk<S: MeshSimd>(
+    fn group_walk<S: Simd>(
         &self,
         s: S,
         points: &[Vec3],
@@ -1250,10 +1250,10 @@ mod tests {
     }
 
     /// [`tri_closest`] on backend `s` for `q` (lanes 0..4) and `q2` (lanes 4..8).
-    fn pair_test<S: MeshSimd>(s: S, t: &PointTri4, q: Vec3A, q2: Vec3A) -> ([f32; 8], [[f32; 8]; 3]) {
+    fn pair_test<S: Simd>(s: S, t: &PointTri4, q: Vec3A, q2: Vec3A) -> ([f32; 8], [[f32; 8]; 3]) {
         let qs = [s.splat_halves8(q.x, q2.x), s.splat_halves8(q.y, q2.y), s.splat_halves8(q.z, q2.z)];
         let (d2, x) = tri_closest(s, t, &qs);
-        (d2.to_array(), [x[0].to_array(), x[1].to_array(), x[2].to_array()])
+        (d2.store(), [x[0].store(), x[1].store(), x[2].store()])
     }
 
     #[test]

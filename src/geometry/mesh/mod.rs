@@ -30,7 +30,7 @@ use crate::geometry::{
 use crate::mesh::TriangleMesh;
 pub use crate::scene::shape::Shading;
 use crate::scene::transform::{Transform, TransformDesc};
-use crate::simd::{MeshKernel, MeshSimd, Portable, dispatch_mesh};
+use crate::simd::{Kernel, Portable, Simd, dispatch};
 
 /// The extents (longest side of the box, scene units) of the meshes traced in the frame
 /// they are given in: 2^-20 to 2^20 (about 1e-6 to 1e6). Beyond, a mesh is traced in a
@@ -321,7 +321,7 @@ impl MeshGeometry {
     /// body (inlined into [`ClosestHit::run`], so that under AVX2 all of it is compiled
     /// with AVX2, in one function).
     #[inline(always)]
-    fn closest_hit_on<S: MeshSimd>(
+    fn closest_hit_on<S: Simd>(
         &self,
         s: S,
         ray: &Ray,
@@ -413,21 +413,20 @@ fn rescale(dir: Vec3) -> Option<f32> {
     Some(2f32.powi(m.log2().floor() as i32))
 }
 
-/// [`Geometry::closest_hit`] of a [`MeshGeometry`] as a [`MeshKernel`].
+/// [`Geometry::closest_hit`] of a [`MeshGeometry`] as a [`Kernel`].
 struct ClosestHit<'a> {
     mesh: &'a MeshGeometry,
-    origin: Vec3,
-    dir: Vec3,
+    ray: &'a Ray,
     t_min: f32,
     t_max: f32,
     stats: &'a mut RayStats,
 }
 
-impl MeshKernel for ClosestHit<'_> {
+impl Kernel for ClosestHit<'_> {
     type Output = Option<Hit>;
     #[inline(always)]
-    fn run<S: MeshSimd>(self, s: S) -> Option<Hit> {
-        let ray = Ray::new(self.origin, self.dir);
+    fn run<S: Simd>(self, s: S) -> Option<Hit> {
+        let ray = Ray::new(self.ray.origin, self.ray.dir);
         self.mesh.closest_hit_on(s, &ray, self.t_min, self.t_max, self.stats)
     }
 }
@@ -443,9 +442,7 @@ impl Geometry for MeshGeometry {
         {
             return hit;
         }
-        // The ray goes by value: a caller that has just written it would otherwise have
-        // its stores read back by wider loads, which cannot be forwarded.
-        dispatch_mesh(ClosestHit { mesh: self, origin: ray.origin, dir: ray.dir, t_min, t_max, stats })
+        dispatch(ClosestHit { mesh: self, ray, t_min, t_max, stats })
     }
 
     fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {

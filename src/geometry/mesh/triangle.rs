@@ -3,13 +3,13 @@
 //! one is exactly zero. Rays through shared edges and vertices of a closed mesh never pass
 //! between its triangles. [`ShearedRay::intersect4`] runs the same test on four triangles
 //! at once, and [`ShearedRay::intersect8`] on eight (a leaf's two packets), in the lanes of
-//! a [`MeshSimd`] backend, with bit-identical results, returning a hit mask and skipping
+//! a [`Simd`] backend, with bit-identical results, returning a hit mask and skipping
 //! the distances and their division when no lane's edge functions agree in sign. Also the exact closest point on a triangle
 //! ([`closest_point_on_triangle`]), for distance queries.
 
 use glam::{DVec3, Vec3, Vec3A};
 
-use crate::simd::{Lanes4, Lanes8, Mask8, MeshSimd};
+use crate::simd::{Lane8, Lanes4, Mask8, Simd};
 
 /// Per-ray precomputation of the shear that maps the ray to the +z axis.
 #[derive(Clone, Copy, Debug)]
@@ -110,11 +110,11 @@ impl ShearedRay {
     /// time in f64, as there. Returns at once, before the distances and their division,
     /// when no lane's edge functions agree in sign (most packets a ray visits).
     #[inline(always)]
-    pub fn intersect4<S: MeshSimd>(&self, s: S, tri: &Tri4, t_min: f32, t_max: f32) -> ([f32; 4], u32) {
+    pub fn intersect4<S: Simd>(&self, s: S, tri: &Tri4, t_min: f32, t_max: f32) -> ([f32; 4], u32) {
         let [kx, ky, kz] = self.k;
-        let (sx, sy, sz) = (s.lanes4(self.shear.x), s.lanes4(self.shear.y), s.lanes4(self.shear.z));
+        let (sx, sy, sz) = (s.splat4f(self.shear.x), s.splat4f(self.shear.y), s.splat4f(self.shear.z));
         let (ox, oy, oz) =
-            (s.lanes4(self.origin_k[0]), s.lanes4(self.origin_k[1]), s.lanes4(self.origin_k[2]));
+            (s.splat4f(self.origin_k[0]), s.splat4f(self.origin_k[1]), s.splat4f(self.origin_k[2]));
         // Per vertex: sheared x, y and the z offset along the ray's main axis. (Functions
         // marked `#[inline(always)]` rather than closures, which the compiler may leave out
         // of line, where they would not be compiled for the backend's instructions.)
@@ -124,32 +124,20 @@ impl ShearedRay {
             (row[0] - o[0] - sx * z, row[1] - o[1] - sy * z, z)
         }
         let o = [ox, oy, oz];
-        let (ax, ay, az) = vertex(
-            [s.load_lanes4(&tri[0][kx]), s.load_lanes4(&tri[0][ky]), s.load_lanes4(&tri[0][kz])],
-            o,
-            sx,
-            sy,
-        );
-        let (bx, by, bz) = vertex(
-            [s.load_lanes4(&tri[1][kx]), s.load_lanes4(&tri[1][ky]), s.load_lanes4(&tri[1][kz])],
-            o,
-            sx,
-            sy,
-        );
-        let (cx, cy, cz) = vertex(
-            [s.load_lanes4(&tri[2][kx]), s.load_lanes4(&tri[2][ky]), s.load_lanes4(&tri[2][kz])],
-            o,
-            sx,
-            sy,
-        );
+        let (ax, ay, az) =
+            vertex([s.load4f(&tri[0][kx]), s.load4f(&tri[0][ky]), s.load4f(&tri[0][kz])], o, sx, sy);
+        let (bx, by, bz) =
+            vertex([s.load4f(&tri[1][kx]), s.load4f(&tri[1][ky]), s.load4f(&tri[1][kz])], o, sx, sy);
+        let (cx, cy, cz) =
+            vertex([s.load4f(&tri[2][kx]), s.load4f(&tri[2][ky]), s.load4f(&tri[2][kz])], o, sx, sy);
         let mut u = cx * by - cy * bx;
         let mut v = ax * cy - ay * cx;
         let mut w = bx * ay - by * ax;
-        let zero = s.lanes4(0.0);
+        let zero = s.splat4f(0.0);
         if (u.eq(zero) | v.eq(zero) | w.eq(zero)) != 0 {
             let mut uvw = [u.to_array(), v.to_array(), w.to_array()];
             self.edges_f64(tri, &mut uvw);
-            (u, v, w) = (s.load_lanes4(&uvw[0]), s.load_lanes4(&uvw[1]), s.load_lanes4(&uvw[2]));
+            (u, v, w) = (s.load4f(&uvw[0]), s.load4f(&uvw[1]), s.load4f(&uvw[2]));
         }
         // Inside: no edge function of either sign against the others (for numbers, the
         // negation of "some negative and some positive"; NaN lanes, unused or degenerate,
@@ -162,7 +150,7 @@ impl ShearedRay {
         }
         let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
         let t = t_scaled / det;
-        let ok = candidates & s.lanes4(t_min).le(t) & t.le(s.lanes4(t_max));
+        let ok = candidates & s.splat4f(t_min).le(t) & t.le(s.splat4f(t_max));
         (t.to_array(), ok)
     }
 
@@ -170,20 +158,13 @@ impl ShearedRay {
     /// lanes 4..8 of the eight-lane type of backend `s`: the same operations in the same
     /// order, so every lane's `t` and hit bit equal the four-lane test's.
     #[inline(always)]
-    pub fn intersect8<S: MeshSimd>(
-        &self,
-        s: S,
-        a: &Tri4,
-        b: &Tri4,
-        t_min: f32,
-        t_max: f32,
-    ) -> ([f32; 8], u32) {
-        let (sx, sy, sz) = (s.lanes8(self.shear.x), s.lanes8(self.shear.y), s.lanes8(self.shear.z));
+    pub fn intersect8<S: Simd>(&self, s: S, a: &Tri4, b: &Tri4, t_min: f32, t_max: f32) -> ([f32; 8], u32) {
+        let (sx, sy, sz) = (s.splat8(self.shear.x), s.splat8(self.shear.y), s.splat8(self.shear.z));
         let (ox, oy, oz) =
-            (s.lanes8(self.origin_k[0]), s.lanes8(self.origin_k[1]), s.lanes8(self.origin_k[2]));
+            (s.splat8(self.origin_k[0]), s.splat8(self.origin_k[1]), s.splat8(self.origin_k[2]));
         // Per vertex: sheared x, y and the z offset along the ray's main axis.
         #[inline(always)]
-        fn vertex<L: Lanes8>(row: [L; 3], o: [L; 3], sx: L, sy: L) -> (L, L, L) {
+        fn vertex<L: Lane8>(row: [L; 3], o: [L; 3], sx: L, sy: L) -> (L, L, L) {
             let z = row[2] - o[2];
             (row[0] - o[0] - sx * z, row[1] - o[1] - sy * z, z)
         }
@@ -194,22 +175,23 @@ impl ShearedRay {
         let mut u = cx * by - cy * bx;
         let mut v = ax * cy - ay * cx;
         let mut w = bx * ay - by * ax;
-        let zero = s.lanes8(0.0);
-        if (u.eq(zero) | v.eq(zero) | w.eq(zero)).bits() != 0 {
-            let mut uvw = [u.to_array(), v.to_array(), w.to_array()];
+        let zero = s.splat8(0.0);
+        if (u.mask_eq(zero) | v.mask_eq(zero) | w.mask_eq(zero)).bits() != 0 {
+            let mut uvw = [u.store(), v.store(), w.store()];
             self.edges_f64_8(a, b, &mut uvw);
-            (u, v, w) = (s.load_lanes8(&uvw[0]), s.load_lanes8(&uvw[1]), s.load_lanes8(&uvw[2]));
+            (u, v, w) = (s.load8(&uvw[0]), s.load8(&uvw[1]), s.load8(&uvw[2]));
         }
-        let inside = (zero.le(u) & zero.le(v) & zero.le(w)) | (u.le(zero) & v.le(zero) & w.le(zero));
+        let inside = (zero.mask_le(u) & zero.mask_le(v) & zero.mask_le(w))
+            | (u.mask_le(zero) & v.mask_le(zero) & w.mask_le(zero));
         let det = u + v + w;
-        let candidates = inside.and_not(det.eq(zero)).bits();
+        let candidates = inside.and_not(det.mask_eq(zero)).bits();
         if candidates == 0 {
             return ([0.0; 8], 0);
         }
         let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
         let t = t_scaled / det;
-        let ok = candidates & (s.lanes8(t_min).le(t) & t.le(s.lanes8(t_max))).bits();
-        (t.to_array(), ok)
+        let ok = candidates & (s.splat8(t_min).mask_le(t) & t.mask_le(s.splat8(t_max))).bits();
+        (t.store(), ok)
     }
 
     /// [`ShearedRay::edges_f64`] on the two packets of an eight-lane test (lanes 0..4 of
@@ -259,7 +241,7 @@ impl ShearedRay {
 /// Vertex `v`'s coordinates on the axes `k` (x', y', z' of the sheared frame) of the
 /// packets `a` (lanes 0..4) and `b` (lanes 4..8).
 #[inline(always)]
-fn rows8<S: MeshSimd>(s: S, a: &Tri4, b: &Tri4, v: usize, k: [usize; 3]) -> [S::F8; 3] {
+fn rows8<S: Simd>(s: S, a: &Tri4, b: &Tri4, v: usize, k: [usize; 3]) -> [S::F32x8; 3] {
     [
         s.halves8(&a[v][k[0]], &b[v][k[0]]),
         s.halves8(&a[v][k[1]], &b[v][k[1]]),

@@ -1,8 +1,8 @@
 //! The per-mesh 8-wide BVH: an obvhs `Bvh2` collapsed (grouped by a surface area heuristic
 //! dynamic programme, [`WideBvh::from_bvh2`]) into nodes of eight children whose
 //! boxes are stored as structure-of-arrays (so one ray tests all eight at once, [`BoxRay`],
-//! in the eight lanes of a [`MeshSimd`] backend: one AVX2 instruction per step where
-//! [`crate::simd::dispatch_mesh`] picks AVX2), with leaves of up to eight triangles
+//! in the eight lanes of a [`Simd`] backend: one AVX2 instruction per step where
+//! [`crate::simd::dispatch`] picks AVX2), with leaves of up to eight triangles
 //! pre-gathered into one or two [`Tri4`] packets (tested together in one eight-lane test,
 //! [`ShearedRay::intersect8`]). Owns the closest-hit, any-hit and nearest-point walks over
 //! it and their work counting. The scene's top-level BVH over objects stays in
@@ -16,7 +16,7 @@ use obvhs::bvh2::Bvh2;
 use crate::geometry::bvh2;
 use crate::geometry::mesh::triangle::{ShearedRay, Tri4};
 use crate::geometry::{Aabb, RayStats, box_distance};
-use crate::simd::{Lanes8, Mask8, MeshKernel, MeshSimd, WalkStack, dispatch_mesh};
+use crate::simd::{Kernel, Lane, Lane8, Mask8, Simd, WalkStack, at_byte_offset, dispatch};
 
 /// Children per node. Eight rather than four (benches/primary_rays.rs, armadillo) cuts the
 /// nodes a primary ray visits from 3.4 to 2.5 and the depth from 11 to 7, and raised
@@ -111,7 +111,7 @@ fn safe_inverse(dir: Vec3) -> [f32; 3] {
 /// Both rows of an axis sit at fixed offsets and are ordered by `min` and `max`, which
 /// keep an empty lane's NaN, rather than rows chosen by the direction's signs: no row
 /// index to keep per ray. Below the root a slab distance is one fused
-/// `bound * inv - offset` ([`Lanes8::mul_sub`]: one FMA on AVX2, the same bits computed
+/// `bound * inv - offset` ([`Lane8::mul_sub`]: one FMA on AVX2, the same bits computed
 /// exactly on the portable backend), with `offset` the product `origin * inv` rounded
 /// away from the box: its rounding error (up to half an ulp of the product, an absolute
 /// error that grows with the origin's distance from the mesh's frame, unlike the relative
@@ -126,17 +126,17 @@ fn safe_inverse(dir: Vec3) -> [f32; 3] {
 /// uses `(bound - origin) * inv` (a fused root made rays that miss slower; the root's box
 /// holds every triangle well inside).
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct BoxRay<S: MeshSimd> {
+pub(crate) struct BoxRay<S: Simd> {
     s: S,
-    origin: [S::F8; 3],
-    inv: [S::F8; 3],
+    origin: [S::F32x8; 3],
+    inv: [S::F32x8; 3],
     /// Per bound row (minimum x, y, z, then maximum x, y, z): `origin * inv` of its axis,
     /// raised where the row is the entry slab (the minimum for a nonnegative `inv`) and
     /// lowered where it is the exit slab.
-    offset: [S::F8; 6],
+    offset: [S::F32x8; 6],
 }
 
-impl<S: MeshSimd> BoxRay<S> {
+impl<S: Simd> BoxRay<S> {
     /// Prepares the ray `origin + t * dir`.
     #[inline(always)]
     fn new(s: S, origin: Vec3, dir: Vec3) -> Self {
@@ -146,17 +146,17 @@ impl<S: MeshSimd> BoxRay<S> {
         // `p` is within half an ulp of it); `copysign` picks the entry row without a branch.
         // (Loops rather than closures, which the compiler may leave out of line, where they
         // would not be compiled for the backend's instructions.)
-        let mut offset = [s.lanes8(0.0); 6];
+        let mut offset = [s.splat8(0.0); 6];
         for (row, x) in offset.iter_mut().enumerate() {
             let a = row % 3;
             let p = o[a] * inv[a];
             let e = (p.abs() * (2.0 * f32::EPSILON)).copysign(inv[a]);
-            *x = s.lanes8(if row < 3 { p + e } else { p - e });
+            *x = s.splat8(if row < 3 { p + e } else { p - e });
         }
         BoxRay {
             s,
-            origin: [s.lanes8(o[0]), s.lanes8(o[1]), s.lanes8(o[2])],
-            inv: [s.lanes8(inv[0]), s.lanes8(inv[1]), s.lanes8(inv[2])],
+            origin: [s.splat8(o[0]), s.splat8(o[1]), s.splat8(o[2])],
+            inv: [s.splat8(inv[0]), s.splat8(inv[1]), s.splat8(inv[2])],
             offset,
         }
     }
@@ -174,20 +174,20 @@ impl<S: MeshSimd> BoxRay<S> {
         // Per axis, the entry and exit distances of the slab. `min` and `max` return their
         // second operand where either is NaN, so the NaN of an empty lane carries through
         // every step below and fails the final comparison.
-        let near = x0.min(x1).max(y0.min(y1)).max(self.s.lanes8(t_min).max(z0.min(z1)));
-        let far = x0.max(x1).min(y0.max(y1)).min(self.s.lanes8(t_max).min(z0.max(z1)));
-        (near.le(far).bits(), near.order_keys())
+        let near = x0.vmin(x1).vmax(y0.vmin(y1)).vmax(self.s.splat8(t_min).vmax(z0.vmin(z1)));
+        let far = x0.vmax(x1).vmin(y0.vmax(y1)).vmin(self.s.splat8(t_max).vmin(z0.vmax(z1)));
+        (near.mask_le(far).bits(), near.order_keys())
     }
 
     /// The slab distances of bound row `row` (values `bound`): fused below the root, else
     /// `(bound - origin) * inv`.
     #[inline(always)]
-    fn slab(&self, fused: bool, bound: &[f32; WIDTH], row: usize) -> S::F8 {
+    fn slab(&self, fused: bool, bound: &[f32; WIDTH], row: usize) -> S::F32x8 {
         let a = row % 3;
         if fused {
-            self.s.load_lanes8(bound).mul_sub(self.inv[a], self.offset[row])
+            self.s.load8(bound).mul_sub(self.inv[a], self.offset[row])
         } else {
-            (self.s.load_lanes8(bound) - self.origin[a]) * self.inv[a]
+            (self.s.load8(bound) - self.origin[a]) * self.inv[a]
         }
     }
 
@@ -338,7 +338,7 @@ impl WideBvh {
     /// The closest triangle hit by the ray `origin + t * dir` with `t` in `[t_min, t_max]`:
     /// its index and `t`. Counts inner nodes visited (each an eight-box test) in
     /// `stats.bvh_nodes` and triangles tested in `stats.prim_tests`. Runs on the backend of
-    /// this process ([`dispatch_mesh`]); [`closest_walk`] runs on a given one.
+    /// this process ([`dispatch`]); [`closest_walk`] runs on a given one.
     #[inline]
     pub fn closest_hit(
         &self,
@@ -348,28 +348,23 @@ impl WideBvh {
         t_max: f32,
         stats: &mut RayStats,
     ) -> Option<LeafHit> {
-        dispatch_mesh(Walk::<false> { bvh: self, origin, dir, t_min, t_max, stats })
+        dispatch(Walk::<false> { bvh: self, origin, dir, t_min, t_max, stats })
     }
 
     /// Whether any triangle is hit with `t` in `[t_min, t_max]`; stops at the first
     /// (shadow rays). Counts work as [`WideBvh::closest_hit`] does.
     #[inline]
     pub fn any_hit(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
-        dispatch_mesh(Walk::<true> { bvh: self, origin, dir, t_min, t_max, stats })
+        dispatch(Walk::<true> { bvh: self, origin, dir, t_min, t_max, stats })
     }
 
     /// The node of inner-node reference `r` (its byte offset in [`WideBvh::nodes`]): one
     /// add where indexing would shift first, a step of latency less on each node of a
-    /// walk (measured: 1.3% more primary rays per second on the bunny). Indexed by
-    /// `r >> 8`, so that the address is `r` with its low bits masked (`(r >> 8) << 8`), one
-    /// `and` on the walk's chain, and the bounds check compares the index off it.
+    /// walk (measured: 1.3% more primary rays per second on the bunny; indexing by
+    /// `r >> 8` compiled to a shift, a mask and a shift back on the chain, 3% slower).
     #[inline(always)]
     fn node(&self, r: u32) -> &WideNode {
-        debug_assert!(
-            r.is_multiple_of(size_of::<WideNode>() as u32),
-            "node reference {r} is not a node's offset"
-        );
-        &self.nodes[r as usize >> 8]
+        at_byte_offset(&self.nodes, r)
     }
 
     /// The packets of the leaf whose first packet and triangle count are `range` (from
@@ -487,7 +482,7 @@ macro_rules! with_stack {
 }
 
 /// A walk of [`WideBvh::closest_hit`] (`ANY` false) or [`WideBvh::any_hit`] (`ANY` true)
-/// as a [`MeshKernel`]: the ray and the work counters.
+/// as a [`Kernel`]: the ray and the work counters.
 struct Walk<'a, const ANY: bool> {
     bvh: &'a WideBvh,
     origin: Vec3,
@@ -497,28 +492,28 @@ struct Walk<'a, const ANY: bool> {
     stats: &'a mut RayStats,
 }
 
-impl MeshKernel for Walk<'_, false> {
+impl Kernel for Walk<'_, false> {
     type Output = Option<LeafHit>;
     #[inline(always)]
-    fn run<S: MeshSimd>(self, s: S) -> Option<LeafHit> {
+    fn run<S: Simd>(self, s: S) -> Option<LeafHit> {
         closest_walk(s, self.bvh, self.origin, self.dir, self.t_min, self.t_max, self.stats)
     }
 }
 
-impl MeshKernel for Walk<'_, true> {
+impl Kernel for Walk<'_, true> {
     type Output = bool;
     #[inline(always)]
-    fn run<S: MeshSimd>(self, s: S) -> bool {
+    fn run<S: Simd>(self, s: S) -> bool {
         any_walk(s, self.bvh, self.origin, self.dir, self.t_min, self.t_max, self.stats)
     }
 }
 
 /// [`WideBvh::closest_hit`] on backend `s`: the root's test, then (for a ray that enters
 /// it) the walk on a stack from [`with_stack`], set up only then. Inlined into its
-/// callers, so that inside a kernel run by [`dispatch_mesh`] all of it is compiled for the
+/// callers, so that inside a kernel run by [`dispatch`] all of it is compiled for the
 /// backend.
 #[inline(always)]
-pub(crate) fn closest_walk<S: MeshSimd>(
+pub(crate) fn closest_walk<S: Simd>(
     s: S,
     bvh: &WideBvh,
     origin: Vec3,
@@ -545,13 +540,7 @@ pub(crate) fn closest_walk<S: MeshSimd>(
 /// [`NONE`] where the ray enters none. Two children are ordered by one compare-exchange of
 /// their entries, three or four by a network of four, more by insertion.
 #[inline(always)]
-fn visit_node<S: MeshSimd>(
-    br: &BoxRay<S>,
-    n: &WideNode,
-    t_min: f32,
-    t_max: f32,
-    stack: &mut WalkStack,
-) -> u32 {
+fn visit_node<S: Simd>(br: &BoxRay<S>, n: &WideNode, t_min: f32, t_max: f32, stack: &mut WalkStack) -> u32 {
     let (mask, d) = br.hit::<false>(n, t_min, t_max);
     push_children(n, mask, d, stack)
 }
@@ -621,7 +610,7 @@ fn push_children(n: &WideNode, mut mask: u32, d: [u32; WIDTH], stack: &mut WalkS
 /// root); the second goes on from that leaf with it.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn closest_walk_in<S: MeshSimd>(
+fn closest_walk_in<S: Simd>(
     br: &BoxRay<S>,
     bvh: &WideBvh,
     stack: &mut WalkStack,
@@ -714,7 +703,7 @@ fn closest_walk_in<S: MeshSimd>(
 
 /// [`WideBvh::any_hit`] on backend `s` with a stack from [`with_stack`].
 #[inline(always)]
-pub(crate) fn any_walk<S: MeshSimd>(
+pub(crate) fn any_walk<S: Simd>(
     s: S,
     bvh: &WideBvh,
     origin: Vec3,
@@ -729,7 +718,7 @@ pub(crate) fn any_walk<S: MeshSimd>(
 /// [`any_walk`] on `stack` (at least [`stack_needed`] entries).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn any_walk_in<S: MeshSimd>(
+fn any_walk_in<S: Simd>(
     s: S,
     bvh: &WideBvh,
     stack: &mut WalkStack,
