@@ -38,7 +38,7 @@ use crate::mesh::{TriangleMesh, save_mesh};
 use crate::metrics::{self, Probe};
 use crate::plan::budget::{MemoryBudget, reextract_bytes};
 use crate::plan::{
-    Build, Fallback, GridFill, GridStorage, MeshMethod, ObjectPlan, ReprKind, Representation,
+    Build, Fallback, GridFill, GridStorage, MeshMethod, MeshPlane, ObjectPlan, ReprKind, Representation,
     build_scene_with_plans, reextract_mesh, traced_repr,
 };
 use crate::render::{Frame, render, write_png};
@@ -450,6 +450,7 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
                     resolution: sweep_mesh_resolution(r),
                     shading: Shading::Smooth,
                     method,
+                    plane: MeshPlane::ClosedForm,
                     march,
                 })
             };
@@ -760,7 +761,7 @@ fn stem(path: &Path) -> String {
 /// region, ...); empty when there is none. Two fallbacks that belong to the asked
 /// representation are not named: the analytic representation's sphere tracing of objects
 /// without a closed form (its definition) and an infinite plane intersected in closed form
-/// (as in every representation but the mesh one).
+/// (as every representation does; the mesh one unless asked for discs).
 fn note(scene: &Scene, plans: &[ObjectPlan]) -> String {
     let fallbacks: Vec<String> = scene
         .objects

@@ -6,12 +6,14 @@
 //! ([`budget::scene_bytes`]) counts exactly that, so the two cannot disagree.
 //!
 //! The plans ([`Build`]):
-//! - [`Build::ClosedForm`]: closed-form ray/primitive intersection (primitives, analytic).
+//! - [`Build::ClosedForm`]: closed-form ray/primitive intersection (primitives, analytic;
+//!   infinite planes in every representation).
 //! - [`Build::Marched`]: sphere tracing of the analytic SDF (the sdf representation, and
 //!   every fallback below that says "sphere traced").
 //! - [`Build::MeshTriangles`]: a loaded mesh traced as its own triangles.
 //! - [`Build::Tessellated`]: a primitive tessellated parametrically.
-//! - [`Build::PlaneDisc`]: an infinite plane as a disc around the camera.
+//! - [`Build::PlaneDisc`]: an infinite plane as a disc around the camera (the mesh
+//!   representation with [`MeshPlane::Disc`]).
 //! - [`Build::Extracted`]: a bounded object's surface extracted from its SDF.
 //! - [`Build::Instanced`]: a repetition's child made into one mesh (tessellated or
 //!   extracted) with one BVH, placed once per copy under the scene's top-level BVH, as a
@@ -111,8 +113,10 @@ pub enum Representation {
         march: MarchParams,
     },
     /// Primitives tessellated parametrically at `resolution` (segments around the largest
-    /// circle) and ray traced as triangle meshes through a BVH; infinite planes become a
-    /// disc around the camera out to the scene's `max_distance`; repetition is instanced
+    /// circle) and ray traced as triangle meshes through a BVH; infinite planes are
+    /// intersected in closed form, as in every representation ([`MeshPlane::ClosedForm`]),
+    /// or made a disc around the camera out to the scene's `max_distance` when asked
+    /// ([`MeshPlane::Disc`]); repetition is instanced
     /// (its child made into one mesh, placed per copy: [`Build::Instanced`]); bounded CSG
     /// is extracted from its SDF (marching cubes, `resolution` cells along the
     /// longest axis, at most [`MAX_EXTRACT_RESOLUTION`]: [`extract_resolution`]); unbounded
@@ -126,6 +130,8 @@ pub enum Representation {
         shading: Shading,
         /// Parametric tessellation, or extraction of every bounded object.
         method: MeshMethod,
+        /// How infinite planes are traced.
+        plane: MeshPlane,
         /// Sphere tracing parameters of the objects that stay marched.
         march: MarchParams,
     },
@@ -152,6 +158,20 @@ pub enum MeshMethod {
     Parametric,
     /// Every bounded object extracted from its SDF with the given method.
     Extracted(ExtractMethod),
+}
+
+/// How the mesh representation traces an infinite plane; the command line's `--plane`
+/// values.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum MeshPlane {
+    /// Intersected in closed form ([`Build::ClosedForm`], the analytic representation's
+    /// primitive), as every other representation does: the study compares the objects, not
+    /// a tessellation of the ground.
+    #[default]
+    ClosedForm,
+    /// Tessellated into a flat disc around the camera out to the scene's `max_distance`
+    /// ([`Build::PlaneDisc`]), traced as triangles like the rest.
+    Disc,
 }
 
 /// How a mesh object's grid is filled (analytic objects are always sampled exactly); the
@@ -233,8 +253,8 @@ impl Representation {
         match self {
             Representation::Analytic { march } => Representation::Analytic { march: with_footprint(march) },
             Representation::Sdf { march } => Representation::Sdf { march: with_footprint(march) },
-            Representation::Mesh { resolution, shading, method, march } => {
-                Representation::Mesh { resolution, shading, method, march: with_footprint(march) }
+            Representation::Mesh { resolution, shading, method, plane, march } => {
+                Representation::Mesh { resolution, shading, method, plane, march: with_footprint(march) }
             }
             Representation::Grid { resolution, fill, storage, march } => {
                 Representation::Grid { resolution, fill, storage, march: with_footprint(march) }
@@ -591,8 +611,8 @@ impl ObjectPlan {
     /// plan is as asked or its fallback stays in the representation
     /// ([`Fallback::stays_in_repr`]); `asked` too for an infinite plane intersected in
     /// closed form (the grid representation's fallback for it), as every representation
-    /// intersects planes in closed form but the mesh one, the common ground the study does
-    /// not compare; otherwise the realised build's ([`Build::kind`]): sphere traced is
+    /// intersects planes in closed form (the mesh one unless [`MeshPlane::Disc`]), the
+    /// common ground the study does not compare; otherwise the realised build's ([`Build::kind`]): sphere traced is
     /// `sdf`, a grid file marched instead of extracted `grid`, a mesh whose grid could not
     /// be built `mesh`.
     pub fn traced(&self, asked: ReprKind) -> ReprKind {
@@ -667,16 +687,17 @@ pub fn plan_object(scene: &Scene, o: &Object, repr: Representation) -> ObjectPla
             ObjectKind::Primitive(_) => ObjectPlan::as_asked(Build::ClosedForm),
             _ => marched(Some(Fallback::NoClosedForm { kind: o.kind_name() })),
         },
-        // Unbounded planes have a closed form in every representation but the mesh (a
-        // disc out to the far distance): never marched to the horizon.
+        // Unbounded planes have a closed form in every representation (the mesh one may
+        // make them a disc out to the far distance): never marched to the horizon.
         Representation::Sdf { .. } => match o.kind {
             ObjectKind::Primitive(Primitive::Plane { .. }) => ObjectPlan::as_asked(Build::ClosedForm),
             _ => marched(None),
         },
-        Representation::Mesh { resolution, shading, method, .. } => match (&o.kind, method) {
-            (ObjectKind::Primitive(Primitive::Plane { .. }), _) => {
-                ObjectPlan::as_asked(Build::PlaneDisc { resolution })
-            }
+        Representation::Mesh { resolution, shading, method, plane, .. } => match (&o.kind, method) {
+            (ObjectKind::Primitive(Primitive::Plane { .. }), _) => match plane {
+                MeshPlane::ClosedForm => ObjectPlan::as_asked(Build::ClosedForm),
+                MeshPlane::Disc => ObjectPlan::as_asked(Build::PlaneDisc { resolution }),
+            },
             (ObjectKind::Primitive(_), MeshMethod::Parametric) => match first_alike(scene, o) {
                 Some(of) => ObjectPlan::as_asked(Build::SharedMesh { of }),
                 None => ObjectPlan::as_asked(Build::Tessellated { resolution, shading }),
@@ -876,6 +897,7 @@ mod tests {
             resolution: 16,
             shading: Shading::Smooth,
             method,
+            plane: MeshPlane::ClosedForm,
             march: MarchParams::default(),
         }
     }
@@ -926,7 +948,7 @@ mod tests {
         let copies = |mesh| Build::Instanced { mesh, copies: 8, reach: None };
         for (o, p) in s.objects.iter().zip(plan_scene(&s, mesh(MeshMethod::Parametric))) {
             let build = match kind(o) {
-                "plane" => Build::PlaneDisc { resolution: 16 },
+                "plane" => Build::ClosedForm,
                 "repeat" => copies(InstanceMesh::Tessellated { resolution: 16, shading: Shading::Smooth }),
                 "other" => Build::Extracted { method: mc, resolution: 16 },
                 _ => Build::Tessellated { resolution: 16, shading: Shading::Smooth },
@@ -935,7 +957,7 @@ mod tests {
         }
         for (o, p) in s.objects.iter().zip(plan_scene(&s, mesh(MeshMethod::Extracted(mc)))) {
             let expect = match kind(o) {
-                "plane" => ObjectPlan::as_asked(Build::PlaneDisc { resolution: 16 }),
+                "plane" => ObjectPlan::as_asked(Build::ClosedForm),
                 "triangle" => ObjectPlan::fallback(Build::Marched { march }, Fallback::Unsigned),
                 "repeat" => {
                     ObjectPlan::as_asked(copies(InstanceMesh::Extracted { method: mc, resolution: 16 }))
@@ -944,6 +966,20 @@ mod tests {
             };
             assert_eq!(p, expect, "{}", o.label);
         }
+        // The disc, when asked for.
+        let Representation::Mesh { resolution, shading, method, march: m, .. } = mesh(MeshMethod::Parametric)
+        else {
+            unreachable!("a mesh representation")
+        };
+        let discs = Representation::Mesh { resolution, shading, method, plane: MeshPlane::Disc, march: m };
+        let planes: Vec<Build> = s
+            .objects
+            .iter()
+            .zip(plan_scene(&s, discs))
+            .filter(|(o, _)| kind(o) == "plane")
+            .map(|(_, p)| p.build)
+            .collect();
+        assert!(!planes.is_empty() && planes.iter().all(|b| *b == Build::PlaneDisc { resolution: 16 }));
         for (o, p) in s.objects.iter().zip(plan_scene(&s, grid(GridFill::Voxelize))) {
             let expect = match kind(o) {
                 "plane" => ObjectPlan::fallback(Build::ClosedForm, Fallback::Unbounded),
