@@ -36,7 +36,7 @@ use crate::config::CASE_RESOLUTION;
 use crate::error::{Error, Result, catch_panic};
 use crate::geometry::march::MarchParams;
 use crate::plan::budget::MemoryBudget;
-use crate::plan::{GridFill, GridStorage, MeshMethod, ReprKind, Representation};
+use crate::plan::{GridFill, GridStorage, MeshMethod, MeshPlane, ReprKind, Representation};
 use crate::render::report::render_scene;
 use crate::scene::load_input;
 use crate::scene::shape::Shading;
@@ -174,6 +174,7 @@ fn representation(kind: ReprKind, resolution: u32) -> Representation {
             resolution,
             shading: Shading::Smooth,
             method: MeshMethod::Parametric,
+            plane: MeshPlane::ClosedForm,
             march,
         },
         ReprKind::Grid => {

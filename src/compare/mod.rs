@@ -38,22 +38,23 @@ use crate::mesh::{TriangleMesh, save_mesh};
 use crate::metrics::{self, Probe};
 use crate::plan::budget::{MemoryBudget, reextract_bytes};
 use crate::plan::{
-    Fallback, GridFill, GridStorage, MeshMethod, ObjectPlan, ReprKind, Representation,
-    build_scene_with_plans, reextract_mesh,
+    Build, Fallback, GridFill, GridStorage, MeshMethod, MeshPlane, ObjectPlan, ReprKind, Representation,
+    build_scene_with_plans, reextract_mesh, traced_repr,
 };
 use crate::render::{Frame, render, write_png};
 use crate::scene::shape::{ObjectKind, Shading};
 use crate::scene::{Scene, load_input};
 
 /// Version of the CSV schema; bumped whenever a column changes meaning or order.
-pub const SCHEMA_VERSION: u32 = 2;
+pub const SCHEMA_VERSION: u32 = 3;
 
 /// The CSV columns, in order (units in the names; see the README).
-pub const COLUMNS: [&str; 43] = [
+pub const COLUMNS: [&str; 44] = [
     "input",
     "class",
     "replicate",
     "repr",
+    "asked_repr",
     "method",
     "resolution",
     "tolerance_px",
@@ -105,8 +106,13 @@ pub struct Row {
     pub class: String,
     /// Replicate number (`--replicate`): which repetition of the whole experiment.
     pub replicate: u32,
-    /// `analytic`, `sdf`, `mesh` or `grid`.
+    /// What traced the run ([`crate::plan::TracedRepr::name`]): `analytic`, `sdf`, `mesh`
+    /// or `grid` when one representation traced every object, else those that traced some
+    /// joined by `+` (`sdf+mesh`). Equal to `asked_repr` unless an object fell back to
+    /// another representation (see the README's column table).
     pub repr: String,
+    /// The representation asked for: `analytic`, `sdf`, `mesh` or `grid`.
+    pub asked_repr: String,
     /// How the representation was made (see the README's schema).
     pub method: String,
     /// Cells along the longest axis (grids, extraction) or segments (parametric meshes).
@@ -196,12 +202,13 @@ pub struct Row {
 }
 
 impl Row {
-    /// The key that `--resume` matches rows by.
+    /// The key that `--resume` matches rows by (the asked representation: what was traced
+    /// is known only once the run is built).
     pub fn key(&self) -> RowKey {
         RowKey {
             input: self.input.clone(),
             replicate: self.replicate,
-            repr: self.repr.clone(),
+            repr: self.asked_repr.clone(),
             method: self.method.clone(),
             resolution: self.resolution,
             knob: self.tolerance_px.zip(self.relaxation).map(|(t, r)| (t.to_bits(), r.to_bits())),
@@ -209,14 +216,14 @@ impl Row {
     }
 }
 
-/// What identifies a run: input, replicate, repr, method, resolution and the march knob.
+/// What identifies a run: input, replicate, asked repr, method, resolution and the march knob.
 #[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct RowKey {
     /// Input name.
     pub input: String,
     /// Replicate number.
     pub replicate: u32,
-    /// `repr` column.
+    /// `asked_repr` column.
     pub repr: String,
     /// `method` column.
     pub method: String,
@@ -443,6 +450,7 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
                     resolution: sweep_mesh_resolution(r),
                     shading: Shading::Smooth,
                     method,
+                    plane: MeshPlane::ClosedForm,
                     march,
                 })
             };
@@ -619,30 +627,44 @@ pub fn commit_id() -> String {
     }
 }
 
-/// Reads the rows of an existing CSV, checking its header against [`COLUMNS`].
+/// Reads the rows of an existing CSV, checking its header against [`COLUMNS`]. A CSV of
+/// schema version 2 (without `asked_repr`) is read too, each row's `asked_repr` taken to
+/// be its `repr` (version 2 wrote the asked representation there).
 ///
 /// # Errors
 /// [`Error::Input`] naming the file and line when the header or a row does not match.
 pub fn read_rows(path: &Path) -> Result<Vec<Row>> {
+    read_rows_of(path, true)
+}
+
+/// [`read_rows`]; a version 2 CSV is refused unless `old_too`.
+fn read_rows_of(path: &Path, old_too: bool) -> Result<Vec<Row>> {
     let mut reader = csv::Reader::from_path(path).map_err(|e| Error::io(path, e))?;
     let header = reader.headers().map_err(|e| Error::input(path, None, e))?.clone();
-    if header.iter().ne(COLUMNS.iter().copied()) {
+    let asked_at = COLUMNS.iter().position(|c| *c == "asked_repr").expect("a column");
+    let version_2 = || COLUMNS.iter().enumerate().filter(|&(i, _)| i != asked_at).map(|(_, c)| *c);
+    let old = old_too && header.iter().eq(version_2());
+    if !old && header.iter().ne(COLUMNS.iter().copied()) {
         return Err(Error::input(
             path,
             Some(crate::error::Location { line: 1, column: 1 }),
             format!("the header is not compare schema version {SCHEMA_VERSION}; write a new file"),
         ));
     }
+    let columns = csv::StringRecord::from(COLUMNS.to_vec());
     let mut rows = Vec::new();
-    for (i, r) in reader.deserialize::<Row>().enumerate() {
-        match r {
-            Ok(row) => rows.push(row),
-            Err(e) => {
-                // A row cut off by a crash is the only one that can be incomplete: the last.
-                let line = i + 2;
-                return Err(Error::input(path, Some(crate::error::Location { line, column: 1 }), e));
+    for (i, r) in reader.records().enumerate() {
+        // A row cut off by a crash is the only one that can be incomplete: the last.
+        let at = Some(crate::error::Location { line: i + 2, column: 1 });
+        let mut record = r.map_err(|e| Error::input(path, at, e))?;
+        if old {
+            let mut fields: Vec<&str> = record.iter().collect();
+            if fields.len() >= asked_at {
+                fields.insert(asked_at, fields[asked_at - 1]);
             }
+            record = csv::StringRecord::from(fields);
         }
+        rows.push(record.deserialize::<Row>(Some(&columns)).map_err(|e| Error::input(path, at, e))?);
     }
     Ok(rows)
 }
@@ -690,7 +712,8 @@ fn open_csv(opts: &CompareOptions) -> Result<(File, Vec<Row>)> {
     let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
     if len > 0 && opts.resume {
         drop_partial_row(&file, path)?;
-        return Ok((file, read_rows(path)?));
+        // Rows are appended under this header: an older schema is refused.
+        return Ok((file, read_rows_of(path, false)?));
     }
     if len > 0 && !opts.overwrite {
         return Err(Error::io(
@@ -731,32 +754,29 @@ fn stem(path: &Path) -> String {
     path.file_stem().map_or_else(|| "input".into(), |s| s.to_string_lossy().into_owned())
 }
 
-/// What a mesh or grid run did not represent as asked, from the objects' realised plans:
-/// the description of every object with a fallback that sphere traces it (entirely or
-/// outside a view-region clip) or that sampled a mesh voxelizing found open; empty for
-/// other runs.
-fn note(geometry: &SceneGeometry, plans: &[ObjectPlan], repr: ReprKind) -> String {
-    if !matches!(repr, ReprKind::Mesh | ReprKind::Grid) {
-        return String::new();
-    }
-    let fallbacks: Vec<String> = geometry
-        .objects()
+/// What a run did not represent as asked, from the objects' realised plans (in the order
+/// of `scene`'s objects): every object with a fallback, named with its typed cause and what
+/// was done instead ([`Fallback`]'s text), whether it left the representation (then `repr`
+/// says so too) or stayed in it (a dense grid for a band, a grid clipped to the view
+/// region, ...); empty when there is none. Two fallbacks that belong to the asked
+/// representation are not named: the analytic representation's sphere tracing of objects
+/// without a closed form (its definition) and an infinite plane intersected in closed form
+/// (as every representation does; the mesh one unless asked for discs).
+fn note(scene: &Scene, plans: &[ObjectPlan]) -> String {
+    let fallbacks: Vec<String> = scene
+        .objects
         .iter()
         .zip(plans)
-        .filter(|(_, p)| {
-            p.fallback.is_some() && (p.sphere_traced() || p.fallback == Some(Fallback::OpenMeshSampled))
+        .filter_map(|(o, p)| match p.fallback? {
+            Fallback::NoClosedForm { .. } => None,
+            _ if p.build == Build::ClosedForm => None,
+            f => Some(format!("{} '{}': {f}", o.kind_name(), o.label)),
         })
-        .map(|(o, _)| o.describe())
         .collect();
     if fallbacks.is_empty() {
         String::new()
     } else {
-        format!(
-            "{} of {} objects not as asked: {}",
-            fallbacks.len(),
-            geometry.objects().len(),
-            fallbacks.join("; ")
-        )
+        format!("{} of {} objects not as asked: {}", fallbacks.len(), plans.len(), fallbacks.join("; "))
     }
 }
 
@@ -986,7 +1006,8 @@ fn measure(
         input: name.to_string(),
         class: class.to_string(),
         replicate: opts.replicate,
-        repr: run.repr.to_string(),
+        repr: traced_repr(&built.plans, run.repr).name(),
+        asked_repr: run.repr.to_string(),
         method: run.method.to_string(),
         resolution: run.resolution,
         tolerance_px: knob.map(|k| k.0),
@@ -1025,7 +1046,7 @@ fn measure(
         timestamp: timing.timestamp,
         frame_ms_samples: timing.samples,
         schema_version: SCHEMA_VERSION,
-        note: note(&built.geometry, &built.plans, run.repr),
+        note: note(scene, &built.plans),
     };
     if let Some(dir) = &opts.artifacts {
         save_artifacts(&dir.join(name), run, scene, &built, &frame.image, is_reference)?;

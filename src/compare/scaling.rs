@@ -15,7 +15,7 @@ use serde::Serialize;
 use crate::config::ScalingOptions;
 use crate::error::{Error, Result};
 use crate::geometry::Geometry;
-use crate::plan::{GridFill, GridStorage, MeshMethod, Representation, build_scene};
+use crate::plan::{GridFill, GridStorage, MeshMethod, MeshPlane, Representation, build_scene};
 use crate::scene::shape::{CsgOp, Object, ObjectKind, Primitive, Shading};
 use crate::scene::transform::TransformDesc;
 use crate::scene::{Camera, Light, Material, Scene, Settings};
@@ -220,6 +220,7 @@ pub fn scaling_command(opts: &ScalingOptions, csv_path: &Path) -> Result<String>
                 resolution: res,
                 shading: Shading::Smooth,
                 method: MeshMethod::Parametric,
+                plane: MeshPlane::ClosedForm,
                 march,
             },
         ),

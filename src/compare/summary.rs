@@ -3,8 +3,12 @@
 //! and the smallest run that meets it (`quality_px <= level`), the time and memory ratio of
 //! the best ray-marched run (SDF or grid) to the best mesh run, and the resolutions at which
 //! the fastest representation changes. Rows of several replicates of a run (same input,
-//! repr, method, resolution, tolerance and relaxation) count as one run: its median frame
-//! time over the replicates and its worst quality.
+//! asked repr, method, resolution, tolerance and relaxation) count as one run: its median
+//! frame time over the replicates and its worst quality.
+//!
+//! A run counts for a side ([`side`]) only when it was asked in that side's representation
+//! and traced by that side alone: a mesh run whose extraction came out empty and was sphere
+//! traced (`repr` `sdf`, `asked_repr` `mesh`) is neither a mesh run nor a marched one.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -97,8 +101,9 @@ pub struct Summary {
 }
 
 fn pick(r: &Row) -> Pick {
+    let asked = if r.asked_repr == r.repr { String::new() } else { format!(" (asked {})", r.asked_repr) };
     Pick {
-        run: format!("{}/{}", r.repr, r.method),
+        run: format!("{}/{}{asked}", r.repr, r.method),
         resolution: r.resolution,
         tolerance_px: r.tolerance_px,
         relaxation: r.relaxation,
@@ -114,8 +119,38 @@ fn min_by<'a>(rows: impl Iterator<Item = &'a Row>, key: impl Fn(&Row) -> f64) ->
     rows.min_by(|a, b| key(a).total_cmp(&key(b)))
 }
 
+/// The two sides the summary compares.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Side {
+    /// Ray marching: `sdf` (sphere tracing) and `grid`.
+    Marched,
+    /// Triangle meshes: `mesh`.
+    Mesh,
+}
+
+/// The side a representation's name is on (`None`: `analytic`, or an unknown name).
+fn side_of(repr: &str) -> Option<Side> {
+    match repr {
+        r if r == ReprKind::Sdf.name() || r == ReprKind::Grid.name() => Some(Side::Marched),
+        r if r == ReprKind::Mesh.name() => Some(Side::Mesh),
+        _ => None,
+    }
+}
+
+/// The side a run counts for: the asked representation's, when every representation that
+/// traced it (`repr`, `+`-separated) is on that side too; `None` otherwise (the closed-form
+/// reference, a mesh run sphere traced in whole or in part, ...).
+pub fn side(r: &Row) -> Option<Side> {
+    let asked = side_of(&r.asked_repr)?;
+    r.repr.split('+').all(|k| side_of(k) == Some(asked)).then_some(asked)
+}
+
 fn is_marched(r: &Row) -> bool {
-    r.repr == ReprKind::Sdf.name() || r.repr == ReprKind::Grid.name()
+    side(r) == Some(Side::Marched)
+}
+
+fn is_mesh(r: &Row) -> bool {
+    side(r) == Some(Side::Mesh)
 }
 
 /// One row per run of an input: replicates merged (median frame time, worst errors and
@@ -177,9 +212,9 @@ pub fn summarize(rows: &[Row]) -> Summary {
                     let fastest = min_by(ok(), time);
                     let smallest = min_by(ok(), bytes);
                     let best_marched = min_by(ok().filter(|r| is_marched(r)), time);
-                    let best_mesh = min_by(ok().filter(|r| r.repr == ReprKind::Mesh.name()), time);
+                    let best_mesh = min_by(ok().filter(|r| is_mesh(r)), time);
                     let small_marched = min_by(ok().filter(|r| is_marched(r)), bytes);
-                    let small_mesh = min_by(ok().filter(|r| r.repr == ReprKind::Mesh.name()), bytes);
+                    let small_mesh = min_by(ok().filter(|r| is_mesh(r)), bytes);
                     AtLevel {
                         quality_px: l,
                         max_silhouette_pct: level.max_silhouette_pct,

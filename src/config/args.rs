@@ -9,7 +9,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use crate::convert::extract::ExtractMethod;
 use crate::plan::budget::MemoryBudget;
-use crate::plan::{GridFill, ReprKind};
+use crate::plan::{GridFill, MeshPlane, ReprKind};
 
 /// The `toolkit` command line.
 #[derive(Parser)]
@@ -210,6 +210,11 @@ pub struct MeshArgs {
     /// instead of a scene); default flat.
     #[arg(long)]
     pub smooth: bool,
+    /// How --repr mesh traces infinite planes: in closed form, as every representation
+    /// does, or as a tessellated disc around the camera out to max_distance (the other
+    /// representations always use the closed form).
+    #[arg(long, value_enum, default_value_t = MeshPlane::ClosedForm)]
+    pub plane: MeshPlane,
     /// How --repr grid fills mesh objects' grids (analytic objects are always sampled).
     #[arg(long, value_enum, default_value_t = GridFill::Sample)]
     pub fill: GridFill,

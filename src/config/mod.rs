@@ -556,9 +556,13 @@ fn representation(kind: ReprKind, mesh: &MeshArgs, march: MarchParams) -> Result
     let repr = match kind {
         ReprKind::Analytic => Representation::Analytic { march },
         ReprKind::Sdf => Representation::Sdf { march },
-        ReprKind::Mesh => {
-            Representation::Mesh { resolution, shading: shading(mesh), method: MeshMethod::Parametric, march }
-        }
+        ReprKind::Mesh => Representation::Mesh {
+            resolution,
+            shading: shading(mesh),
+            method: MeshMethod::Parametric,
+            plane: mesh.plane,
+            march,
+        },
         // `--band K`: 0 stores every sample, else a narrow band of K cells; with
         // `--scene-grid` (clap makes it need `--band`) one band shared by the objects.
         ReprKind::Grid => Representation::Grid {

@@ -303,8 +303,11 @@ fn build_object(
         Build::Tessellated { .. } | Build::PlaneDisc { .. } | Build::Extracted { .. } => {
             match mesh_geometry(scene, o, plan.build) {
                 Some((g, build)) => (Box::new(g), ObjectPlan { build, ..plan }),
-                None if matches!(plan.build, Build::PlaneDisc { .. }) => marched(Fallback::NoPlaneDisc),
-                None => marched(Fallback::EmptyExtraction),
+                None => match plan.build {
+                    Build::Extracted { resolution, .. } => marched(Fallback::EmptyExtraction { resolution }),
+                    Build::PlaneDisc { .. } => marched(Fallback::NoPlaneDisc),
+                    _ => unreachable!("a tessellation always has triangles"),
+                },
             }
         }
         Build::SharedMesh { .. } => {
@@ -313,7 +316,17 @@ fn build_object(
         }
         Build::Instanced { .. } => match instanced(scene, o, plan.build) {
             Some((g, build)) => (Box::new(g), ObjectPlan { build, ..plan }),
-            None => marched(Fallback::EmptyExtraction),
+            // The copies were counted when planning: only the child's extraction can fail.
+            None => {
+                let resolution = match plan.build {
+                    Build::Instanced { mesh: InstanceMesh::Extracted { resolution, .. }, .. }
+                    | Build::Instanced { mesh: InstanceMesh::Tessellated { resolution, .. }, .. } => {
+                        resolution
+                    }
+                    _ => unreachable!("an instanced plan"),
+                };
+                marched(Fallback::EmptyExtraction { resolution })
+            }
         },
         Build::GridFileExtracted { method, resolution } => match grid_file_surface(o, resolution, method) {
             Some(mesh) => {
@@ -367,24 +380,31 @@ fn sphere_traced(
     fallback: Option<Fallback>,
 ) -> Box<dyn Geometry> {
     let kind = o.kind_name();
-    // The descriptions of the render report (`toolkit render`); under the mesh and grid
-    // representations one text covers several fallbacks. Each `format!` is written as it
-    // always was: the string's capacity counts in `bytes_used` (the compare CSV's bytes).
-    let why = match (fallback, repr) {
-        (None, _) => format!("{kind} '{}': sphere traced", o.label),
-        (Some(Fallback::NoClosedForm { kind }), _) => {
+    // The descriptions of the render report (`toolkit render`), naming the true cause. The
+    // first three `format!`s are written as they always were: the string's capacity counts
+    // in `bytes_used` (the compare CSV's bytes), so those rows keep their bytes.
+    let no = if matches!(repr, Representation::Mesh { .. }) { "no mesh" } else { "no grid" };
+    let why = match fallback {
+        None => format!("{kind} '{}': sphere traced", o.label),
+        Some(Fallback::NoClosedForm { kind }) => {
             format!("{kind} '{}': sphere traced (no closed form for {kind})", o.label)
         }
-        (Some(Fallback::OutsideViewRegion), _) => {
+        Some(Fallback::OutsideViewRegion) => {
             format!("{kind} '{}': sphere traced (outside the view region: no grid)", o.label)
         }
-        (Some(_), Representation::Mesh { .. }) => {
-            format!("{kind} '{}': sphere traced (unbounded: no mesh)", o.label)
+        Some(Fallback::Unbounded) => format!("{kind} '{}': sphere traced (unbounded: {no})", o.label),
+        Some(Fallback::Unsigned) => {
+            format!("{kind} '{}': sphere traced (unsigned distance, it holds a triangle: {no})", o.label)
         }
-        (Some(_), _) => {
-            let why = "unbounded or unsigned: no grid";
-            format!("{kind} '{}': sphere traced ({why})", o.label)
+        Some(Fallback::EmptyExtraction { resolution }) => format!(
+            "{kind} '{}': sphere traced (extraction at {resolution} cells gave no triangles: no sample \
+             inside, thinner than a cell)",
+            o.label
+        ),
+        Some(Fallback::NoPlaneDisc) => {
+            format!("{kind} '{}': sphere traced (no disc of the plane in f32 range: {no})", o.label)
         }
+        Some(f) => format!("{kind} '{}': sphere traced ({f})", o.label),
     };
     match sdf_geometry(o, march, why) {
         Some(s) => s,

@@ -6,12 +6,14 @@
 //! ([`budget::scene_bytes`]) counts exactly that, so the two cannot disagree.
 //!
 //! The plans ([`Build`]):
-//! - [`Build::ClosedForm`]: closed-form ray/primitive intersection (primitives, analytic).
+//! - [`Build::ClosedForm`]: closed-form ray/primitive intersection (primitives, analytic;
+//!   infinite planes in every representation).
 //! - [`Build::Marched`]: sphere tracing of the analytic SDF (the sdf representation, and
 //!   every fallback below that says "sphere traced").
 //! - [`Build::MeshTriangles`]: a loaded mesh traced as its own triangles.
 //! - [`Build::Tessellated`]: a primitive tessellated parametrically.
-//! - [`Build::PlaneDisc`]: an infinite plane as a disc around the camera.
+//! - [`Build::PlaneDisc`]: an infinite plane as a disc around the camera (the mesh
+//!   representation with [`MeshPlane::Disc`]).
 //! - [`Build::Extracted`]: a bounded object's surface extracted from its SDF.
 //! - [`Build::Instanced`]: a repetition's child made into one mesh (tessellated or
 //!   extracted) with one BVH, placed once per copy under the scene's top-level BVH, as a
@@ -111,8 +113,10 @@ pub enum Representation {
         march: MarchParams,
     },
     /// Primitives tessellated parametrically at `resolution` (segments around the largest
-    /// circle) and ray traced as triangle meshes through a BVH; infinite planes become a
-    /// disc around the camera out to the scene's `max_distance`; repetition is instanced
+    /// circle) and ray traced as triangle meshes through a BVH; infinite planes are
+    /// intersected in closed form, as in every representation ([`MeshPlane::ClosedForm`]),
+    /// or made a disc around the camera out to the scene's `max_distance` when asked
+    /// ([`MeshPlane::Disc`]); repetition is instanced
     /// (its child made into one mesh, placed per copy: [`Build::Instanced`]); bounded CSG
     /// is extracted from its SDF (marching cubes, `resolution` cells along the
     /// longest axis, at most [`MAX_EXTRACT_RESOLUTION`]: [`extract_resolution`]); unbounded
@@ -126,6 +130,8 @@ pub enum Representation {
         shading: Shading,
         /// Parametric tessellation, or extraction of every bounded object.
         method: MeshMethod,
+        /// How infinite planes are traced.
+        plane: MeshPlane,
         /// Sphere tracing parameters of the objects that stay marched.
         march: MarchParams,
     },
@@ -152,6 +158,20 @@ pub enum MeshMethod {
     Parametric,
     /// Every bounded object extracted from its SDF with the given method.
     Extracted(ExtractMethod),
+}
+
+/// How the mesh representation traces an infinite plane; the command line's `--plane`
+/// values.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum MeshPlane {
+    /// Intersected in closed form ([`Build::ClosedForm`], the analytic representation's
+    /// primitive), as every other representation does: the study compares the objects, not
+    /// a tessellation of the ground.
+    #[default]
+    ClosedForm,
+    /// Tessellated into a flat disc around the camera out to the scene's `max_distance`
+    /// ([`Build::PlaneDisc`]), traced as triangles like the rest.
+    Disc,
 }
 
 /// How a mesh object's grid is filled (analytic objects are always sampled exactly); the
@@ -233,8 +253,8 @@ impl Representation {
         match self {
             Representation::Analytic { march } => Representation::Analytic { march: with_footprint(march) },
             Representation::Sdf { march } => Representation::Sdf { march: with_footprint(march) },
-            Representation::Mesh { resolution, shading, method, march } => {
-                Representation::Mesh { resolution, shading, method, march: with_footprint(march) }
+            Representation::Mesh { resolution, shading, method, plane, march } => {
+                Representation::Mesh { resolution, shading, method, plane, march: with_footprint(march) }
             }
             Representation::Grid { resolution, fill, storage, march } => {
                 Representation::Grid { resolution, fill, storage, march: with_footprint(march) }
@@ -458,9 +478,14 @@ pub enum Fallback {
     /// Grid with [`GridFill::Voxelize`]: voxelizing found the mesh open, so it was sampled
     /// exactly instead (known while building).
     OpenMeshSampled,
-    /// Mesh: extracting the surface gave no triangles; the object is sphere traced (known
-    /// while building).
-    EmptyExtraction,
+    /// Mesh: extracting the surface at `resolution` cells gave no triangles: no sample of
+    /// the extraction's grid fell inside the object (a bounded, signed object), so every
+    /// part of it is thinner than a cell there; the object is sphere traced (known while
+    /// building).
+    EmptyExtraction {
+        /// Cells along the longest axis of the extracted box.
+        resolution: u32,
+    },
     /// Mesh: a plane's view disc could not be made (the plane lies beyond the `f32` range
     /// under its transform, or no part of it is within the view distance); it is sphere
     /// traced (known while building).
@@ -490,8 +515,14 @@ impl fmt::Display for Fallback {
                 f.write_str("gridded inside the view region, sphere traced outside it")
             }
             Fallback::OpenMeshSampled => f.write_str("voxelizing found the mesh open: sampled"),
-            Fallback::EmptyExtraction => f.write_str("extraction gave no triangles: sphere traced"),
-            Fallback::NoPlaneDisc => f.write_str("the plane has no disc in f32 range: sphere traced"),
+            Fallback::EmptyExtraction { resolution } => write!(
+                f,
+                "extraction at {resolution} cells gave no triangles (no sample inside: thinner than \
+                 a cell): sphere traced"
+            ),
+            Fallback::NoPlaneDisc => {
+                f.write_str("the plane has no disc in f32 range within the view distance: sphere traced")
+            }
             Fallback::GridNotBuilt => f.write_str("the grid could not be built"),
             Fallback::OwnGrid => f.write_str("the scene grid could not be built: a grid of its own"),
             Fallback::NoSurfaceInGridFile => f.write_str("no surface in the grid: ray marched"),
@@ -500,7 +531,99 @@ impl fmt::Display for Fallback {
     }
 }
 
+impl Fallback {
+    /// Whether the object stays in the asked representation despite the fallback: a
+    /// different storage or fill of a grid ([`Fallback::DenseInsteadOfBand`],
+    /// [`Fallback::OwnGrid`], [`Fallback::OpenMeshSampled`]), a grid clipped to the view
+    /// region ([`Fallback::ClippedToViewRegion`]: still gridded where it is seen), and the
+    /// sphere tracing that defines the analytic representation for objects without a
+    /// closed form ([`Fallback::NoClosedForm`]). Every other fallback traces the object in
+    /// another representation ([`ObjectPlan::traced`]).
+    pub fn stays_in_repr(self) -> bool {
+        matches!(
+            self,
+            Fallback::NoClosedForm { .. }
+                | Fallback::ClippedToViewRegion
+                | Fallback::OpenMeshSampled
+                | Fallback::OwnGrid
+                | Fallback::DenseInsteadOfBand
+        )
+    }
+}
+
+impl Build {
+    /// The representation whose tracer traces this build: closed form (analytic), sphere
+    /// tracing (sdf), triangles (mesh) or a grid (grid).
+    pub fn kind(&self) -> ReprKind {
+        match self {
+            Build::ClosedForm => ReprKind::Analytic,
+            Build::Marched { .. } => ReprKind::Sdf,
+            Build::MeshTriangles
+            | Build::Tessellated { .. }
+            | Build::PlaneDisc { .. }
+            | Build::Extracted { .. }
+            | Build::Instanced { .. }
+            | Build::SharedMesh { .. }
+            | Build::GridFileExtracted { .. } => ReprKind::Mesh,
+            Build::Grid { .. }
+            | Build::LocalGrid { .. }
+            | Build::SharedGrid { .. }
+            | Build::InstancedGrid { .. }
+            | Build::GridFileMarched { .. } => ReprKind::Grid,
+        }
+    }
+}
+
+/// What traced a run asked in one representation, from its objects' realised plans
+/// ([`traced_repr`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TracedRepr {
+    /// Every representation that traced an object of the run, in [`ReprKind::ALL`] order,
+    /// without repeats; empty for a run without objects (then the asked one traced it).
+    pub kinds: Vec<ReprKind>,
+}
+
+impl TracedRepr {
+    /// The compare CSV's `repr`: the one representation that traced every object, or the
+    /// representations that traced some, joined by `+` in [`ReprKind::ALL`] order
+    /// (`sdf+mesh`: some objects sphere traced, the others triangles).
+    pub fn name(&self) -> String {
+        self.kinds.iter().map(|k| k.name()).collect::<Vec<_>>().join("+")
+    }
+}
+
+/// What traced a run asked in `asked` whose objects were built as `plans` (realised, in
+/// scene order): the set of [`ObjectPlan::traced`] over its objects. When every object is
+/// traced as asked this is `asked` alone.
+pub fn traced_repr(plans: &[ObjectPlan], asked: ReprKind) -> TracedRepr {
+    let mut kinds: Vec<ReprKind> = plans.iter().map(|p| p.traced(asked)).collect();
+    if kinds.is_empty() {
+        kinds.push(asked);
+    }
+    let rank = |k: &ReprKind| ReprKind::ALL.iter().position(|x| x == k);
+    kinds.sort_by_key(rank);
+    kinds.dedup();
+    TracedRepr { kinds }
+}
+
 impl ObjectPlan {
+    /// Which representation traces the object of a run asked in `asked`: `asked` when the
+    /// plan is as asked or its fallback stays in the representation
+    /// ([`Fallback::stays_in_repr`]); `asked` too for an infinite plane intersected in
+    /// closed form (the grid representation's fallback for it), as every representation
+    /// intersects planes in closed form (the mesh one unless [`MeshPlane::Disc`]), the
+    /// common ground the study does not compare; otherwise the realised build's ([`Build::kind`]): sphere traced is
+    /// `sdf`, a grid file marched instead of extracted `grid`, a mesh whose grid could not
+    /// be built `mesh`.
+    pub fn traced(&self, asked: ReprKind) -> ReprKind {
+        match self.fallback {
+            None => asked,
+            Some(f) if f.stays_in_repr() => asked,
+            Some(_) if self.build == Build::ClosedForm => asked,
+            Some(_) => self.build.kind(),
+        }
+    }
+
     /// `build`, as asked.
     pub fn as_asked(build: Build) -> Self {
         ObjectPlan { build, fallback: None }
@@ -564,16 +687,17 @@ pub fn plan_object(scene: &Scene, o: &Object, repr: Representation) -> ObjectPla
             ObjectKind::Primitive(_) => ObjectPlan::as_asked(Build::ClosedForm),
             _ => marched(Some(Fallback::NoClosedForm { kind: o.kind_name() })),
         },
-        // Unbounded planes have a closed form in every representation but the mesh (a
-        // disc out to the far distance): never marched to the horizon.
+        // Unbounded planes have a closed form in every representation (the mesh one may
+        // make them a disc out to the far distance): never marched to the horizon.
         Representation::Sdf { .. } => match o.kind {
             ObjectKind::Primitive(Primitive::Plane { .. }) => ObjectPlan::as_asked(Build::ClosedForm),
             _ => marched(None),
         },
-        Representation::Mesh { resolution, shading, method, .. } => match (&o.kind, method) {
-            (ObjectKind::Primitive(Primitive::Plane { .. }), _) => {
-                ObjectPlan::as_asked(Build::PlaneDisc { resolution })
-            }
+        Representation::Mesh { resolution, shading, method, plane, .. } => match (&o.kind, method) {
+            (ObjectKind::Primitive(Primitive::Plane { .. }), _) => match plane {
+                MeshPlane::ClosedForm => ObjectPlan::as_asked(Build::ClosedForm),
+                MeshPlane::Disc => ObjectPlan::as_asked(Build::PlaneDisc { resolution }),
+            },
             (ObjectKind::Primitive(_), MeshMethod::Parametric) => match first_alike(scene, o) {
                 Some(of) => ObjectPlan::as_asked(Build::SharedMesh { of }),
                 None => ObjectPlan::as_asked(Build::Tessellated { resolution, shading }),
@@ -773,6 +897,7 @@ mod tests {
             resolution: 16,
             shading: Shading::Smooth,
             method,
+            plane: MeshPlane::ClosedForm,
             march: MarchParams::default(),
         }
     }
@@ -823,7 +948,7 @@ mod tests {
         let copies = |mesh| Build::Instanced { mesh, copies: 8, reach: None };
         for (o, p) in s.objects.iter().zip(plan_scene(&s, mesh(MeshMethod::Parametric))) {
             let build = match kind(o) {
-                "plane" => Build::PlaneDisc { resolution: 16 },
+                "plane" => Build::ClosedForm,
                 "repeat" => copies(InstanceMesh::Tessellated { resolution: 16, shading: Shading::Smooth }),
                 "other" => Build::Extracted { method: mc, resolution: 16 },
                 _ => Build::Tessellated { resolution: 16, shading: Shading::Smooth },
@@ -832,7 +957,7 @@ mod tests {
         }
         for (o, p) in s.objects.iter().zip(plan_scene(&s, mesh(MeshMethod::Extracted(mc)))) {
             let expect = match kind(o) {
-                "plane" => ObjectPlan::as_asked(Build::PlaneDisc { resolution: 16 }),
+                "plane" => ObjectPlan::as_asked(Build::ClosedForm),
                 "triangle" => ObjectPlan::fallback(Build::Marched { march }, Fallback::Unsigned),
                 "repeat" => {
                     ObjectPlan::as_asked(copies(InstanceMesh::Extracted { method: mc, resolution: 16 }))
@@ -841,6 +966,20 @@ mod tests {
             };
             assert_eq!(p, expect, "{}", o.label);
         }
+        // The disc, when asked for.
+        let Representation::Mesh { resolution, shading, method, march: m, .. } = mesh(MeshMethod::Parametric)
+        else {
+            unreachable!("a mesh representation")
+        };
+        let discs = Representation::Mesh { resolution, shading, method, plane: MeshPlane::Disc, march: m };
+        let planes: Vec<Build> = s
+            .objects
+            .iter()
+            .zip(plan_scene(&s, discs))
+            .filter(|(o, _)| kind(o) == "plane")
+            .map(|(_, p)| p.build)
+            .collect();
+        assert!(!planes.is_empty() && planes.iter().all(|b| *b == Build::PlaneDisc { resolution: 16 }));
         for (o, p) in s.objects.iter().zip(plan_scene(&s, grid(GridFill::Voxelize))) {
             let expect = match kind(o) {
                 "plane" => ObjectPlan::fallback(Build::ClosedForm, Fallback::Unbounded),
@@ -912,6 +1051,47 @@ mod tests {
             }
             assert_eq!(planned, realised, "{}", repr.name());
         }
+    }
+
+    #[test]
+    fn a_run_is_recorded_as_what_traced_it() {
+        let march = MarchParams::default();
+        let marched = |f| ObjectPlan::fallback(Build::Marched { march }, f);
+        let tess = ObjectPlan::as_asked(Build::Tessellated { resolution: 16, shading: Shading::Smooth });
+        let empty = marched(Fallback::EmptyExtraction { resolution: 16 });
+        let name = |plans: &[ObjectPlan], asked| traced_repr(plans, asked).name();
+        assert_eq!(empty.traced(ReprKind::Mesh), ReprKind::Sdf);
+        assert_eq!(name(&[tess, tess], ReprKind::Mesh), "mesh");
+        assert_eq!(name(&[empty], ReprKind::Mesh), "sdf");
+        assert_eq!(name(&[tess, empty, tess], ReprKind::Mesh), "sdf+mesh");
+        assert_eq!(name(&[], ReprKind::Grid), "grid");
+        // Fallbacks that stay in the representation.
+        let b = crate::geometry::aabb(Vec3::ZERO, Vec3::ONE);
+        let grid =
+            |storage, clip| Build::Grid { resolution: 16, fill: GridFill::Sample, storage, march, clip };
+        let clipped = ObjectPlan::fallback(grid(GridStorage::Dense, Some(b)), Fallback::ClippedToViewRegion);
+        let own = ObjectPlan::fallback(grid(GridStorage::Band { cells: 2 }, None), Fallback::OwnGrid);
+        assert_eq!(name(&[clipped, own], ReprKind::Grid), "grid");
+        let csg = marched(Fallback::NoClosedForm { kind: "union" });
+        assert_eq!(name(&[csg, ObjectPlan::as_asked(Build::ClosedForm)], ReprKind::Analytic), "analytic");
+        // A plane in closed form is the common ground of every representation.
+        let plane = ObjectPlan::fallback(Build::ClosedForm, Fallback::Unbounded);
+        assert_eq!(name(&[plane, own], ReprKind::Grid), "grid");
+        // The others leave it.
+        assert_eq!(name(&[plane, own, marched(Fallback::Unbounded)], ReprKind::Grid), "sdf+grid");
+        let triangles = ObjectPlan::fallback(Build::MeshTriangles, Fallback::GridNotBuilt);
+        assert_eq!(name(&[triangles], ReprKind::Grid), "mesh");
+
+        // Built: the thin shell has no triangles at 16 cells, and the description says why.
+        let s = scene("thin/thin_shell.toml");
+        let (g, realised) = build_scene_with_plans(&s, mesh(MeshMethod::Parametric));
+        let got: Vec<_> = realised.iter().map(|p| (p.build.kind(), p.fallback)).collect();
+        assert_eq!(got, [(ReprKind::Sdf, empty.fallback)]);
+        let text = g.objects()[0].describe();
+        assert!(
+            text.contains("extraction at 16 cells gave no triangles") && text.contains("thinner"),
+            "{text}"
+        );
     }
 
     #[test]

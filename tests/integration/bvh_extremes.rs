@@ -177,15 +177,12 @@ fn render_mesh(name: &str, scene: &str, extra: &[&str], limit: Duration) -> imag
     let path = put(&dir, "scene.toml", scene);
     let out = dir.join("out.png");
     let start = Instant::now();
-    let o = toolkit(&[
-        "render",
-        path.to_str().unwrap(),
-        "--repr",
-        "mesh",
-        "-o",
-        out.to_str().unwrap(),
-        extra.first().copied().unwrap_or("--res=16"),
-    ]);
+    let mut args = vec!["render", path.to_str().unwrap(), "--repr", "mesh", "-o", out.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    if !extra.iter().any(|a| a.starts_with("--res")) {
+        args.push("--res=16");
+    }
+    let o = toolkit(&args);
     let elapsed = start.elapsed();
     assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));
     assert!(elapsed < limit, "{name}: took {elapsed:?}");
@@ -199,17 +196,17 @@ fn scene(settings: &str, objects: &str) -> String {
     CAMERA.replace("%SETTINGS%", settings) + objects
 }
 
-/// Class 1: a plane with `max_distance = 1e20` is a disc 2e20 across, whose f32 box
+/// Class 1 (`--plane disc`): a plane with `max_distance = 1e20` is a disc 2e20 across, whose f32 box
 /// areas overflowed and left the wide BVH's grouping without slots (a panic in `cover`).
 #[test]
 fn plane_disc_1e20_renders() {
     let s = scene("max_distance = 1e20", "[[objects]]\ntype = \"plane\"\nnormal = [0, 1, 0]\n");
-    let img = render_mesh("plane-far", &s, &[], Duration::from_secs(60));
+    let img = render_mesh("plane-far", &s, &["--plane=disc"], Duration::from_secs(60));
     // The camera looks down at the plane: most pixels show it rather than the background.
     assert!(covered(&img, [0, 0, 255]) > 16 * 16 / 2, "{} pixels", covered(&img, [0, 0, 255]));
 }
 
-/// Class 2: a plane under a scale of 1e30 or 1e-30 on one axis got a NaN world normal
+/// Class 2 (`--plane disc`): a plane under a scale of 1e30 or 1e-30 on one axis got a NaN world normal
 /// (its f32 length underflowed or overflowed), hence NaN triangles, on which obvhs's
 /// builder indexed out of its node array. Its normal is now found in f64.
 #[test]
@@ -218,12 +215,12 @@ fn planes_under_extreme_scales_render() {
         [("plane-y", "[0, 1, 0]", "[1, 1e30, 1]"), ("plane-x", "[0, 1, 0]", "[1e-30, 1, 1]")]
     {
         let o = format!("[[objects]]\ntype = \"plane\"\nnormal = {normal}\nscale = {scale}\n");
-        let img = render_mesh(name, &scene("", &o), &[], Duration::from_secs(60));
+        let img = render_mesh(name, &scene("", &o), &["--plane=disc"], Duration::from_secs(60));
         assert!(covered(&img, [0, 0, 255]) > 16 * 16 / 2, "{name}: {} pixels", covered(&img, [0, 0, 255]));
     }
     // An oblique normal under 1e-30 on one axis: the plane turns to face x; no panic.
     let o = "[[objects]]\ntype = \"plane\"\nnormal = [1, 1, 1]\nscale = [1e-30, 1, 1]\n";
-    render_mesh("plane-oblique", &scene("", o), &[], Duration::from_secs(60));
+    render_mesh("plane-oblique", &scene("", o), &["--plane=disc"], Duration::from_secs(60));
 }
 
 /// Class 3 through the command line: CSG of spheres 1e-30 across, extracted at 64 cells

@@ -103,7 +103,7 @@ fn csv_header_is_the_documented_schema() {
     assert_eq!(rows.len(), 1 + 6 + 5 * 2);
     assert!(rows.iter().all(|r| r.reference == "analytic/closed-form"));
     let class = dir.file_name().unwrap().to_string_lossy().into_owned();
-    assert!(rows.iter().all(|r| r.class == class && r.replicate == 0 && r.schema_version == 2));
+    assert!(rows.iter().all(|r| r.class == class && r.replicate == 0 && r.schema_version == 3));
     let reference = &rows[0];
     assert_eq!((reference.image_rmse, reference.chamfer_rel), (0.0, Some(0.0)));
     assert_eq!((reference.flip_mean, reference.silhouette_mismatch_pct), (0.0, 0.0));

@@ -89,6 +89,7 @@ fn mesh() -> Representation {
         resolution: 48,
         shading: Shading::Smooth,
         method: MeshMethod::Parametric,
+        plane: sdfmesh::plan::MeshPlane::ClosedForm,
         march: MarchParams::default(),
     }
 }
@@ -622,3 +623,14 @@ contract_tests!(
     several_with_plane,
     repeated
 );
+
+/// The mesh representation's plane as a tessellated disc (`--plane disc`; the default
+/// intersects it in closed form, as every representation does), checked as before.
+#[test]
+fn several_with_plane_mesh_disc() {
+    let Representation::Mesh { resolution, shading, method, march, .. } = mesh() else {
+        unreachable!("a mesh representation")
+    };
+    let plane = sdfmesh::plan::MeshPlane::Disc;
+    check(several_with_plane(), Representation::Mesh { resolution, shading, method, plane, march });
+}

@@ -68,6 +68,7 @@ fn reprs() -> [(&'static str, Representation); 4] {
                 resolution: 48,
                 shading: sdfmesh::scene::shape::Shading::Flat,
                 method: MeshMethod::Extracted(ExtractMethod::DualContouring),
+                plane: sdfmesh::plan::MeshPlane::ClosedForm,
                 march: MarchParams::default(),
             },
         ),

@@ -33,6 +33,7 @@ fn reprs() -> [Representation; 6] {
             resolution: 512,
             shading: sdfmesh::scene::shape::Shading::Smooth,
             method: sdfmesh::plan::MeshMethod::Parametric,
+            plane: sdfmesh::plan::MeshPlane::ClosedForm,
             march: m,
         },
         grid(GridStorage::Dense),
@@ -304,6 +305,7 @@ fn mirror_and_glass_spheres_have_no_speckles_in_any_representation() {
         resolution: 24,
         shading: sdfmesh::scene::shape::Shading::Smooth,
         method: sdfmesh::plan::MeshMethod::Parametric,
+        plane: sdfmesh::plan::MeshPlane::ClosedForm,
         march: MarchParams::default(),
     };
     for repr in reprs().into_iter().chain([coarse]) {

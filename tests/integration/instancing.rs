@@ -20,7 +20,13 @@ use sdfmesh::scene::shape::Shading;
 use sdfmesh::scene::{Scene, parse_scene};
 
 fn mesh(method: MeshMethod) -> Representation {
-    Representation::Mesh { resolution: 32, shading: Shading::Smooth, method, march: MarchParams::default() }
+    Representation::Mesh {
+        resolution: 32,
+        shading: Shading::Smooth,
+        method,
+        plane: sdfmesh::plan::MeshPlane::ClosedForm,
+        march: MarchParams::default(),
+    }
 }
 
 fn sdf() -> Representation {

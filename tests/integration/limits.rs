@@ -60,6 +60,7 @@ fn reprs() -> [Representation; 4] {
             resolution: 16,
             shading: Shading::Flat,
             method: MeshMethod::Parametric,
+            plane: sdfmesh::plan::MeshPlane::ClosedForm,
             march,
         },
         Representation::Grid { resolution: 16, fill: GridFill::Sample, storage: GridStorage::Dense, march },

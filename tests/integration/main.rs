@@ -16,6 +16,7 @@ mod contract;
 mod extract;
 mod extract_dc;
 mod extract_mc;
+mod fallbacks;
 mod file_safety;
 mod fuzz_regressions;
 mod grid_band;

@@ -62,6 +62,7 @@ fn closed_form_and_sphere_traced_renders_agree_for_every_primitive() {
             resolution: 512,
             shading: sdfmesh::scene::shape::Shading::Smooth,
             method: sdfmesh::plan::MeshMethod::Parametric,
+            plane: sdfmesh::plan::MeshPlane::ClosedForm,
             march,
         };
         let m = render_scene(&scene, mesh);
@@ -200,6 +201,7 @@ fn finely_tessellated_sphere_renders_like_the_closed_form_sphere() {
             resolution,
             shading: sdfmesh::scene::shape::Shading::Smooth,
             method: sdfmesh::plan::MeshMethod::Parametric,
+            plane: sdfmesh::plan::MeshPlane::ClosedForm,
             march,
         };
         let m = render_scene(&scene, mesh);

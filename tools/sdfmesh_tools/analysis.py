@@ -2,7 +2,9 @@
 the families' crossovers and the cost model. Pure functions of the rows (no plotting).
 
 - A *side* is `sdf` (rows of repr `sdf` or `grid`: ray marching) or `mesh` (repr `mesh`,
-  the original of a scanned mesh included); the closed-form reference of scenes is neither.
+  the original of a scanned mesh included); the closed-form reference of scenes is neither,
+  and so is a run traced (in whole or in part) by another side than the one asked
+  (`asked_repr` `mesh`, `repr` `sdf` or `sdf+mesh`: data.side).
 - The *best* run of a side at a quality level, per input and replicate, is the fastest (for
   frame time) or the smallest (for bytes) run of that side whose `quality_px` is at most
   the level.

@@ -1,5 +1,11 @@
-"""Reading the CSVs that `toolkit compare` writes (schema version 2; version 1 rows read too,
-with the columns version 2 added left empty).
+"""Reading the CSVs that `toolkit compare` writes (schema version 3; version 1 and 2 rows read
+too, with the columns later versions added left empty, except `asked_repr`, which rows
+without it take from `repr`: before version 3 `repr` was the asked representation).
+
+Version 3 split what was asked from what traced the run: `asked_repr` is the asked
+representation, `repr` what traced it (`sdf` for a mesh run whose extraction was empty and
+sphere traced; several joined by `+`, e.g. `sdf+mesh`, when the objects went different ways).
+A run counts for a side only when it was asked and traced on that side (`side`).
 
 Rows are dicts of strings; `num` and `samples` turn cells into numbers and tolerate
 missing columns and empty cells (both give None / an empty list).
@@ -13,7 +19,7 @@ from collections import OrderedDict
 from pathlib import Path
 
 COMPARE_COLUMNS = (
-    "input class replicate repr method resolution tolerance_px relaxation reference triangles "
+    "input class replicate repr asked_repr method resolution tolerance_px relaxation reference triangles "
     "grid_cells_stored geometry_bytes accel_bytes total_bytes build_ms frame_ms_median "
     "frame_ms_min frame_ms_max frames mrays_per_s steps_per_ray nodes_per_ray image_rmse "
     "image_psnr_db image_ssim flip_mean silhouette_mismatch_pct px_err_mean px_err_p95 "
@@ -53,10 +59,19 @@ def read_csv(path: str | Path | None) -> list[dict[str, str]]:
         return []
     with p.open(newline="") as f:
         rows = [dict(r) for r in csv.DictReader(f)]
+    for r in rows:
+        normalize(r)
     version = {r.get("schema_version", "") for r in rows} - {"", None}
-    if version - {"1", "2"}:
-        print(f"note: {p} has schema_version {sorted(version)}; this reader knows versions 1 and 2")
+    if version - {"1", "2", "3"}:
+        print(f"note: {p} has schema_version {sorted(version)}; this reader knows versions 1 to 3")
     return rows
+
+
+def normalize(row: dict) -> dict:
+    """Fills `asked_repr` from `repr` where it is missing or empty (CSVs before schema 3)."""
+    if not (row.get("asked_repr") or "").strip():
+        row["asked_repr"] = row.get("repr", "")
+    return row
 
 
 def class_of(row: dict) -> str:
@@ -69,15 +84,26 @@ def replicate_of(row: dict) -> str:
     return (row.get("replicate") or "").strip() or "0"
 
 
-def side(row: dict) -> str | None:
-    """`sdf` for ray-marched rows (analytic SDF, grids), `mesh` for triangle meshes (the
-    original of a scanned mesh included), None for the closed-form reference of scenes."""
-    rep = row.get("repr", "")
+def _side_of(rep: str) -> str | None:
     if rep in SDF_REPRS:
         return "sdf"
     if rep in MESH_REPRS:
         return "mesh"
     return None
+
+
+def side(row: dict) -> str | None:
+    """`sdf` for ray-marched rows (analytic SDF, grids), `mesh` for triangle meshes (the
+    original of a scanned mesh included), None for the closed-form reference of scenes.
+
+    A row counts for the side of its asked representation (`asked_repr`, else `repr`) only
+    when everything that traced it (`repr`, `+`-separated) is on that side too: a mesh run
+    whose objects were sphere traced (`repr` `sdf` or `sdf+mesh`) is on no side."""
+    rep = (row.get("repr") or "").strip()
+    asked = _side_of((row.get("asked_repr") or "").strip() or rep)
+    if asked is None or not rep:
+        return None
+    return asked if all(_side_of(k) == asked for k in rep.split("+")) else None
 
 
 def meets(row: dict, level: float) -> bool:
@@ -142,4 +168,5 @@ def inputs(rows) -> list[str]:
 
 def is_reference(row: dict) -> bool:
     ref = (row.get("reference") or "").strip()
-    return bool(ref) and ref == f"{row.get('repr', '')}/{row.get('method', '')}"
+    asked = (row.get("asked_repr") or "").strip() or row.get("repr", "")
+    return bool(ref) and ref == f"{asked}/{row.get('method', '')}"

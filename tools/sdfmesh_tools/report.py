@@ -151,8 +151,8 @@ def hypothesis_tests(rows) -> "OrderedDict[str, list[tuple[float, dict | None]]]
         res = []
         for t in THRESHOLDS:
             ok = meeting(sub, t)
-            s = fastest([r for r in ok if r.get("repr") in data.SDF_REPRS])
-            m = fastest([r for r in ok if r.get("repr") in data.MESH_REPRS])
+            s = fastest([r for r in ok if data.side(r) == "sdf"])
+            m = fastest([r for r in ok if data.side(r) == "mesh"])
             res.append((t, compare_rows(s, m) if s is not None and m is not None else None))
         out[name] = res
     return out

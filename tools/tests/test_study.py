@@ -284,3 +284,44 @@ def test_menger_cross_arms_reach_past_the_box():
             arm = max(cross["children"][0]["half_size"])
             # past the face by a margin, never ending on it
             assert edge + arm > 1 + 1e-3, (level, i)
+
+
+def test_a_fallback_row_is_never_the_mesh_sides_best(tmp_path):
+    """A mesh-asked run that was sphere traced (schema 3: repr `sdf`, asked_repr `mesh`; or
+    partly, `sdf+mesh`) is the fastest run meeting the level, yet neither side's best."""
+    rows = [
+        row("thin_shell", "thin", 0, "analytic", "closed-form", frame=0.5, quality=0.5),
+        row("thin_shell", "thin", 0, "sdf", "sphere-trace", tol=0.25, relax=1, frame=4.0, quality=0.5),
+        row("thin_shell", "thin", 0, "mesh", "parametric", res=64, frame=2.0, quality=0.5),
+    ]
+    for repr_, frame in (("sdf", 0.1), ("sdf+mesh", 0.2)):
+        r = row("thin_shell", "thin", 0, repr_, "parametric", res=16, frame=frame, quality=0.5)
+        r["asked_repr"] = "mesh"
+        rows.append(r)
+    for r in rows:
+        r["schema_version"] = 3
+        data.normalize(r)
+    assert [data.side(r) for r in rows] == [None, "sdf", "mesh", None, None]
+    best = analysis.best_per_run(rows, 0.5, "frame_ms_median")[("thin_shell", "0")]
+    assert best["mesh"]["resolution"] == 64 and best["mesh"]["repr"] == "mesh"
+    assert best["sdf"]["method"] == "sphere-trace"
+    tests = report.hypothesis_tests(rows)["thin_shell"]
+    assert all(c is None or c["mesh"]["resolution"] == 64 for _, c in tests)
+    # Only the fallbacks meet it on the mesh side: no mesh side at all.
+    rows[2]["quality_px"] = ""
+    best = analysis.best_per_run(rows, 0.5, "frame_ms_median")[("thin_shell", "0")]
+    assert best["mesh"] is None
+    assert analysis.compare_sides(rows, 0.5, "frame_ms_median")["only_sdf"] == ["thin_shell"]
+
+    # A schema-2 CSV (no asked_repr column) still loads, asked_repr taken from repr.
+    old = [c for c in data.COMPARE_COLUMNS if c != "asked_repr"]
+    path = tmp_path / "v2.csv"
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=old)
+        w.writeheader()
+        for r in rows[:3]:
+            w.writerow({c: (2 if c == "schema_version" else r.get(c, "")) for c in old})
+    read = data.read_csv(path)
+    assert [r["asked_repr"] for r in read] == ["analytic", "sdf", "mesh"]
+    assert [data.side(r) for r in read] == [None, "sdf", "mesh"]
+    assert data.is_reference(read[0]) and not data.is_reference(read[1])
