@@ -111,12 +111,6 @@ impl<const W: usize> PointBlock<W> {
 
     /// This block as a [`WIDE`] one, where `W` is [`WIDE`] (for a field's 32-lane kernels).
     #[inline]
-    pub fn wide(&self) -> Option<&PointBlock<WIDE>> {
-        (self as &dyn std::any::Any).downcast_ref()
-    }
-
-    /// [`Self::wide`], mutable.
-    #[inline]
     pub fn wide_mut(&mut self) -> Option<&mut PointBlock<WIDE>> {
         (self as &mut dyn std::any::Any).downcast_mut()
     }

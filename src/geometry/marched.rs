@@ -129,7 +129,7 @@ pub struct Marched<F> {
     /// scales with ([`MarchParams::tolerance`]).
     size: f64,
     march: MarchParams,
-    /// Label or reason given to [`DistanceField::describe`].
+    /// Label or reason given to [`FieldObject::describe`].
     label: String,
 }
 
@@ -204,7 +204,7 @@ impl<F: DistanceField> Marched<F> {
 
     /// Marches the rays `rays[i]` over `[t_min, reach(i)]` (not at all where `reach(i)` is
     /// `None`) side by side, one field evaluation per step for all lanes. A field that
-    /// refills lanes ([`DistanceField::refills_lanes`]) marches [`WIDE`] lanes, four
+    /// refills lanes ([`FieldFacts::refills_lanes`]) marches [`WIDE`] lanes, four
     /// packets evaluated together ([`DistanceField::distances`]), and a lane whose
     /// march ends takes the next ray of the batch, so lanes idle only once the batch runs
     /// out (a packet would wait for its slowest ray). Otherwise a packet of [`PACKET`]
@@ -311,22 +311,16 @@ impl<F: DistanceField> Marched<F> {
             // not used. (Their own last points would split the packet across more regions
             // of a pruned field: a smooth union of 64 spheres took 15% more instructions
             // per frame.)
-            let packets = (0..W / PACKET)
+            let active = (0..W / PACKET)
                 .filter(|g| marching >> (PACKET * g) & ONE_PACKET != 0)
-                .fold(0, |p, g| p | 1 << g);
+                .fold(0, |m, g| m | ONE_PACKET << (PACKET * g));
             let first = marching.trailing_zeros() as usize;
-            let mut rest = idle
-                & (0..W / PACKET)
-                    .filter(|g| packets & 1 << g != 0)
-                    .fold(0, |m, g| m | ONE_PACKET << (PACKET * g));
+            let mut rest = idle & active;
             while rest != 0 {
                 let l = rest.trailing_zeros() as usize;
                 rest &= rest - 1;
                 lanes.copy_point(first, l);
             }
-            let active = (0..W / PACKET)
-                .filter(|g| packets & 1 << g != 0)
-                .fold(0, |m, g| m | ONE_PACKET << (PACKET * g));
             lanes.pts.active = active;
             self.field.distances(&mut lanes.pts);
             let d = lanes.pts.out;
