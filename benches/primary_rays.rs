@@ -1,45 +1,61 @@
-//! Primary-ray throughput: 1M closest-hit rays (1000x1000 through the camera that
-//! `mesh_preview_scene` frames a mesh with), no shading, on the armadillo and the
-//! Stanford bunny.
+//! Primary-ray and shadow-ray throughput: 1M closest-hit rays (1000x1000 through the
+//! camera that `mesh_preview_scene` frames a mesh with), no shading, on the armadillo and
+//! the Stanford bunny, and the shadow rays of their hits towards the preview scene's point
+//! light (occlusion queries).
 //!
-//! * Our tracer (`MeshGeometry::closest_hit`) on 1 and 2 rayon threads, rays in 16x16
-//!   tiles: BVH build time (median of 3), bytes, Mrays/s (median, min and max of 5 frames
-//!   after a warm-up), BVH nodes and triangle tests per ray, on the SIMD backend of the
-//!   process (`SDFMESH_SIMD=portable cargo bench --bench primary_rays` times the portable
-//!   one).
+//! * Our tracer on 1 and 2 rayon threads, rays in 16x16 tiles: one ray at a time
+//!   (`Geometry::closest_hit` of the `MeshGeometry`, the tile's pixels row by row) and a
+//!   tile's rays as one batch (`Geometry::closest_hits`, the rays in the renderer's order:
+//!   packets of `geometry::PACKET` = 4x2 neighbours one after the other, see
+//!   `render::render`); BVH build time (median of 3), bytes, Mrays/s (median, min and max
+//!   of 5 frames after a warm-up), BVH nodes and triangle tests per ray, on the SIMD
+//!   backend of the process (`SDFMESH_SIMD=portable cargo bench --bench primary_rays`
+//!   times the portable one).
+//! * Shadow rays: from each of our primary hits, moved off the surface as the renderer
+//!   does (`render::tracer::spawn_offset` along the facing normal), towards the preview
+//!   scene's point light, where the light is in front of the surface; a tile's shadow rays
+//!   in the renderer's order (those of the primary rays' batch order, rays without one
+//!   left out). Ours one at a time (`Geometry::any_hit`) and as one batch per tile
+//!   (`Geometry::any_hits`).
 //! * A sweep of obvhs build presets, leaf sizes and reinsertion ratios (1 thread; each
 //!   Bvh2 is collapsed into the 8-wide BVH `MeshGeometry` traces) to choose
-//!   `MeshGeometry::BUILD_PARAMS` by measurement. Nodes per ray count 8-wide nodes visited, tests per ray triangles.
-//! * With `--features embree` (Debian's `libembree-dev`, Embree 3), the same frames
-//!   traced by Embree one ray at a time (`rtcIntersect1`), in packets of 8
-//!   (`rtcIntersect8`), as a coherent stream of one tile (`rtcIntersect1M`) and one ray
-//!   at a time in its robust mode (watertight, like ours), the ratio of our throughput to
-//!   Embree's, and a per-ray check that both tracers agree on hit/miss and on `t`.
+//!   `MeshGeometry::BUILD_PARAMS` by measurement. Nodes per ray count 8-wide nodes visited,
+//!   tests per ray triangles. `--no-presets` skips it (it takes most of the run).
+//! * With `--features embree` (Debian's `libembree-dev`, Embree 3), the same rays traced
+//!   by Embree one ray at a time (`rtcIntersect1`), in packets of 4, 8 and (where the
+//!   device has native 16-wide packets) 16 neighbouring rays of the renderer's order
+//!   (`rtcIntersect4/8/16`), as a coherent stream of one tile (`rtcIntersect1M`) and one
+//!   ray at a time in its robust mode (watertight, like ours); the shadow rays likewise
+//!   (`rtcOccluded1/4/8/16/1M`); the ratio of our throughput to Embree's, and a per-ray
+//!   check that both tracers agree on hit/miss and on `t` (shadow rays: on occluded or
+//!   not).
 //!
-//! Frames of the tracers being compared are interleaved round by round, so background
-//! load affects all of them alike; besides wall-clock throughput, each frame's process
-//! CPU time is measured, and rays per CPU-second is reported too (it is what a frame
-//! would reach per thread on an otherwise idle machine, and it is far less noisy when
-//! other jobs share the cores). `cargo bench --bench primary_rays [MESH-SUBSTRING]` runs
-//! it; without `--bench` (as under `cargo test --all-targets`) it runs a quick smoke
-//! check on a small image instead, and with `--quick` the full-size frames on one thread
-//! without the preset sweep. `tools/bench-embree` installs Embree and runs it with
-//! the feature.
+//! Frames of the tracers being compared are interleaved round by round (primary tracers
+//! among themselves, then shadow tracers), so background load affects all of them alike;
+//! besides wall-clock throughput, each frame's process CPU time is measured, and rays per
+//! CPU-second is reported too (it is what a frame would reach per thread on an otherwise
+//! idle machine, and it is far less noisy when other jobs share the cores). `cargo bench
+//! --bench primary_rays [MESH-SUBSTRING] [--no-presets]` runs it; without `--bench` (as
+//! under `cargo test --all-targets`) it runs a quick smoke check on a small image instead,
+//! and with `--quick` the full-size frames on one thread without the preset sweep.
+//! `tools/bench-embree` installs Embree and runs it with the feature.
 
 use sdfmesh::metrics::median;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
+use glam::Vec3;
 use obvhs::BvhBuildParams;
 use rayon::ThreadPool;
 use rayon::prelude::*;
 use sdfmesh::geometry::mesh::{MeshGeometry, Shading};
-use sdfmesh::geometry::{Geometry, RayStats};
+use sdfmesh::geometry::{Geometry, Hit, PACKET, Ray, RayStats};
 use sdfmesh::mesh::{TriangleMesh, load_mesh};
+use sdfmesh::render::tracer::spawn_offset;
 use sdfmesh::scene::camera::RayGenerator;
-use sdfmesh::scene::mesh_preview_scene;
 use sdfmesh::scene::transform::Transform;
+use sdfmesh::scene::{Light, mesh_preview_scene};
 
 /// Side of a square tile of rays.
 const TILE: u32 = 16;
@@ -47,8 +63,17 @@ const TILE: u32 = 16;
 const TILE_RAYS: usize = (TILE * TILE) as usize;
 /// Output value of a pixel whose ray missed.
 const MISS: f32 = f32::INFINITY;
-/// Output value of a tile slot outside the image (never compared, never counted).
+/// Output value of a tile slot outside the image (never compared, never counted), or of
+/// a pixel without a shadow ray.
 const UNUSED: f32 = -1.0;
+/// Output value of an occluded shadow ray (an unoccluded one gives `MISS`).
+const OCCLUDED: f32 = 1.0;
+/// Width and height of a packet of primary rays in the renderer (`render::render`): 4x2
+/// pixels, `PACKET_W * PACKET_H = PACKET`.
+const PACKET_W: u32 = 4;
+/// See [`PACKET_W`].
+const PACKET_H: u32 = 2;
+const _: () = assert!((PACKET_W * PACKET_H) as usize == PACKET);
 
 /// What one run measures.
 #[derive(Clone, Copy, Debug)]
@@ -61,7 +86,7 @@ struct Plan {
     builds: usize,
     /// Thread counts to trace with.
     threads: &'static [usize],
-    /// Whether to run the build-preset sweep.
+    /// Whether to run the build-preset sweep (`--no-presets` turns it off).
     presets: bool,
 }
 
@@ -121,6 +146,28 @@ impl Frame {
     fn pixel(&self, (x0, y0): (u32, u32), s: usize) -> Option<(u32, u32)> {
         let (x, y) = (x0 + s as u32 % TILE, y0 + s as u32 / TILE);
         (x < self.size && y < self.size).then_some((x, y))
+    }
+
+    /// The slots of tile `i`'s pixels inside the image in the order the renderer hands
+    /// them to `Geometry::closest_hits` (`render::render`): packets of
+    /// `PACKET_W x PACKET_H` pixels, clipped at the edge, one after the other, rows of
+    /// packets top to bottom. Returns the slots and their count.
+    fn packet_order(&self, i: usize) -> ([u16; TILE_RAYS], usize) {
+        let (x0, y0) = self.origin(i);
+        let (tw, th) = (TILE.min(self.size - x0), TILE.min(self.size - y0));
+        let mut order = [0u16; TILE_RAYS];
+        let mut n = 0;
+        for py in (0..th).step_by(PACKET_H as usize) {
+            for px in (0..tw).step_by(PACKET_W as usize) {
+                for y in py..(py + PACKET_H).min(th) {
+                    for x in px..(px + PACKET_W).min(tw) {
+                        order[n] = (y * TILE + x) as u16;
+                        n += 1;
+                    }
+                }
+            }
+        }
+        (order, n)
     }
 
     /// Pixel of output buffer index `i`, if inside the image.
@@ -188,15 +235,21 @@ impl<'a> Contender<'a> {
         (wall, cpu)
     }
 
+    /// Rays one frame traces, as the tracer counts them (`RayStats::rays`: the image's
+    /// pixels for primary rays, fewer for shadow rays).
+    fn rays(&self) -> f64 {
+        self.stats.rays as f64
+    }
+
     /// Mrays per wall-clock second of each timed frame.
-    fn mrays(&self, frame: &Frame) -> Vec<f64> {
-        self.secs.iter().map(|s| frame.rays() as f64 / s / 1e6).collect()
+    fn mrays(&self, _frame: &Frame) -> Vec<f64> {
+        self.secs.iter().map(|s| self.rays() / s / 1e6).collect()
     }
 
     /// Median Mrays per CPU-second over the timed frames, if measured.
-    fn mrays_cpu(&self, frame: &Frame) -> Option<f64> {
+    fn mrays_cpu(&self, _frame: &Frame) -> Option<f64> {
         (!self.cpu_secs.is_empty())
-            .then(|| median(&self.cpu_secs.iter().map(|s| frame.rays() as f64 / s / 1e6).collect::<Vec<_>>()))
+            .then(|| median(&self.cpu_secs.iter().map(|s| self.rays() / s / 1e6).collect::<Vec<_>>()))
     }
 }
 
@@ -287,6 +340,20 @@ impl Agreement {
         }
         s
     }
+
+    /// [`Self::describe`] for two frames of shadow rays (`OCCLUDED` or `MISS` per ray).
+    fn describe_occlusion(&self, first: &str, second: &str) -> String {
+        let word = |t: f32| if t == MISS { "unoccluded" } else { "occluded" };
+        let mut s = format!(
+            "{first} vs {second}: {} shadow rays, {} occluded by both; occluded only by {first} {}, \
+             only by {second} {}",
+            self.rays, self.hits, self.only_first, self.only_second
+        );
+        for (x, y, a, b) in &self.examples {
+            s += &format!("\n    shadow ray of pixel ({x}, {y}): {} vs {}", word(*a), word(*b));
+        }
+        s
+    }
 }
 
 fn pool(threads: usize) -> ThreadPool {
@@ -304,6 +371,118 @@ fn ours_tile(geom: &MeshGeometry) -> TileFn<'_> {
                 stats.rays += 1;
                 *slot = geom.closest_hit(&ray, 0.0, f32::INFINITY, &mut stats).map_or(MISS, |h| h.t);
             }
+        }
+        stats
+    })
+}
+
+/// Tracer name of our one-by-one rows (primary rays): what they call.
+const OURS_ONE: &str = "ours closest_hit";
+/// Tracer name of our batch rows (primary rays): what they call.
+const OURS_BATCH: &str = "ours closest_hits batch";
+/// Tracer name of our one-by-one shadow rows.
+const OURS_SHADOW_ONE: &str = "ours any_hit";
+/// Tracer name of our batch shadow rows: what they call.
+const OURS_SHADOW_BATCH: &str = "ours any_hits batch";
+
+/// Our tracer on one tile as the renderer calls it: the tile's rays in the renderer's
+/// order ([`Frame::packet_order`]) as one `Geometry::closest_hits` batch.
+fn ours_batch_tile(geom: &MeshGeometry) -> TileFn<'_> {
+    Box::new(move |frame: &Frame, tile: usize, slots: &mut [f32]| {
+        let o = frame.origin(tile);
+        let (order, n) = frame.packet_order(tile);
+        let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); TILE_RAYS];
+        for (ray, &s) in rays.iter_mut().zip(&order[..n]) {
+            let (x, y) = frame.pixel(o, s as usize).expect("packet_order keeps pixels inside the image");
+            *ray = frame.camera.ray(x, y);
+        }
+        let mut t_max = [f32::INFINITY; TILE_RAYS];
+        let mut hits: [Option<Hit>; TILE_RAYS] = [None; TILE_RAYS];
+        let mut stats = RayStats { rays: n as u64, ..RayStats::default() };
+        geom.closest_hits(&rays[..n], 0.0, &mut t_max[..n], &mut hits[..n], &mut stats);
+        for (hit, &s) in hits[..n].iter().zip(&order[..n]) {
+            slots[s as usize] = hit.map_or(MISS, |h| h.t);
+        }
+        stats
+    })
+}
+
+/// The shadow rays of a frame: from each of our primary hits towards one point light,
+/// grouped by tile, each tile's in the renderer's order.
+struct Shadows {
+    /// Rays of tile `i`: `start[i]..start[i + 1]`.
+    start: Vec<usize>,
+    rays: Vec<Ray>,
+    /// How far each ray goes: the distance to the light.
+    reach: Vec<f32>,
+    /// The tile slot (primary pixel) each ray belongs to.
+    slot: Vec<u16>,
+}
+
+impl Shadows {
+    /// The shadow rays of `geom`'s primary hits in `frame` towards a point light at
+    /// `light`, spawned as the renderer spawns them (`render::tracer`): off the hit
+    /// along the normal facing the viewer by `spawn_offset`, only where the light is in
+    /// front of the (facing) shading normal.
+    fn new(geom: &MeshGeometry, frame: &Frame, light: Vec3) -> Self {
+        let mut sh = Shadows { start: vec![0], rays: Vec::new(), reach: Vec::new(), slot: Vec::new() };
+        let mut stats = RayStats::default();
+        for tile in 0..frame.tiles() {
+            let o = frame.origin(tile);
+            let (order, n) = frame.packet_order(tile);
+            for &s in &order[..n] {
+                let (x, y) = frame.pixel(o, s as usize).expect("packet_order keeps pixels inside the image");
+                let ray = frame.camera.ray(x, y);
+                let Some(hit) = geom.closest_hit(&ray, 0.0, f32::INFINITY, &mut stats) else { continue };
+                // render::tracer's surface_frame and batch_shadows, for one point light.
+                let leaving = hit.normal.dot(ray.dir) > 0.0;
+                let face = if leaving { -hit.normal } else { hit.normal };
+                let n = if leaving { -hit.shading_normal } else { hit.shading_normal };
+                let n = if n.dot(face) > 0.0 { n } else { face };
+                let above = hit.point + face * spawn_offset(&hit);
+                let v = light - above;
+                let d = v.length();
+                if d > 0.0 && n.dot(v / d) > 0.0 {
+                    sh.rays.push(Ray::spawned(above, v / d, ray.spread + hit.t));
+                    sh.reach.push(d);
+                    sh.slot.push(s);
+                }
+            }
+            sh.start.push(sh.rays.len());
+        }
+        sh
+    }
+
+    /// The index range of tile `i`'s rays.
+    fn of_tile(&self, i: usize) -> std::ops::Range<usize> {
+        self.start[i]..self.start[i + 1]
+    }
+}
+
+/// Our tracer on one tile's shadow rays, one at a time (`Geometry::any_hit`).
+fn ours_shadow_tile<'a>(geom: &'a MeshGeometry, sh: &'a Shadows) -> TileFn<'a> {
+    Box::new(move |_frame: &Frame, tile: usize, slots: &mut [f32]| {
+        let r = sh.of_tile(tile);
+        let mut stats = RayStats { rays: r.len() as u64, ..RayStats::default() };
+        for j in r {
+            let blocked = geom.any_hit(&sh.rays[j], 0.0, sh.reach[j], &mut stats);
+            slots[sh.slot[j] as usize] = if blocked { OCCLUDED } else { MISS };
+        }
+        stats
+    })
+}
+
+/// Our tracer on one tile's shadow rays as the renderer calls it: one
+/// `Geometry::any_hits` batch.
+fn ours_shadow_batch_tile<'a>(geom: &'a MeshGeometry, sh: &'a Shadows) -> TileFn<'a> {
+    Box::new(move |_frame: &Frame, tile: usize, slots: &mut [f32]| {
+        let r = sh.of_tile(tile);
+        let m = r.len();
+        let mut blocked = [false; TILE_RAYS];
+        let mut stats = RayStats { rays: m as u64, ..RayStats::default() };
+        geom.any_hits(&sh.rays[r.clone()], 0.0, &sh.reach[r.clone()], &mut blocked[..m], &mut stats);
+        for (&b, &s) in blocked[..m].iter().zip(&sh.slot[r]) {
+            slots[s as usize] = if b { OCCLUDED } else { MISS };
         }
         stats
     })
@@ -341,8 +520,14 @@ struct Row {
     build_ms: Option<f64>,
     mrays: Vec<f64>,
     mrays_cpu: Option<f64>,
+    /// Our one-by-one tracer / this row (on that row itself: / Embree's one-ray row), by
+    /// wall clock and by CPU time.
     ratio: Option<f64>,
     ratio_cpu: Option<f64>,
+    /// Our batch tracer / this row (on that row itself: / Embree's 8-ray packets), by
+    /// wall clock and by CPU time.
+    ratio_batch: Option<f64>,
+    ratio_batch_cpu: Option<f64>,
     nodes_per_ray: Option<f64>,
     tests_per_ray: Option<f64>,
     bytes: String,
@@ -355,7 +540,7 @@ fn opt(v: Option<f64>, prec: usize) -> String {
 
 fn print_table(rows: &[Row]) {
     println!(
-        "{:<16} {:<23} {:>3} {:>8} {:>7} {:>6} {:>6} {:>6} {:>7} {:>6} {:>7} {:>7} {:>21} {:>5}",
+        "{:<16} {:<23} {:>3} {:>8} {:>7} {:>6} {:>6} {:>7} {:>6} {:>6} {:>6} {:>6} {:>7} {:>7} {:>21} {:>5}",
         "mesh",
         "tracer",
         "thr",
@@ -363,9 +548,11 @@ fn print_table(rows: &[Row]) {
         "Mray/s",
         "min",
         "max",
-        "ratio",
         "cpu M/s",
         "ratio",
+        "cpu r",
+        "batch",
+        "cpu b",
         "nodes/r",
         "tests/r",
         "bytes (total/accel)",
@@ -374,7 +561,7 @@ fn print_table(rows: &[Row]) {
     for r in rows {
         let (lo, hi) = min_max(&r.mrays);
         println!(
-            "{:<16} {:<23} {:>3} {:>8} {:>7.2} {:>6.2} {:>6.2} {:>6} {:>7} {:>6} {:>7} {:>7} {:>21} {:>5}",
+            "{:<16} {:<23} {:>3} {:>8} {:>7.2} {:>6.2} {:>6.2} {:>7} {:>6} {:>6} {:>6} {:>6} {:>7} {:>7} {:>21} {:>5}",
             r.mesh,
             r.tracer,
             r.threads,
@@ -382,13 +569,36 @@ fn print_table(rows: &[Row]) {
             median(&r.mrays),
             lo,
             hi,
-            opt(r.ratio, 2),
             opt(r.mrays_cpu, 2),
+            opt(r.ratio, 2),
             opt(r.ratio_cpu, 2),
+            opt(r.ratio_batch, 2),
+            opt(r.ratio_batch_cpu, 2),
             opt(r.nodes_per_ray, 1),
             opt(r.tests_per_ray, 2),
             r.bytes,
             r.mismatches
+        );
+    }
+}
+
+/// The issue's targets read off the table: our batch rows against Embree's 8-ray
+/// packets (`rtcIntersect8`, `rtcOccluded8`), >= 1.0 wanted.
+fn print_targets(rows: &[Row]) {
+    if !rows.iter().any(|r| r.tracer == embree::PACKET8) {
+        return;
+    }
+    println!("\ntargets: ours batch / embree packets of 8, by wall clock (by CPU time); >= 1.0 wanted");
+    for r in rows.iter().filter(|r| r.tracer == OURS_BATCH || r.tracer == OURS_SHADOW_BATCH) {
+        let peer = if r.tracer == OURS_BATCH { embree::PACKET8 } else { embree::OCCLUDED8 };
+        println!(
+            "  {:<16} {} thr  {:<23} / {:<21} {} ({})",
+            r.mesh,
+            r.threads,
+            r.tracer,
+            peer,
+            opt(r.ratio_batch, 2),
+            opt(r.ratio_batch_cpu, 2)
         );
     }
 }
@@ -487,6 +697,67 @@ fn preset_sweep(label: &str, mesh: &TriangleMesh, frame: &Frame, plan: &Plan) {
     }
 }
 
+/// The table rows of one race whose contenders 0 and 1 are ours one by one and ours as
+/// batches: ratios of those two to every row (on their own rows, to the Embree rows named
+/// by `peers`, one-ray and 8-ray packets), work counts of ours, and the agreement of every
+/// row with contender 0, printed where `print` (`occlusion`: the outputs are shadow rays).
+fn race_rows(
+    label: &str,
+    threads: usize,
+    cs: &[Contender<'_>],
+    frame: &Frame,
+    peers: [&str; 2],
+    occlusion: bool,
+    print: bool,
+) -> Vec<Row> {
+    let speed = |c: &Contender<'_>| (median(&c.mrays(frame)), c.mrays_cpu(frame));
+    let ours = [speed(&cs[0]), speed(&cs[1])];
+    // Ours `k` / contender `c`, wall clock and CPU time; on our own row `k`, / peer `k`.
+    let ratio_of = |k: usize, i: usize| {
+        let other = if i == k { cs.iter().find(|c| c.tracer == peers[k]) } else { Some(&cs[i]) };
+        let (wall, cpu) = match other {
+            Some(c) => speed(c),
+            None => return (None, None),
+        };
+        (Some(ours[k].0 / wall), ours[k].1.zip(cpu).map(|(a, b)| a / b))
+    };
+    let mut rows = Vec::new();
+    for (i, c) in cs.iter().enumerate() {
+        let agreement = (i > 0).then(|| Agreement::of(frame, &cs[0].out, &c.out));
+        let (ratio, ratio_cpu) = ratio_of(0, i);
+        let (ratio_batch, ratio_batch_cpu) = ratio_of(1, i);
+        // Only our tracers count BVH nodes and triangle tests.
+        let counted = c.stats.bvh_nodes > 0;
+        rows.push(Row {
+            mesh: label.to_string(),
+            tracer: c.tracer.clone(),
+            threads,
+            build_ms: c.build_ms,
+            mrays: c.mrays(frame),
+            mrays_cpu: c.mrays_cpu(frame),
+            ratio,
+            ratio_cpu,
+            ratio_batch,
+            ratio_batch_cpu,
+            nodes_per_ray: counted.then(|| per_ray(c.stats.bvh_nodes, c.stats.rays)).flatten(),
+            tests_per_ray: counted.then(|| per_ray(c.stats.prim_tests, c.stats.rays)).flatten(),
+            bytes: c.bytes.clone(),
+            mismatches: agreement.as_ref().map_or("-".into(), |g| g.mismatches().to_string()),
+        });
+        if let Some(g) = agreement
+            && print
+        {
+            let text = if occlusion {
+                g.describe_occlusion(&cs[0].tracer, &c.tracer)
+            } else {
+                g.describe(&cs[0].tracer, &c.tracer)
+            };
+            println!("agreement {text}");
+        }
+    }
+    rows
+}
+
 /// Benchmarks one mesh; returns its table rows.
 fn bench_mesh(path: &Path, plan: &Plan) -> Vec<Row> {
     let label = path.file_stem().map_or_else(|| "mesh".into(), |s| s.to_string_lossy().into_owned());
@@ -523,13 +794,42 @@ fn bench_mesh(path: &Path, plan: &Plan) -> Vec<Row> {
     #[cfg(feature = "embree")]
     let emb = embree::Bench::new(&mesh, plan.builds);
 
+    // The shadow rays of our primary hits towards the preview scene's point light.
+    let light = scene
+        .lights
+        .iter()
+        .find_map(|l| if let Light::Point { position, .. } = l { Some(*position) } else { None })
+        .expect("the preview scene has a point light");
+    let shadows = Shadows::new(&ours, &frame, light);
+    println!(
+        "shadow rays: {} (from our hits, where the point light at [{:.4} {:.4} {:.4}] is in front of \
+         the surface), t in [0, distance to the light]",
+        shadows.rays.len(),
+        light.x,
+        light.y,
+        light.z
+    );
+    println!(
+        "ours batch rows: {OURS_BATCH} = MeshGeometry's Geometry::closest_hits, {OURS_SHADOW_BATCH} = \
+         its Geometry::any_hits, one call per tile (up to {TILE_RAYS} rays in the renderer's order, \
+         packets of {PACKET}); MeshGeometry::prefers_packets() = {}",
+        ours.prefers_packets()
+    );
+
     let mut rows = Vec::new();
     let mut ours_out: Vec<f32> = Vec::new();
     for &threads in plan.threads {
         let pool = pool(threads);
-        let mut cs = vec![Contender::new("ours", ours_tile(&ours))];
-        cs[0].build_ms = Some(ours_ms);
-        cs[0].bytes = format!("{}/{}", ours.bytes_used(), ours.accel_bytes());
+        let bytes = format!("{}/{}", ours.bytes_used(), ours.accel_bytes());
+        // Primary rays: ours one by one (index 0) and as batches (index 1), then Embree's.
+        let mut cs = vec![
+            Contender::new(OURS_ONE, ours_tile(&ours)),
+            Contender::new(OURS_BATCH, ours_batch_tile(&ours)),
+        ];
+        for c in &mut cs {
+            c.build_ms = Some(ours_ms);
+            c.bytes = bytes.clone();
+        }
         #[cfg(feature = "embree")]
         cs.extend(emb.contenders());
         race(&mut cs, &pool, &frame, plan.frames);
@@ -542,41 +842,39 @@ fn bench_mesh(path: &Path, plan: &Plan) -> Vec<Row> {
                 100.0 * hits as f64 / frame.rays() as f64
             );
         }
+        let first = threads == plan.threads[0];
+        rows.extend(race_rows(
+            &label,
+            threads,
+            &cs,
+            &frame,
+            [embree::ONE_RAY, embree::PACKET8],
+            false,
+            first,
+        ));
+        drop(cs);
 
-        let ours_median = median(&cs[0].mrays(&frame));
-        let ours_cpu = cs[0].mrays_cpu(&frame);
-        let e1 = cs.iter().find(|c| c.tracer == embree::ONE_RAY);
-        let (e1_median, e1_cpu) =
-            (e1.map(|c| median(&c.mrays(&frame))), e1.and_then(|c| c.mrays_cpu(&frame)));
-        for (i, c) in cs.iter().enumerate() {
-            let m = c.mrays(&frame);
-            let cpu = c.mrays_cpu(&frame);
-            let agreement = (i > 0).then(|| Agreement::of(&frame, &cs[0].out, &c.out));
-            let (ratio, ratio_cpu) = if i == 0 {
-                (e1_median.map(|e| ours_median / e), ours_cpu.zip(e1_cpu).map(|(a, b)| a / b))
-            } else {
-                (Some(ours_median / median(&m)), ours_cpu.zip(cpu).map(|(a, b)| a / b))
-            };
-            rows.push(Row {
-                mesh: label.clone(),
-                tracer: c.tracer.clone(),
-                threads,
-                build_ms: c.build_ms,
-                mrays: m,
-                mrays_cpu: cpu,
-                ratio,
-                ratio_cpu,
-                nodes_per_ray: (i == 0).then(|| per_ray(c.stats.bvh_nodes, c.stats.rays)).flatten(),
-                tests_per_ray: (i == 0).then(|| per_ray(c.stats.prim_tests, c.stats.rays)).flatten(),
-                bytes: c.bytes.clone(),
-                mismatches: agreement.as_ref().map_or("-".into(), |g| g.mismatches().to_string()),
-            });
-            if let Some(g) = agreement
-                && threads == plan.threads[0]
-            {
-                println!("agreement {}", g.describe("ours", &c.tracer));
-            }
+        // Shadow rays: ours one by one (index 0) and as batches (index 1), then Embree's.
+        let mut cs = vec![
+            Contender::new(OURS_SHADOW_ONE, ours_shadow_tile(&ours, &shadows)),
+            Contender::new(OURS_SHADOW_BATCH, ours_shadow_batch_tile(&ours, &shadows)),
+        ];
+        for c in &mut cs {
+            c.build_ms = Some(ours_ms);
+            c.bytes = bytes.clone();
         }
+        #[cfg(feature = "embree")]
+        cs.extend(emb.shadow_contenders(&shadows));
+        race(&mut cs, &pool, &frame, plan.frames);
+        rows.extend(race_rows(
+            &label,
+            threads,
+            &cs,
+            &frame,
+            [embree::OCCLUDED1, embree::OCCLUDED8],
+            true,
+            first,
+        ));
     }
     #[cfg(feature = "embree")]
     println!("agreement {}", emb.robust_agreement(&frame, &ours_out).describe("ours", "embree robust"));
@@ -586,9 +884,44 @@ fn bench_mesh(path: &Path, plan: &Plan) -> Vec<Row> {
     rows
 }
 
+/// Checks of the smoke run (`cargo test --all-targets`): [`Frame::packet_order`] is the
+/// renderer's order on frames whose edge tiles are cut at odd places, and our batch rows
+/// agree ray for ray with our one-by-one rows (the `Geometry::closest_hits` /
+/// `Geometry::any_hits` contract).
+fn smoke_checks(rows: &[Row]) {
+    let cam = sdfmesh::scene::Camera { width: 37, height: 37, ..Default::default() };
+    for size in [37, 64] {
+        let frame = Frame::new(RayGenerator::new(&cam), size);
+        for tile in 0..frame.tiles() {
+            let o = frame.origin(tile);
+            let (order, n) = frame.packet_order(tile);
+            let mut inside: Vec<u16> =
+                (0..TILE_RAYS as u16).filter(|&s| frame.pixel(o, s as usize).is_some()).collect();
+            let mut got = order[..n].to_vec();
+            got.sort_unstable();
+            inside.sort_unstable();
+            assert_eq!(got, inside, "packet_order of tile {tile} at size {size}: every pixel once");
+            // A packet is a 4x2 block, clipped at the edge: the rays of a packet lie within
+            // one block of 4 columns and 2 rows, and blocks come in the renderer's order.
+            let block = |s: u16| (u32::from(s) / TILE / PACKET_H, u32::from(s) % TILE / PACKET_W);
+            assert!(order[..n].windows(2).all(|w| block(w[0]) <= block(w[1])), "packets in order");
+            if frame.pixel(o, TILE_RAYS - 1).is_some() {
+                assert_eq!(order[..PACKET], [0, 1, 2, 3, 16, 17, 18, 19], "first packet of a full tile");
+            }
+        }
+    }
+    // No rows where the meshes are missing (the run says which it skipped).
+    let ours = rows.iter().filter(|r| r.tracer == OURS_BATCH || r.tracer == OURS_SHADOW_BATCH);
+    assert!(rows.is_empty() || ours.clone().count() == 2, "both batch rows ran");
+    for r in ours {
+        assert_eq!(r.mismatches, "0", "{} disagrees with our one-by-one tracer", r.tracer);
+    }
+    println!("smoke checks passed: packet order, our batches agree with our one-by-one rays");
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let plan = if args.iter().any(|a| a == "--quick") {
+    let mut plan = if args.iter().any(|a| a == "--quick") {
         QUICK
     } else if args.iter().any(|a| a == "--bench") {
         FULL
@@ -596,6 +929,9 @@ fn main() {
         println!("smoke mode (run with `cargo bench --bench primary_rays` for the benchmark)");
         SMOKE
     };
+    if args.iter().any(|a| a == "--no-presets") {
+        plan.presets = false;
+    }
     let filters: Vec<&String> = args.iter().filter(|a| !a.starts_with('-')).collect();
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes");
     let meshes: &[&str] = if plan.size == FULL.size {
@@ -604,12 +940,14 @@ fn main() {
         &["stanford-bunny.obj"]
     };
     println!(
-        "primary rays: {0}x{0}, 16x16 tiles, closest hit only, t in [0, inf); threads {1:?}; \
-         {2} timed frames after 1 warm-up, interleaved across tracers; {3} CPUs available",
+        "primary rays: {0}x{0}, 16x16 tiles, closest hit only, t in [0, inf); shadow rays of their \
+         hits towards a point light, occlusion only; threads {1:?}; {2} timed frames after 1 warm-up, \
+         interleaved across tracers; {3} CPUs available; BVH-preset sweep {4}",
         plan.size,
         plan.threads,
         plan.frames,
-        std::thread::available_parallelism().map_or(0, |n| n.get())
+        std::thread::available_parallelism().map_or(0, |n| n.get()),
+        if plan.presets { "on" } else { "off" }
     );
     let mut rows = Vec::new();
     for name in meshes {
@@ -625,16 +963,26 @@ fn main() {
     }
     println!();
     print_table(&rows);
+    if plan.size == SMOKE.size {
+        smoke_checks(&rows);
+    }
     println!(
         "\nMray/s: million rays per wall-clock second, median of the timed frames (min, max beside it). \
          cpu M/s: million rays per process CPU second (median): per-thread throughput, robust to other \
-         load on the machine. ratio: on our rows, ours / embree rtcIntersect1 at the same thread \
-         count; on embree rows, ours / that row (first by wall clock, then by CPU time). \
-         bytes: ours Geometry::bytes_used / MeshGeometry::accel_bytes; embree: net bytes its \
+         load on the machine. ratio, cpu r: ours one by one ({OURS_ONE}; shadow rays {OURS_SHADOW_ONE}) / \
+         that row at the same thread count, by wall clock and by CPU time; on that row itself, / {} \
+         ({}). batch, cpu b: likewise for ours as batches ({OURS_BATCH}; {OURS_SHADOW_BATCH}); on that \
+         row itself, / {} ({}). nodes/r, tests/r: our 8-wide BVH nodes visited and triangles tested \
+         per ray. bytes: ours Geometry::bytes_used / MeshGeometry::accel_bytes; embree: net bytes its \
          memory monitor saw allocated for the scene / the same less the vertex and index \
-         buffers. mism.: rays whose hit/miss differs, or whose t differs by more than 1e-4 \
-         relative, from ours."
+         buffers. mism.: rays whose hit/miss (shadow rays: occluded or not) differs, or whose t \
+         differs by more than 1e-4 relative, from ours one by one.",
+        embree::ONE_RAY,
+        embree::OCCLUDED1,
+        embree::PACKET8,
+        embree::OCCLUDED8
     );
+    print_targets(&rows);
     #[cfg(not(feature = "embree"))]
     println!(
         "Embree rows disabled: run tools/bench-embree, or install libembree-dev and run \
@@ -647,6 +995,12 @@ fn main() {
 mod embree {
     /// Tracer name of the one-ray-at-a-time Embree rows.
     pub const ONE_RAY: &str = "embree rtcIntersect1";
+    /// Tracer name of the Embree rows of 8-ray packets.
+    pub const PACKET8: &str = "embree rtcIntersect8";
+    /// Tracer name of the one-ray-at-a-time Embree shadow rows.
+    pub const OCCLUDED1: &str = "embree rtcOccluded1";
+    /// Tracer name of the Embree shadow rows of 8-ray packets.
+    pub const OCCLUDED8: &str = "embree rtcOccluded8";
 }
 
 /// Embree 3 (Debian's libembree-dev) through a minimal hand-written FFI, checked against
@@ -661,7 +1015,9 @@ mod embree {
     use sdfmesh::geometry::RayStats;
     use sdfmesh::mesh::TriangleMesh;
 
-    use super::{Agreement, Contender, Frame, MISS, TILE, TILE_RAYS, TileFn, median, process_cpu_secs};
+    use super::{
+        Agreement, Contender, Frame, MISS, OCCLUDED, Shadows, TILE_RAYS, TileFn, median, process_cpu_secs,
+    };
 
     #[allow(non_camel_case_types, non_snake_case, dead_code)]
     mod ffi {
@@ -685,7 +1041,9 @@ mod embree {
         pub const RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT: RTCEnum = 0;
         pub const RTC_INTERSECT_CONTEXT_FLAG_COHERENT: RTCEnum = 1;
         pub const RTC_DEVICE_PROPERTY_VERSION: RTCEnum = 0;
+        pub const RTC_DEVICE_PROPERTY_NATIVE_RAY4_SUPPORTED: RTCEnum = 32;
         pub const RTC_DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED: RTCEnum = 33;
+        pub const RTC_DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED: RTCEnum = 34;
         pub const RTC_DEVICE_PROPERTY_RAY_STREAM_SUPPORTED: RTCEnum = 35;
         pub const RTC_DEVICE_PROPERTY_BACKFACE_CULLING_ENABLED: RTCEnum = 65;
         pub const RTC_DEVICE_PROPERTY_TASKING_SYSTEM: RTCEnum = 128;
@@ -732,50 +1090,100 @@ mod embree {
             pub hit: RTCHit,
         }
 
-        /// `struct RTCRay8` (rtcore_ray.h).
-        #[repr(C, align(32))]
-        #[derive(Clone, Copy, Debug, Default)]
-        pub struct RTCRay8 {
-            pub org_x: [f32; 8],
-            pub org_y: [f32; 8],
-            pub org_z: [f32; 8],
-            pub tnear: [f32; 8],
-            pub dir_x: [f32; 8],
-            pub dir_y: [f32; 8],
-            pub dir_z: [f32; 8],
-            pub time: [f32; 8],
-            pub tfar: [f32; 8],
-            pub mask: [c_uint; 8],
-            pub id: [c_uint; 8],
-            pub flags: [c_uint; 8],
+        /// `struct RTCRay4/8/16` (rtcore_ray.h): `N` rays as arrays per field. Aligned to 64
+        /// bytes for every `N` (the headers ask 16, 32 and 64): the fields stay where C
+        /// puts them, since each is `4 * N` bytes and the ray part is a multiple of 64.
+        #[repr(C, align(64))]
+        #[derive(Clone, Copy, Debug)]
+        pub struct RTCRayN<const N: usize> {
+            pub org_x: [f32; N],
+            pub org_y: [f32; N],
+            pub org_z: [f32; N],
+            pub tnear: [f32; N],
+            pub dir_x: [f32; N],
+            pub dir_y: [f32; N],
+            pub dir_z: [f32; N],
+            pub time: [f32; N],
+            pub tfar: [f32; N],
+            pub mask: [c_uint; N],
+            pub id: [c_uint; N],
+            pub flags: [c_uint; N],
         }
 
-        /// `struct RTCHit8` (rtcore_ray.h).
-        #[repr(C, align(32))]
-        #[derive(Clone, Copy, Debug, Default)]
-        pub struct RTCHit8 {
-            pub Ng_x: [f32; 8],
-            pub Ng_y: [f32; 8],
-            pub Ng_z: [f32; 8],
-            pub u: [f32; 8],
-            pub v: [f32; 8],
-            pub primID: [c_uint; 8],
-            pub geomID: [c_uint; 8],
-            pub instID: [[c_uint; 8]; MAX_INSTANCE_LEVEL_COUNT],
+        /// `struct RTCHit4/8/16` (rtcore_ray.h).
+        #[repr(C, align(64))]
+        #[derive(Clone, Copy, Debug)]
+        pub struct RTCHitN<const N: usize> {
+            pub Ng_x: [f32; N],
+            pub Ng_y: [f32; N],
+            pub Ng_z: [f32; N],
+            pub u: [f32; N],
+            pub v: [f32; N],
+            pub primID: [c_uint; N],
+            pub geomID: [c_uint; N],
+            pub instID: [[c_uint; N]; MAX_INSTANCE_LEVEL_COUNT],
         }
 
-        /// `struct RTCRayHit8` (rtcore_ray.h).
+        /// `struct RTCRayHit4/8/16` (rtcore_ray.h).
         #[repr(C)]
-        #[derive(Clone, Copy, Debug, Default)]
-        pub struct RTCRayHit8 {
-            pub ray: RTCRay8,
-            pub hit: RTCHit8,
+        #[derive(Clone, Copy, Debug)]
+        pub struct RTCRayHitN<const N: usize> {
+            pub ray: RTCRayN<N>,
+            pub hit: RTCHitN<N>,
         }
 
-        /// The `valid` mask of `rtcIntersect8`: -1 active, 0 inactive, 32-byte aligned.
-        #[repr(C, align(32))]
-        #[derive(Clone, Copy, Debug, Default)]
-        pub struct Valid8(pub [c_int; 8]);
+        impl<const N: usize> RTCRayN<N> {
+            /// All lanes zero (inactive lanes are never read).
+            pub fn zeroed() -> Self {
+                RTCRayN {
+                    org_x: [0.0; N],
+                    org_y: [0.0; N],
+                    org_z: [0.0; N],
+                    tnear: [0.0; N],
+                    dir_x: [0.0; N],
+                    dir_y: [0.0; N],
+                    dir_z: [0.0; N],
+                    time: [0.0; N],
+                    tfar: [0.0; N],
+                    mask: [0; N],
+                    id: [0; N],
+                    flags: [0; N],
+                }
+            }
+        }
+
+        impl<const N: usize> RTCRayHitN<N> {
+            /// All lanes zero but the hit's ids, which say "no hit".
+            pub fn zeroed() -> Self {
+                RTCRayHitN {
+                    ray: RTCRayN::zeroed(),
+                    hit: RTCHitN {
+                        Ng_x: [0.0; N],
+                        Ng_y: [0.0; N],
+                        Ng_z: [0.0; N],
+                        u: [0.0; N],
+                        v: [0.0; N],
+                        primID: [RTC_INVALID_GEOMETRY_ID; N],
+                        geomID: [RTC_INVALID_GEOMETRY_ID; N],
+                        instID: [[RTC_INVALID_GEOMETRY_ID; N]; MAX_INSTANCE_LEVEL_COUNT],
+                    },
+                }
+            }
+        }
+
+        /// The `valid` mask of `rtcIntersect4/8/16` and `rtcOccluded4/8/16`: -1 active, 0
+        /// inactive, aligned like the packet.
+        #[repr(C, align(64))]
+        #[derive(Clone, Copy, Debug)]
+        pub struct ValidN<const N: usize>(pub [c_int; N]);
+
+        /// `rtcIntersect4/8/16` for one `N`.
+        pub type IntersectN<const N: usize> =
+            unsafe extern "C" fn(*const ValidN<N>, RTCScene, *mut RTCIntersectContext, *mut RTCRayHitN<N>);
+
+        /// `rtcOccluded4/8/16` for one `N`.
+        pub type OccludedN<const N: usize> =
+            unsafe extern "C" fn(*const ValidN<N>, RTCScene, *mut RTCIntersectContext, *mut RTCRayN<N>);
 
         pub type RTCFilterFunctionN = Option<unsafe extern "C" fn(args: *const c_void)>;
 
@@ -844,16 +1252,54 @@ mod embree {
             pub fn rtcCommitScene(scene: RTCScene);
             pub fn rtcGetSceneBounds(scene: RTCScene, bounds: *mut RTCBounds);
             pub fn rtcIntersect1(scene: RTCScene, context: *mut RTCIntersectContext, rayhit: *mut RTCRayHit);
-            pub fn rtcIntersect8(
-                valid: *const Valid8,
+            pub fn rtcIntersect4(
+                valid: *const ValidN<4>,
                 scene: RTCScene,
                 context: *mut RTCIntersectContext,
-                rayhit: *mut RTCRayHit8,
+                rayhit: *mut RTCRayHitN<4>,
+            );
+            pub fn rtcIntersect8(
+                valid: *const ValidN<8>,
+                scene: RTCScene,
+                context: *mut RTCIntersectContext,
+                rayhit: *mut RTCRayHitN<8>,
+            );
+            pub fn rtcIntersect16(
+                valid: *const ValidN<16>,
+                scene: RTCScene,
+                context: *mut RTCIntersectContext,
+                rayhit: *mut RTCRayHitN<16>,
             );
             pub fn rtcIntersect1M(
                 scene: RTCScene,
                 context: *mut RTCIntersectContext,
                 rayhit: *mut RTCRayHit,
+                m: c_uint,
+                byte_stride: usize,
+            );
+            pub fn rtcOccluded1(scene: RTCScene, context: *mut RTCIntersectContext, ray: *mut RTCRay);
+            pub fn rtcOccluded4(
+                valid: *const ValidN<4>,
+                scene: RTCScene,
+                context: *mut RTCIntersectContext,
+                ray: *mut RTCRayN<4>,
+            );
+            pub fn rtcOccluded8(
+                valid: *const ValidN<8>,
+                scene: RTCScene,
+                context: *mut RTCIntersectContext,
+                ray: *mut RTCRayN<8>,
+            );
+            pub fn rtcOccluded16(
+                valid: *const ValidN<16>,
+                scene: RTCScene,
+                context: *mut RTCIntersectContext,
+                ray: *mut RTCRayN<16>,
+            );
+            pub fn rtcOccluded1M(
+                scene: RTCScene,
+                context: *mut RTCIntersectContext,
+                ray: *mut RTCRay,
                 m: c_uint,
                 byte_stride: usize,
             );
@@ -864,8 +1310,10 @@ mod embree {
     use ffi::*;
 
     // Layouts as compiled C reports them for Debian's embree 3.13.5 (x86-64):
-    // RTCRayHit 80/16 (hit at 48, tfar at 32, geomID at 72), RTCRayHit8 640/32 (hit at
-    // 384), RTCIntersectContext 24/8 (filter at 8, instID at 16), RTCBounds 32/16.
+    // RTCRayHit 80/16 (hit at 48, tfar at 32, geomID at 72), RTCRayHit4 320/16 (hit at 192),
+    // RTCRayHit8 640/32 (hit at 384), RTCRayHit16 1280/64 (hit at 768), RTCRay4/8/16
+    // 192/384/768, RTCIntersectContext 24/8 (filter at 8, instID at 16), RTCBounds 32/16.
+    // Our packets are 64-byte aligned, which keeps these offsets and sizes.
     const _: () = {
         assert!(size_of::<RTCRay>() == 48 && align_of::<RTCRay>() == 16);
         assert!(size_of::<RTCHit>() == 32 && align_of::<RTCHit>() == 16);
@@ -873,8 +1321,12 @@ mod embree {
         assert!(offset_of!(RTCRayHit, hit) == 48);
         assert!(offset_of!(RTCRay, tfar) == 32);
         assert!(offset_of!(RTCHit, primID) == 20 && offset_of!(RTCHit, geomID) == 24);
-        assert!(size_of::<RTCRayHit8>() == 640 && align_of::<RTCRayHit8>() == 32);
-        assert!(offset_of!(RTCRayHit8, hit) == 384);
+        assert!(size_of::<RTCRayHitN<4>>() == 320 && offset_of!(RTCRayHitN<4>, hit) == 192);
+        assert!(size_of::<RTCRayHitN<8>>() == 640 && offset_of!(RTCRayHitN<8>, hit) == 384);
+        assert!(size_of::<RTCRayHitN<16>>() == 1280 && offset_of!(RTCRayHitN<16>, hit) == 768);
+        assert!(size_of::<RTCRayN<4>>() == 192 && size_of::<RTCRayN<8>>() == 384);
+        assert!(size_of::<RTCRayN<16>>() == 768 && align_of::<RTCRayN<16>>() == 64);
+        assert!(offset_of!(RTCRayN<8>, tfar) == 256 && offset_of!(RTCHitN<8>, geomID) == 192);
         assert!(size_of::<RTCIntersectContext>() == 24);
         assert!(offset_of!(RTCIntersectContext, filter) == 8);
         assert!(offset_of!(RTCIntersectContext, instID) == 16);
@@ -883,6 +1335,12 @@ mod embree {
 
     /// Tracer name of the one-ray-at-a-time Embree rows.
     pub const ONE_RAY: &str = "embree rtcIntersect1";
+    /// Tracer name of the Embree rows of 8-ray packets.
+    pub const PACKET8: &str = "embree rtcIntersect8";
+    /// Tracer name of the one-ray-at-a-time Embree shadow rows.
+    pub const OCCLUDED1: &str = "embree rtcOccluded1";
+    /// Tracer name of the Embree shadow rows of 8-ray packets.
+    pub const OCCLUDED8: &str = "embree rtcOccluded8";
 
     /// Net bytes the device's memory monitor has seen allocated.
     static DEVICE_BYTES: AtomicIsize = AtomicIsize::new(0);
@@ -1039,76 +1497,162 @@ mod embree {
         })
     }
 
-    /// Embree packets of 8 rays (4 x 2 pixels), coherent context.
-    fn tile_8(scene: &Scene) -> TileFn<'_> {
+    /// A context for coherent rays (packets and streams of neighbours).
+    fn coherent() -> RTCIntersectContext {
+        let mut ctx = rtcInitIntersectContext();
+        ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+        ctx
+    }
+
+    /// Embree packets of `N` rays (`rtcIntersect4/8/16`), coherent context: `N`
+    /// consecutive rays of the tile in the renderer's order ([`Frame::packet_order`]: a
+    /// packet of 4 is half of one of the renderer's 4x2 packets, one of 16 two of them).
+    fn tile_n<const N: usize>(scene: &Scene, intersect: IntersectN<N>) -> TileFn<'_> {
         Box::new(move |frame: &Frame, tile: usize, slots: &mut [f32]| {
             let o = frame.origin(tile);
+            let (order, n) = frame.packet_order(tile);
+            let mut ctx = coherent();
+            for group in order[..n].chunks(N) {
+                let mut valid = ValidN([0; N]);
+                let mut p = RTCRayHitN::<N>::zeroed();
+                for (k, &s) in group.iter().enumerate() {
+                    let (x, y) =
+                        frame.pixel(o, s as usize).expect("packet_order keeps pixels inside the image");
+                    let r = frame.camera.ray(x, y);
+                    valid.0[k] = -1;
+                    p.ray.org_x[k] = r.origin.x;
+                    p.ray.org_y[k] = r.origin.y;
+                    p.ray.org_z[k] = r.origin.z;
+                    p.ray.dir_x[k] = r.dir.x;
+                    p.ray.dir_y[k] = r.dir.y;
+                    p.ray.dir_z[k] = r.dir.z;
+                    p.ray.tfar[k] = f32::INFINITY;
+                    p.ray.mask[k] = u32::MAX;
+                }
+                // SAFETY: 64-byte aligned mask and packet of the layout the headers give
+                // (checked above), committed scene.
+                unsafe { intersect(&valid, scene.0, &mut ctx, &mut p) };
+                for (k, &s) in group.iter().enumerate() {
+                    slots[s as usize] =
+                        if p.hit.geomID[k] != RTC_INVALID_GEOMETRY_ID { p.ray.tfar[k] } else { MISS };
+                }
+            }
+            RayStats { rays: n as u64, ..RayStats::default() }
+        })
+    }
+
+    /// Embree ray stream: one tile's rays in the renderer's order in one `rtcIntersect1M`
+    /// call, coherent context.
+    fn tile_1m(scene: &Scene) -> TileFn<'_> {
+        Box::new(move |frame: &Frame, tile: usize, slots: &mut [f32]| {
+            let o = frame.origin(tile);
+            let (order, n) = frame.packet_order(tile);
+            let mut ctx = coherent();
+            let mut rays = [RTCRayHit::default(); TILE_RAYS];
+            for (rh, &s) in rays.iter_mut().zip(&order[..n]) {
+                let (x, y) = frame.pixel(o, s as usize).expect("packet_order keeps pixels inside the image");
+                *rh = ray_hit(frame, x, y);
+            }
+            // SAFETY: `n` contiguous initialised rays with their natural stride.
+            unsafe { rtcIntersect1M(scene.0, &mut ctx, rays.as_mut_ptr(), n as u32, size_of::<RTCRayHit>()) };
+            for (rh, &s) in rays[..n].iter().zip(&order[..n]) {
+                slots[s as usize] = result(rh);
+            }
+            RayStats { rays: n as u64, ..RayStats::default() }
+        })
+    }
+
+    /// Shadow ray `j` of `sh` as an Embree ray: `t` in [0, distance to the light].
+    #[inline]
+    fn shadow_ray(sh: &Shadows, j: usize) -> RTCRay {
+        let r = &sh.rays[j];
+        RTCRay {
+            org_x: r.origin.x,
+            org_y: r.origin.y,
+            org_z: r.origin.z,
+            tnear: 0.0,
+            dir_x: r.dir.x,
+            dir_y: r.dir.y,
+            dir_z: r.dir.z,
+            time: 0.0,
+            tfar: sh.reach[j],
+            mask: u32::MAX,
+            id: 0,
+            flags: 0,
+        }
+    }
+
+    /// The output of an Embree occlusion query: it sets `tfar` to -inf where occluded.
+    #[inline]
+    fn occlusion(tfar: f32) -> f32 {
+        if tfar == f32::NEG_INFINITY { OCCLUDED } else { MISS }
+    }
+
+    /// Embree shadow rays one at a time (`rtcOccluded1`), incoherent context.
+    fn shadow_1<'a>(scene: &'a Scene, sh: &'a Shadows) -> TileFn<'a> {
+        Box::new(move |_frame: &Frame, tile: usize, slots: &mut [f32]| {
+            let r = sh.of_tile(tile);
             let mut ctx = rtcInitIntersectContext();
-            ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-            let mut stats = RayStats::default();
-            for py in 0..TILE / 2 {
-                for px in 0..TILE / 4 {
-                    let mut valid = Valid8([0; 8]);
-                    let mut p = RTCRayHit8::default();
-                    let mut slot_of = [usize::MAX; 8];
-                    for k in 0..8u32 {
-                        let s = ((py * 2 + k / 4) * TILE + px * 4 + k % 4) as usize;
-                        let Some((x, y)) = frame.pixel(o, s) else {
-                            continue;
-                        };
-                        let k = k as usize;
-                        let r = frame.camera.ray(x, y);
-                        slot_of[k] = s;
-                        valid.0[k] = -1;
-                        p.ray.org_x[k] = r.origin.x;
-                        p.ray.org_y[k] = r.origin.y;
-                        p.ray.org_z[k] = r.origin.z;
-                        p.ray.dir_x[k] = r.dir.x;
-                        p.ray.dir_y[k] = r.dir.y;
-                        p.ray.dir_z[k] = r.dir.z;
-                        p.ray.tfar[k] = f32::INFINITY;
-                        p.ray.mask[k] = u32::MAX;
-                        p.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
-                        p.hit.instID[0][k] = RTC_INVALID_GEOMETRY_ID;
-                    }
-                    if valid.0.iter().all(|&v| v == 0) {
-                        continue;
-                    }
-                    // SAFETY: 32-byte aligned mask and packet, committed scene.
-                    unsafe { rtcIntersect8(&valid, scene.0, &mut ctx, &mut p) };
-                    for (k, &s) in slot_of.iter().enumerate() {
-                        if s != usize::MAX {
-                            stats.rays += 1;
-                            slots[s] =
-                                if p.hit.geomID[k] != RTC_INVALID_GEOMETRY_ID { p.ray.tfar[k] } else { MISS };
-                        }
-                    }
+            let stats = RayStats { rays: r.len() as u64, ..RayStats::default() };
+            for j in r {
+                let mut ray = shadow_ray(sh, j);
+                // SAFETY: committed scene, initialised context and ray.
+                unsafe { rtcOccluded1(scene.0, &mut ctx, &mut ray) };
+                slots[sh.slot[j] as usize] = occlusion(ray.tfar);
+            }
+            stats
+        })
+    }
+
+    /// Embree shadow rays in packets of `N` consecutive rays of the tile's
+    /// (`rtcOccluded4/8/16`), coherent context.
+    fn shadow_n<'a, const N: usize>(scene: &'a Scene, sh: &'a Shadows, occluded: OccludedN<N>) -> TileFn<'a> {
+        Box::new(move |_frame: &Frame, tile: usize, slots: &mut [f32]| {
+            let r = sh.of_tile(tile);
+            let stats = RayStats { rays: r.len() as u64, ..RayStats::default() };
+            let mut ctx = coherent();
+            for start in r.clone().step_by(N) {
+                let group = start..(start + N).min(r.end);
+                let mut valid = ValidN([0; N]);
+                let mut p = RTCRayN::<N>::zeroed();
+                for (k, j) in group.clone().enumerate() {
+                    let (o, d) = (sh.rays[j].origin, sh.rays[j].dir);
+                    valid.0[k] = -1;
+                    p.org_x[k] = o.x;
+                    p.org_y[k] = o.y;
+                    p.org_z[k] = o.z;
+                    p.dir_x[k] = d.x;
+                    p.dir_y[k] = d.y;
+                    p.dir_z[k] = d.z;
+                    p.tfar[k] = sh.reach[j];
+                    p.mask[k] = u32::MAX;
+                }
+                // SAFETY: 64-byte aligned mask and packet of the layout the headers give
+                // (checked above), committed scene.
+                unsafe { occluded(&valid, scene.0, &mut ctx, &mut p) };
+                for (k, j) in group.enumerate() {
+                    slots[sh.slot[j] as usize] = occlusion(p.tfar[k]);
                 }
             }
             stats
         })
     }
 
-    /// Embree ray stream: one tile's rays in one `rtcIntersect1M` call, coherent context.
-    fn tile_1m(scene: &Scene) -> TileFn<'_> {
-        Box::new(move |frame: &Frame, tile: usize, slots: &mut [f32]| {
-            let o = frame.origin(tile);
-            let mut ctx = rtcInitIntersectContext();
-            ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-            let mut rays = [RTCRayHit::default(); TILE_RAYS];
-            let mut slot_of = [0usize; TILE_RAYS];
-            let mut m = 0;
-            for s in 0..TILE_RAYS {
-                if let Some((x, y)) = frame.pixel(o, s) {
-                    rays[m] = ray_hit(frame, x, y);
-                    slot_of[m] = s;
-                    m += 1;
-                }
+    /// Embree shadow-ray stream: one tile's shadow rays in one `rtcOccluded1M` call,
+    /// coherent context.
+    fn shadow_1m<'a>(scene: &'a Scene, sh: &'a Shadows) -> TileFn<'a> {
+        Box::new(move |_frame: &Frame, tile: usize, slots: &mut [f32]| {
+            let r = sh.of_tile(tile);
+            let m = r.len();
+            let mut ctx = coherent();
+            let mut rays = [RTCRay::default(); TILE_RAYS];
+            for (ray, j) in rays.iter_mut().zip(r.clone()) {
+                *ray = shadow_ray(sh, j);
             }
             // SAFETY: `m` contiguous initialised rays with their natural stride.
-            unsafe { rtcIntersect1M(scene.0, &mut ctx, rays.as_mut_ptr(), m as u32, size_of::<RTCRayHit>()) };
-            for (rh, &s) in rays[..m].iter().zip(&slot_of[..m]) {
-                slots[s] = result(rh);
+            unsafe { rtcOccluded1M(scene.0, &mut ctx, rays.as_mut_ptr(), m as u32, size_of::<RTCRay>()) };
+            for (ray, j) in rays[..m].iter().zip(r) {
+                slots[sh.slot[j] as usize] = occlusion(ray.tfar);
             }
             RayStats { rays: m as u64, ..RayStats::default() }
         })
@@ -1121,6 +1665,10 @@ mod embree {
         robust: Scene,
         build_ms: f64,
         bytes: String,
+        /// Whether the device traces packets of 4 / 16 rays natively (else they are not
+        /// raced: emulated packets say nothing about Embree's packet kernels).
+        native4: bool,
+        native16: bool,
         _device: Device,
     }
 
@@ -1129,8 +1677,11 @@ mod embree {
             let device = Device::new(c"verbose=0");
             // SAFETY: a plain function and no user data.
             unsafe { rtcSetDeviceMemoryMonitorFunction(device.0, Some(monitor), std::ptr::null_mut()) };
+            let native4 = device.property(RTC_DEVICE_PROPERTY_NATIVE_RAY4_SUPPORTED) != 0;
+            let native16 = device.property(RTC_DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED) != 0;
             println!(
-                "embree {} (tasking system {}, native ray8 {}, ray streams {}, backface culling {})",
+                "embree {} (tasking system {}, native ray4 {} ray8 {} ray16 {}, ray streams {}, backface \
+                 culling {})",
                 device.property(RTC_DEVICE_PROPERTY_VERSION),
                 match device.property(RTC_DEVICE_PROPERTY_TASKING_SYSTEM) {
                     0 => "internal",
@@ -1138,7 +1689,9 @@ mod embree {
                     2 => "PPL",
                     _ => "?",
                 },
+                u8::from(native4),
                 device.property(RTC_DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED),
+                u8::from(native16),
                 device.property(RTC_DEVICE_PROPERTY_RAY_STREAM_SUPPORTED),
                 device.property(RTC_DEVICE_PROPERTY_BACKFACE_CULLING_ENABLED),
             );
@@ -1196,24 +1749,53 @@ mod embree {
                 robust,
                 build_ms,
                 bytes: format!("~{}/~{}", total, total - buffers as isize),
+                native4,
+                native16,
                 _device: device,
             }
         }
 
-        /// The Embree tracers to race at `threads`.
+        /// The Embree primary-ray tracers to race.
         pub fn contenders(&self) -> Vec<Contender<'_>> {
-            let mut v = vec![
-                Contender::new(ONE_RAY, tile_1(&self.scene)),
-                Contender::new("embree rtcIntersect8", tile_8(&self.scene)),
-                Contender::new("embree rtcIntersect1M", tile_1m(&self.scene)),
-                // Watertight like ours (RTC_SCENE_FLAG_ROBUST), one ray at a time.
-                Contender::new("embree robust Isect1", tile_1(&self.robust)),
-            ];
-            for c in &mut v[..3] {
+            let mut v = vec![Contender::new(ONE_RAY, tile_1(&self.scene))];
+            if self.native4 {
+                v.push(Contender::new("embree rtcIntersect4", tile_n::<4>(&self.scene, rtcIntersect4)));
+            }
+            v.push(Contender::new(PACKET8, tile_n::<8>(&self.scene, rtcIntersect8)));
+            if self.native16 {
+                v.push(Contender::new("embree rtcIntersect16", tile_n::<16>(&self.scene, rtcIntersect16)));
+            }
+            v.push(Contender::new("embree rtcIntersect1M", tile_1m(&self.scene)));
+            self.label(&mut v);
+            // Watertight like ours (RTC_SCENE_FLAG_ROBUST), one ray at a time.
+            v.push(Contender::new("embree robust Isect1", tile_1(&self.robust)));
+            v
+        }
+
+        /// The Embree shadow-ray tracers to race on `sh`.
+        pub fn shadow_contenders<'a>(&'a self, sh: &'a Shadows) -> Vec<Contender<'a>> {
+            let mut v = vec![Contender::new(OCCLUDED1, shadow_1(&self.scene, sh))];
+            if self.native4 {
+                v.push(Contender::new("embree rtcOccluded4", shadow_n::<4>(&self.scene, sh, rtcOccluded4)));
+            }
+            v.push(Contender::new(OCCLUDED8, shadow_n::<8>(&self.scene, sh, rtcOccluded8)));
+            if self.native16 {
+                v.push(Contender::new(
+                    "embree rtcOccluded16",
+                    shadow_n::<16>(&self.scene, sh, rtcOccluded16),
+                ));
+            }
+            v.push(Contender::new("embree rtcOccluded1M", shadow_1m(&self.scene, sh)));
+            self.label(&mut v);
+            v
+        }
+
+        /// Gives `contenders` (all tracing the default scene) its build time and bytes.
+        fn label(&self, contenders: &mut [Contender<'_>]) {
+            for c in contenders {
                 c.build_ms = Some(self.build_ms);
                 c.bytes = self.bytes.clone();
             }
-            v
         }
 
         /// Agreement of `ours` (a frame's output) with Embree's robust (watertight) mode.
