@@ -399,7 +399,7 @@ fn ours_batch_tile(geom: &MeshGeometry) -> TileFn<'_> {
         let mut t_max = [f32::INFINITY; TILE_RAYS];
         let mut hits: [Option<Hit>; TILE_RAYS] = [None; TILE_RAYS];
         let mut stats = RayStats { rays: n as u64, ..RayStats::default() };
-        geom.closest_hits(&rays[..n], 0.0, &mut t_max[..n], &mut hits[..n], &mut stats);
+        Geometry::closest_hits(geom, &rays[..n], 0.0, &mut t_max[..n], &mut hits[..n], &mut stats);
         for (hit, &s) in hits[..n].iter().zip(&order[..n]) {
             slots[s as usize] = hit.map_or(MISS, |h| h.t);
         }
@@ -465,7 +465,7 @@ fn ours_shadow_tile<'a>(geom: &'a MeshGeometry, sh: &'a Shadows) -> TileFn<'a> {
         let r = sh.of_tile(tile);
         let mut stats = RayStats { rays: r.len() as u64, ..RayStats::default() };
         for j in r {
-            let blocked = geom.any_hit(&sh.rays[j], 0.0, sh.reach[j], &mut stats);
+            let blocked = Geometry::any_hit(geom, &sh.rays[j], 0.0, sh.reach[j], &mut stats);
             slots[sh.slot[j] as usize] = if blocked { OCCLUDED } else { MISS };
         }
         stats
@@ -480,7 +480,14 @@ fn ours_shadow_batch_tile<'a>(geom: &'a MeshGeometry, sh: &'a Shadows) -> TileFn
         let m = r.len();
         let mut blocked = [false; TILE_RAYS];
         let mut stats = RayStats { rays: m as u64, ..RayStats::default() };
-        geom.any_hits(&sh.rays[r.clone()], 0.0, &sh.reach[r.clone()], &mut blocked[..m], &mut stats);
+        Geometry::any_hits(
+            geom,
+            &sh.rays[r.clone()],
+            0.0,
+            &sh.reach[r.clone()],
+            &mut blocked[..m],
+            &mut stats,
+        );
         for (&b, &s) in blocked[..m].iter().zip(&sh.slot[r]) {
             slots[s as usize] = if b { OCCLUDED } else { MISS };
         }
