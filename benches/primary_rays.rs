@@ -35,9 +35,11 @@
 //! besides wall-clock throughput, each frame's process CPU time is measured, and rays per
 //! CPU-second is reported too (it is what a frame would reach per thread on an otherwise
 //! idle machine, and it is far less noisy when other jobs share the cores). `cargo bench
-//! --bench primary_rays [MESH-SUBSTRING] [--no-presets]` runs it; without `--bench` (as
-//! under `cargo test --all-targets`) it runs a quick smoke check on a small image instead,
-//! and with `--quick` the full-size frames on one thread without the preset sweep.
+//! --bench primary_rays [MESH-SUBSTRING] [--no-presets] [--frames=N]` runs it (`--frames`:
+//! timed frames per tracer, 5 by default; more steady the medians on a loaded machine);
+//! without `--bench` (as under `cargo test --all-targets`) it runs a quick smoke check on
+//! a small image instead, and with `--quick` the full-size frames on one thread without
+//! the preset sweep.
 //! `tools/bench-embree` installs Embree and runs it with the feature.
 
 use sdfmesh::metrics::median;
@@ -938,6 +940,15 @@ fn main() {
     };
     if args.iter().any(|a| a == "--no-presets") {
         plan.presets = false;
+    }
+    for a in args.iter().filter_map(|a| a.strip_prefix("--frames=")) {
+        match a.parse::<usize>() {
+            Ok(n) if n > 0 => plan.frames = n,
+            _ => {
+                eprintln!("error: --frames={a}: expected a positive number of frames");
+                std::process::exit(2);
+            }
+        }
     }
     let filters: Vec<&String> = args.iter().filter(|a| !a.starts_with('-')).collect();
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/meshes");
