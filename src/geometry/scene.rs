@@ -37,35 +37,41 @@ pub struct SceneGeometry {
 }
 
 impl SceneGeometry {
-    /// The bounded objects (BVH leaves) that `rays` (each with its `t_max`) reach within
-    /// their intervals, each once, for a packet query; `None` when they are more than
+    /// The bounded objects (BVH leaves) that `rays` (each with its `t_max`; `None` for a
+    /// ray to leave out) reach within their intervals, each once, for a packet query, with
+    /// the rays that reach each (bit `k` for ray `k`); `None` when they are more than
     /// [`PACKET_CANDIDATES`] (the caller then goes ray by ray).
     fn packet_leaves<'r>(
         &self,
-        rays: impl Iterator<Item = (&'r Ray, f32)>,
+        rays: impl Iterator<Item = Option<(&'r Ray, f32)>>,
         t_min: f32,
         stats: &mut RayStats,
-    ) -> Option<([u32; PACKET_CANDIDATES], usize)> {
-        let mut candidates = [0u32; PACKET_CANDIDATES];
-        let mut count = 0usize;
+    ) -> Option<Candidates> {
+        let mut c = Candidates { prims: [0; PACKET_CANDIDATES], rays: [0; PACKET_CANDIDATES], count: 0 };
         let mut overflow = false;
-        for (ray, reach) in rays {
+        for (k, ray) in rays.enumerate() {
+            let Some((ray, reach)) = ray else { continue };
             bvh2::traverse(&self.bvh, ray, t_min, reach, stats, |prim, _, _| {
-                if !candidates[..count].contains(&prim) {
-                    if count == PACKET_CANDIDATES {
+                let at = match c.prims[..c.count].iter().position(|&p| p == prim) {
+                    Some(at) => at,
+                    None if c.count == PACKET_CANDIDATES => {
                         overflow = true;
                         return Err(());
                     }
-                    candidates[count] = prim;
-                    count += 1;
-                }
+                    None => {
+                        c.prims[c.count] = prim;
+                        c.count += 1;
+                        c.count - 1
+                    }
+                };
+                c.rays[at] |= 1 << k;
                 Ok(None)
             });
             if overflow {
                 return None;
             }
         }
-        Some((candidates, count))
+        Some(c)
     }
     /// The closest hit among the bounded objects (front to back through the BVH).
     fn bounded_closest_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> Option<Hit> {
@@ -117,7 +123,9 @@ impl SceneGeometry {
             part = Vec::new();
         }
         let bvh = bvh2::build(&boxes, BvhBuildParams::medium_build());
-        let packets = objects.iter().any(|o| o.prefers_packets());
+        // One bounded object takes its batches as batches (a mesh traces them in packets)
+        // whatever it prefers: no front-to-back order among objects to lose.
+        let packets = objects.iter().any(|o| o.prefers_packets()) || bounded.len() == 1;
         SceneGeometry { objects, bvh, unbounded, bounded, part, packets, label: None }
     }
 
@@ -162,6 +170,15 @@ impl SceneGeometry {
     }
 }
 
+/// The bounded objects a packet's rays reach ([`SceneGeometry::packet_leaves`]).
+struct Candidates {
+    /// BVH primitives, in the order the rays reached them.
+    prims: [u32; PACKET_CANDIDATES],
+    /// Per primitive, the rays that reach it (bit `k` for ray `k` of the packet).
+    rays: [u8; PACKET_CANDIDATES],
+    count: usize,
+}
+
 /// Most bounded objects a packet marches together ([`SceneGeometry`]'s
 /// [`Geometry::closest_hits`]); a packet whose rays reach more goes ray by ray.
 const PACKET_CANDIDATES: usize = 32;
@@ -191,13 +208,14 @@ impl Geometry for SceneGeometry {
     }
 
     /// Batches go ray by ray (front to back through the top-level BVH, as
-    /// [`Geometry::closest_hit`]) unless an object prefers packets. Then the unbounded
-    /// objects take the whole batch, and so does the bounded leaf of a scene with just one
-    /// (without a trip through the BVH, which could only test the leaf's own bounds).
-    /// Several bounded leaves take the batch in packets of [`PACKET`] consecutive rays:
-    /// each leaf (object or instance) that any ray of a packet reaches takes the whole
-    /// packet (up to [`PACKET_CANDIDATES`] leaves, else the packet goes ray by ray through
-    /// the BVH). Nearest hits compose through `t_max`.
+    /// [`Geometry::closest_hit`]) unless an object prefers packets or the scene has one
+    /// bounded object. Then the unbounded objects take the whole batch, and so does the
+    /// bounded leaf of a scene with just one (without a trip through the BVH, which could
+    /// only test the leaf's own bounds). Several bounded leaves take the batch in packets
+    /// of [`PACKET`] consecutive rays: each leaf (object or instance) that any ray of a
+    /// packet reaches takes the rays of the packet that reach it (the others' reach set
+    /// below `t_min`; up to [`PACKET_CANDIDATES`] leaves, else the packet goes ray by ray
+    /// through the BVH). Nearest hits compose through `t_max`.
     fn closest_hits(
         &self,
         rays: &[Ray],
@@ -218,8 +236,8 @@ impl Geometry for SceneGeometry {
             _ => {
                 let packets = rays.chunks(PACKET).zip(t_max.chunks_mut(PACKET)).zip(hits.chunks_mut(PACKET));
                 for ((rays, t_max), hits) in packets {
-                    let reach = rays.iter().zip(t_max.iter().copied());
-                    let Some((candidates, count)) = self.packet_leaves(reach, t_min, stats) else {
+                    let reach = rays.iter().zip(t_max.iter().copied()).map(Some);
+                    let Some(c) = self.packet_leaves(reach, t_min, stats) else {
                         for ((ray, t_max), hit) in rays.iter().zip(t_max.iter_mut()).zip(hits.iter_mut()) {
                             if let Some(h) = self.bounded_closest_hit(ray, t_min, *t_max, stats) {
                                 (*t_max, *hit) = (h.t, Some(h));
@@ -227,8 +245,26 @@ impl Geometry for SceneGeometry {
                         }
                         continue;
                     };
-                    for &prim in &candidates[..count] {
-                        self.leaf(prim).closest_hits(rays, t_min, t_max, hits, stats);
+                    let all = (1u8 << (rays.len() - 1) << 1).wrapping_sub(1);
+                    for (&prim, &reached) in c.prims[..c.count].iter().zip(&c.rays) {
+                        if reached == all {
+                            self.leaf(prim).closest_hits(rays, t_min, t_max, hits, stats);
+                            continue;
+                        }
+                        // Only the rays that reach the object's box, as one by one: the
+                        // others' reach is below `t_min`, so they cannot hit.
+                        let mut reach = [f32::NEG_INFINITY; PACKET];
+                        for (k, r) in reach.iter_mut().enumerate().take(rays.len()) {
+                            if reached & (1 << k) != 0 {
+                                *r = t_max[k];
+                            }
+                        }
+                        self.leaf(prim).closest_hits(rays, t_min, &mut reach[..rays.len()], hits, stats);
+                        for (k, t) in t_max.iter_mut().enumerate() {
+                            if reached & (1 << k) != 0 {
+                                *t = reach[k];
+                            }
+                        }
                     }
                 }
             }
@@ -255,18 +291,27 @@ impl Geometry for SceneGeometry {
                 let packets = rays.chunks(PACKET).zip(t_max.chunks(PACKET)).zip(occluded.chunks_mut(PACKET));
                 for ((rays, t_max), occluded) in packets {
                     let live = rays.iter().zip(t_max.iter().copied()).zip(occluded.iter());
-                    let live = live.filter(|(_, o)| !**o).map(|(r, _)| r);
-                    let Some((candidates, count)) = self.packet_leaves(live, t_min, stats) else {
+                    let live = live.map(|(r, o)| (!*o).then_some(r));
+                    let Some(c) = self.packet_leaves(live, t_min, stats) else {
                         for ((ray, &t_max), occluded) in rays.iter().zip(t_max).zip(occluded.iter_mut()) {
                             *occluded = *occluded || self.bounded_any_hit(ray, t_min, t_max, stats);
                         }
                         continue;
                     };
-                    for &prim in &candidates[..count] {
+                    for (&prim, &reached) in c.prims[..c.count].iter().zip(&c.rays) {
                         if occluded.iter().all(|&o| o) {
                             break;
                         }
-                        self.leaf(prim).any_hits(rays, t_min, t_max, occluded, stats);
+                        // Only the rays that reach the object's box, as one by one: the
+                        // others go in as already occluded, and keep their own state.
+                        let mut blocked = [true; PACKET];
+                        for (k, b) in blocked.iter_mut().enumerate().take(rays.len()) {
+                            *b = occluded[k] || reached & (1 << k) == 0;
+                        }
+                        self.leaf(prim).any_hits(rays, t_min, t_max, &mut blocked[..rays.len()], stats);
+                        for (k, o) in occluded.iter_mut().enumerate() {
+                            *o = *o || (reached & (1 << k) != 0 && blocked[k]);
+                        }
                     }
                 }
             }

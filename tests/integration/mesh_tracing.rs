@@ -175,3 +175,127 @@ fn simd_switch_selects_the_backend_and_both_render_the_same_image() {
     assert!(String::from_utf8_lossy(&bad.stderr).contains("SDFMESH_SIMD"));
     assert!(!bad_png.exists());
 }
+
+/// An icosphere and a copy of each of its triangles with the corners rotated (b, c, a):
+/// the same surface twice, so a ray often hits two triangles at exactly the same `t`,
+/// which the walks must resolve the same way whatever order they reach leaves in.
+fn doubled_sphere() -> TriangleMesh {
+    let mut mesh = icosphere(2, Vec3::ZERO, 1.0);
+    let copies: Vec<[u32; 3]> = mesh.triangles.iter().map(|&[a, b, c]| [b, c, a]).collect();
+    mesh.triangles.extend(copies);
+    mesh
+}
+
+/// A packet of eight rays: from `eye` through a 4x2 block of points around `target`
+/// `step` apart (coherent, as a tile's primary rays), or (`scatter`) from eight points
+/// spread over the sphere towards `target` (shadow rays from scattered hits).
+fn packet(eye: Vec3, target: Vec3, step: f32, scatter: bool) -> Vec<Ray> {
+    (0..8)
+        .map(|k| {
+            let (i, j) = ((k % 4) as f32, (k / 4) as f32);
+            if scatter {
+                let p = Vec3::new(i - 1.5, j - 0.5, 0.7 * i - j).normalize() * 1.001;
+                Ray::new(p, (target - p).normalize())
+            } else {
+                let t = target + Vec3::new(i * step, j * step, 0.3 * i * step);
+                Ray::new(eye, (t - eye).normalize())
+            }
+        })
+        .collect()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+
+    /// `closest_hits` and `any_hits` of a mesh (packets through the BVH) give every ray of
+    /// a batch exactly what `closest_hit` and `any_hit` give it alone: coherent packets
+    /// (one frustum test per node), wide ones, scattered origins (one ray at a time),
+    /// batches ending part-way through a packet, rays with a nearer hit already found,
+    /// under a transform, and on a mesh whose triangles tie.
+    #[test]
+    fn packets_equal_one_ray_walks(
+        ex in -30i32..=30, ey in -30i32..=30, ez in 20i32..=40,
+        tx in -12i32..=12, ty in -12i32..=12,
+        step_exp in -9i32..=-1,
+        scatter in any::<bool>(),
+        len in 1usize..=8,
+        lowered in 0usize..8,
+        placed in any::<bool>(),
+        doubled in any::<bool>(),
+    ) {
+        let mesh = if doubled { doubled_sphere() } else { icosphere(2, Vec3::ZERO, 1.0) };
+        let desc = TransformDesc { translate: Vec3::new(1.0, -2.0, 0.5), rotate_deg: Vec3::new(10.0, 50.0, -20.0), scale: Vec3::splat(1.7) };
+        let (tr, centre) = if placed { (Transform::new(&desc), Vec3::new(1.0, -2.0, 0.5)) } else { (Transform::IDENTITY, Vec3::ZERO) };
+        let g = geometry(&mesh, tr);
+        let eye = centre + Vec3::new(ex as f32 * 0.1, ey as f32 * 0.1, -(ez as f32) * 0.2);
+        let target = centre + Vec3::new(tx as f32, ty as f32, 0.0) * 0.15;
+        let mut rays = packet(eye, target, 2f32.powi(step_exp), scatter);
+        if scatter && placed {
+            for r in &mut rays {
+                *r = Ray::new(tr.to_world.transform_point3(r.origin), (target - tr.to_world.transform_point3(r.origin)).normalize());
+            }
+        }
+        rays.truncate(len);
+        let mut stats = RayStats::default();
+        let reach: Vec<f32> = (0..len).map(|i| if i == lowered { 1.5 } else { 100.0 }).collect();
+        let want: Vec<_> = rays.iter().zip(&reach).map(|(r, &m)| g.closest_hit(r, 1e-4, m, &mut stats)).collect();
+        let mut t_max = reach.clone();
+        let mut hits = vec![None; len];
+        g.closest_hits(&rays, 1e-4, &mut t_max, &mut hits, &mut stats);
+        prop_assert_eq!(&hits, &want);
+        for (h, t) in hits.iter().zip(&t_max) {
+            if let Some(h) = h {
+                prop_assert_eq!(h.t, *t);
+            }
+        }
+        let occluded_alone: Vec<bool> = rays.iter().zip(&reach).map(|(r, &m)| g.any_hit(r, 1e-4, m, &mut stats)).collect();
+        let mut occluded: Vec<bool> = (0..len).map(|i| i == lowered).collect();
+        g.any_hits(&rays, 1e-4, &reach, &mut occluded, &mut stats);
+        for i in 0..len {
+            prop_assert_eq!(occluded[i], occluded_alone[i] || i == lowered, "ray {}", i);
+        }
+    }
+}
+
+/// Triangles hit at exactly the same distance resolve to the same one in both walks: on
+/// the doubled sphere (every triangle twice), each ray of a coherent grid of packets gets
+/// from `closest_hits` the very hit (normal bits included) `closest_hit` reports, and
+/// many of them are ties (two triangles at the nearest `t`, by a brute-force count).
+#[test]
+fn ties_resolve_the_same_in_packets_and_one_ray_walks() {
+    let mesh = doubled_sphere();
+    let g = geometry(&mesh, Transform::IDENTITY);
+    let eye = Vec3::new(0.1, 0.2, -4.0);
+    let mut stats = RayStats::default();
+    let (mut rays, mut hit, mut ties) = (0, 0, 0);
+    for by in 0..32 {
+        for bx in 0..16 {
+            let target = Vec3::new(-0.9 + bx as f32 * 0.12, -0.9 + by as f32 * 0.06, 0.0);
+            let batch = packet(eye, target, 0.01, false);
+            let want: Vec<_> = batch.iter().map(|r| g.closest_hit(r, 0.0, 100.0, &mut stats)).collect();
+            let mut t_max = vec![100.0; 8];
+            let mut hits = vec![None; 8];
+            g.closest_hits(&batch, 0.0, &mut t_max, &mut hits, &mut stats);
+            assert_eq!(hits, want, "packet at {target}");
+            for (r, h) in batch.iter().zip(&hits) {
+                rays += 1;
+                if let Some(h) = h {
+                    hit += 1;
+                    assert_eq!(Some(h.t), brute_force(&mesh, r, 100.0));
+                    let sheared = ShearedRay::new(r.origin, r.dir);
+                    let at_t = mesh
+                        .triangles
+                        .iter()
+                        .filter(|t| {
+                            let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+                            sheared.intersect(a, b, c, 0.0, 100.0).is_some_and(|x| x.t == h.t)
+                        })
+                        .count();
+                    ties += usize::from(at_t > 1);
+                }
+            }
+        }
+    }
+    assert!(hit > rays / 3, "{hit} of {rays} rays hit");
+    assert!(ties > hit / 10, "{ties} ties among {hit} hits");
+}

@@ -11,6 +11,7 @@
 //! ([`instance`]: the copies of a repetition).
 
 pub mod instance;
+pub mod packet;
 pub mod triangle;
 pub mod wide_bvh;
 
@@ -23,9 +24,10 @@ use obvhs::BvhBuildParams;
 use crate::geometry::bvh2;
 use crate::geometry::mesh::instance::compose;
 use crate::geometry::mesh::triangle::{ShearedRay, closest_point_on_triangle};
-use crate::geometry::mesh::wide_bvh::{LeafHit, WideBvh, closest_walk};
+use crate::geometry::mesh::wide_bvh::{LeafHit, WideBvh, any_walk, closest_walk};
 use crate::geometry::{
-    Aabb, Census, Geometry, Hit, MaterialId, Ray, RayStats, Shared, aabb, f32_error, max_abs,
+    Aabb, Census, Geometry, Hit, MaterialId, PACKET, Ray, RayStats, Shared, aabb, any_hits_one_by_one,
+    closest_hits_one_by_one, f32_error, max_abs,
 };
 use crate::mesh::TriangleMesh;
 pub use crate::scene::shape::Shading;
@@ -431,6 +433,127 @@ impl Kernel for ClosestHit<'_> {
     }
 }
 
+/// The rays of one packet of a batch in the shape's frame (lanes past `rays.len()` repeat
+/// the last ray, so every lane holds a valid ray; the walks keep them inactive).
+#[inline(always)]
+fn local_packet(transform: &Transform, rays: &[Ray]) -> ([Ray; PACKET], [Vec3; PACKET], [Vec3; PACKET]) {
+    let mut local = [rays[0]; PACKET];
+    for (l, slot) in local.iter_mut().enumerate() {
+        let ray = &rays[l.min(rays.len() - 1)];
+        *slot = if transform.identity { *ray } else { transform.ray_to_local(ray) };
+    }
+    let mut origins = [Vec3::ZERO; PACKET];
+    let mut dirs = [Vec3::ZERO; PACKET];
+    for l in 0..PACKET {
+        (origins[l], dirs[l]) = (local[l].origin, local[l].dir);
+    }
+    (local, origins, dirs)
+}
+
+/// [`Geometry::closest_hits`] of a [`MeshGeometry`] as a [`Kernel`]: the batch in packets of
+/// [`PACKET`] rays through [`packet::closest_packet`], in one function compiled for the
+/// backend.
+struct ClosestHits<'a> {
+    mesh: &'a MeshGeometry,
+    rays: &'a [Ray],
+    t_min: f32,
+    t_max: &'a mut [f32],
+    hits: &'a mut [Option<Hit>],
+    stats: &'a mut RayStats,
+}
+
+impl Kernel for ClosestHits<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn run<S: Simd>(self, s: S) {
+        let mesh = self.mesh;
+        let bounds = packet::PacketBounds::of(&mesh.shape.bvh);
+        let packets =
+            self.rays.chunks(PACKET).zip(self.t_max.chunks_mut(PACKET)).zip(self.hits.chunks_mut(PACKET));
+        for ((rays, t_max), hits) in packets {
+            let (local, origins, dirs) = local_packet(&mesh.transform, rays);
+            let mut reach = [f32::NEG_INFINITY; PACKET];
+            reach[..rays.len()].copy_from_slice(t_max);
+            let bvh = &mesh.shape.bvh;
+            let (n, t_min) = (rays.len(), self.t_min);
+            let coherent =
+                packet::closest_coherent(s, bvh, bounds, &origins, &dirs, n, t_min, &mut reach, self.stats);
+            // An incoherent packet goes one ray at a time (loops rather than closures, which
+            // the compiler could leave out of line, where they would not be compiled for the
+            // backend's instructions).
+            let found = match coherent {
+                Some(found) => found,
+                None => {
+                    let mut found = [None; PACKET];
+                    for l in 0..n {
+                        found[l] = closest_walk(s, bvh, origins[l], dirs[l], t_min, reach[l], self.stats);
+                    }
+                    found
+                }
+            };
+            for (l, leaf) in found.into_iter().enumerate() {
+                if let Some(leaf) = leaf {
+                    let ray = Ray::new(rays[l].origin, rays[l].dir);
+                    hits[l] = Some(mesh.hit_record(&ray, &local[l], leaf, leaf.t, &mesh.transform));
+                    t_max[l] = leaf.t;
+                }
+            }
+        }
+    }
+}
+
+/// [`Geometry::any_hits`] of a [`MeshGeometry`] as a [`Kernel`]: the batch in packets of
+/// [`PACKET`] rays through [`packet::any_packet`].
+struct AnyHits<'a> {
+    mesh: &'a MeshGeometry,
+    rays: &'a [Ray],
+    t_min: f32,
+    t_max: &'a [f32],
+    occluded: &'a mut [bool],
+    stats: &'a mut RayStats,
+}
+
+impl Kernel for AnyHits<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn run<S: Simd>(self, s: S) {
+        let mesh = self.mesh;
+        let bounds = packet::PacketBounds::of(&mesh.shape.bvh);
+        let packets =
+            self.rays.chunks(PACKET).zip(self.t_max.chunks(PACKET)).zip(self.occluded.chunks_mut(PACKET));
+        for ((rays, t_max), occluded) in packets {
+            let given = occluded.iter().enumerate().fold(0u32, |m, (l, &o)| m | u32::from(o) << l);
+            if given.count_ones() as usize == rays.len() {
+                continue;
+            }
+            let (_, origins, dirs) = local_packet(&mesh.transform, rays);
+            let mut reach = [f32::NEG_INFINITY; PACKET];
+            reach[..rays.len()].copy_from_slice(t_max);
+            let bvh = &mesh.shape.bvh;
+            let (n, t_min) = (rays.len(), self.t_min);
+            let found = match packet::any_coherent(
+                s, bvh, bounds, &origins, &dirs, n, t_min, &reach, given, self.stats,
+            ) {
+                Some(found) => found,
+                None => {
+                    let mut found = given;
+                    for l in 0..n {
+                        if given & (1 << l) == 0
+                            && any_walk(s, bvh, origins[l], dirs[l], t_min, reach[l], self.stats)
+                        {
+                            found |= 1 << l;
+                        }
+                    }
+                    found
+                }
+            };
+            for (l, o) in occluded.iter_mut().enumerate() {
+                *o = found & (1 << l) != 0;
+            }
+        }
+    }
+}
+
 impl Geometry for MeshGeometry {
     fn bounds(&self) -> Option<Aabb> {
         self.world_bounds
@@ -443,6 +566,40 @@ impl Geometry for MeshGeometry {
             return hit;
         }
         dispatch(ClosestHit { mesh: self, ray, t_min, t_max, stats })
+    }
+
+    /// Packets of [`PACKET`] rays through the BVH together ([`packet`]), each ray's hit
+    /// the one [`Geometry::closest_hit`] gives it; one by one for a mesh placed at a far
+    /// scale (whose rays may need rescaling) or with a BVH too deep for a packet's stack.
+    fn closest_hits(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: &mut [f32],
+        hits: &mut [Option<Hit>],
+        stats: &mut RayStats,
+    ) {
+        if self.far_scale || !packet::fits(&self.shape.bvh) {
+            return closest_hits_one_by_one(self, rays, t_min, t_max, hits, stats);
+        }
+        dispatch(ClosestHits { mesh: self, rays, t_min, t_max, hits, stats });
+    }
+
+    /// False, although batches go in packets: a scene of several objects traces rays
+    /// front to back through its top-level BVH faster, one by one (measured: ten
+    /// tessellated objects 12.7 ms a frame one by one, 19.6 ms in packets), and a scene of
+    /// one bounded object hands its batches to it whatever this says
+    /// ([`crate::geometry::scene::SceneGeometry`]).
+    fn prefers_packets(&self) -> bool {
+        false
+    }
+
+    /// As [`Self::closest_hits`], for the rays not yet occluded.
+    fn any_hits(&self, rays: &[Ray], t_min: f32, t_max: &[f32], occluded: &mut [bool], stats: &mut RayStats) {
+        if self.far_scale || !packet::fits(&self.shape.bvh) {
+            return any_hits_one_by_one(self, rays, t_min, t_max, occluded, stats);
+        }
+        dispatch(AnyHits { mesh: self, rays, t_min, t_max, occluded, stats });
     }
 
     fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {

@@ -32,7 +32,7 @@ pub const LEAF_MAX: usize = 4;
 /// 5.20 MB (benches/primary_rays.rs).
 pub const LEAF_PACKETS: usize = 2;
 /// Marks a child reference as a leaf: `LEAF | first_packet << LEAF_SHIFT | (triangles - 1)`.
-const LEAF: u32 = 1 << 31;
+pub(crate) const LEAF: u32 = 1 << 31;
 /// Bits of a leaf reference that hold its triangle count less one.
 const LEAF_SHIFT: u32 = 5;
 const _: () = assert!(LEAF_MAX * LEAF_PACKETS <= 1 << LEAF_SHIFT);
@@ -45,7 +45,7 @@ const _: () = assert!(size_of::<WideNode>() == 256);
 /// nodes per hit ray) and traced it equally fast.
 const PACKET_COST: f32 = 1.5;
 /// Child reference of an unused slot (its box is NaN, so it is never entered).
-const NONE: u32 = u32::MAX;
+pub(crate) const NONE: u32 = u32::MAX;
 /// Traversal stack entries kept on the call stack (enough for a BVH 36 levels deep); a
 /// deeper BVH walks with a heap stack.
 const STACK: usize = 255;
@@ -102,7 +102,7 @@ pub struct WideBvh {
 /// The safe reciprocal of the direction, per axis (finite and nonzero, with the
 /// direction's sign), so that no slab distance is NaN for a nonempty box.
 #[inline(always)]
-fn safe_inverse(dir: Vec3) -> [f32; 3] {
+pub(crate) fn safe_inverse(dir: Vec3) -> [f32; 3] {
     [obvhs::ray::safe_inverse(dir.x), obvhs::ray::safe_inverse(dir.y), obvhs::ray::safe_inverse(dir.z)]
 }
 
@@ -363,14 +363,14 @@ impl WideBvh {
     /// walk (measured: 1.3% more primary rays per second on the bunny; indexing by
     /// `r >> 8` compiled to a shift, a mask and a shift back on the chain, 3% slower).
     #[inline(always)]
-    fn node(&self, r: u32) -> &WideNode {
+    pub(crate) fn node(&self, r: u32) -> &WideNode {
         at_byte_offset(&self.nodes, r)
     }
 
     /// The packets of the leaf whose first packet and triangle count are `range` (from
     /// [`leaf_range`]).
     #[inline(always)]
-    fn leaf_packets(&self, (first, count): (usize, usize)) -> &[Packet] {
+    pub(crate) fn leaf_packets(&self, (first, count): (usize, usize)) -> &[Packet] {
         &self.packets[first..first + count.div_ceil(LEAF_MAX)]
     }
 
@@ -423,7 +423,7 @@ type Entry = u64;
 /// The bits of `x` mapped so that unsigned integer order is the order of the floats
 /// (negative floats have their bits flipped, others their sign bit set).
 #[inline(always)]
-fn order_key(x: f32) -> u32 {
+pub(crate) fn order_key(x: f32) -> u32 {
     let b = x.to_bits();
     b ^ ((((b as i32) >> 31) as u32) | 0x8000_0000)
 }
@@ -431,7 +431,7 @@ fn order_key(x: f32) -> u32 {
 /// The first packet of the leaf reference `cur` and its number of triangles (its packets
 /// are the next `count.div_ceil(LEAF_MAX)`).
 #[inline(always)]
-fn leaf_range(cur: u32) -> (usize, usize) {
+pub(crate) fn leaf_range(cur: u32) -> (usize, usize) {
     (((cur & !LEAF) >> LEAF_SHIFT) as usize, ((cur & ((1 << LEAF_SHIFT) - 1)) + 1) as usize)
 }
 
@@ -450,6 +450,17 @@ fn next_lane(mask: &mut u32) -> usize {
     l
 }
 
+/// Whether a hit at `t` on the triangle at `at` (packet, lane) replaces the closest so
+/// far, `best` at `t_max` (or none, within `t_max`): when it is nearer, or as near and
+/// later in leaf order (or the first). The rule does not depend on the order in which a
+/// walk reaches leaves, so the one-ray walk and the packet walk
+/// ([`super::packet`]), which reach them in different orders, report the same triangle
+/// where several are hit at exactly the same distance (a ray through a shared edge).
+#[inline(always)]
+pub(crate) fn tie_wins(t: f32, t_max: f32, at: (usize, usize), best: Option<(usize, usize)>) -> bool {
+    t < t_max || (t == t_max && best.is_none_or(|b| at > b))
+}
+
 /// The two entries in order.
 #[inline(always)]
 fn ordered(a: Entry, b: Entry) -> (Entry, Entry) {
@@ -459,7 +470,7 @@ fn ordered(a: Entry, b: Entry) -> (Entry, Entry) {
 /// Stack entries a walk over `bvh` needs at most: each level of the current path holds at
 /// most `WIDTH - 1` pending children, and [`visit_node`] may write two slots past the
 /// entries it keeps.
-fn stack_needed(bvh: &WideBvh) -> usize {
+pub(crate) fn stack_needed(bvh: &WideBvh) -> usize {
     bvh.depth * (WIDTH - 1) + 1 + 2
 }
 
@@ -668,14 +679,15 @@ fn closest_walk_in<S: Simd>(
             tests += count as u64;
             let (t, mut hits) = br.leaf(&sheared, bvh.leaf_packets((first, count)), t_min, t_max);
             if hits != 0 {
-                // The nearest hit lane (the last of equals, as a lane-by-lane scan would
-                // take).
+                // The nearest hit lane; among hits at the same distance, the last in leaf
+                // order, in this leaf or any other ([`tie_wins`]).
                 while hits != 0 {
                     let lane = hits.trailing_zeros() as usize & 7;
                     hits &= hits - 1;
-                    if t[lane] <= t_max {
+                    let at = (first + lane / LEAF_MAX, lane % LEAF_MAX);
+                    if tie_wins(t[lane], t_max, at, best) {
                         t_max = t[lane];
-                        best = Some((first + lane / LEAF_MAX, lane % LEAF_MAX));
+                        best = Some(at);
                     }
                 }
                 t_max_key = order_key(t_max);
