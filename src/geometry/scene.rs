@@ -214,7 +214,7 @@ impl Geometry for SceneGeometry {
     /// only test the leaf's own bounds). Several bounded leaves take the batch in packets
     /// of [`PACKET`] consecutive rays: each leaf (object or instance) that any ray of a
     /// packet reaches takes the rays of the packet that reach it (the others' reach set
-    /// below `t_min`; up to [`PACKET_CANDIDATES`] leaves, else the packet goes ray by ray
+    /// below `t_min`; up to 32 leaves, else the packet goes ray by ray
     /// through the BVH). Nearest hits compose through `t_max`.
     fn closest_hits(
         &self,

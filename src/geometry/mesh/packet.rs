@@ -5,7 +5,7 @@
 //! shadow rays.
 //!
 //! A coherent packet (directions of one sign per axis, origins close together: a
-//! [`Frustum`]) tests each node's eight child boxes once for all of its rays, with interval
+//! frustum) tests each node's eight child boxes once for all of its rays, with interval
 //! arithmetic over the rays' origins and reciprocal directions, widened by a bound on the
 //! rounding of both this test and the one-ray test, so that it enters every box some ray
 //! enters alone. Children are visited nearest first by the frustum's entry distance and
