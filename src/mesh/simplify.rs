@@ -64,7 +64,8 @@ impl FromStr for DecimateTarget {
     type Err = String;
 
     /// A number in `(0, 1]` is a ratio, `N%` a percentage in `(0, 100]`, an integer of at
-    /// least 2 a triangle count; anything else is refused with a one-line message.
+    /// least 2 (or `Ntris`, as [`fmt::Display`] writes it) a triangle count; anything else
+    /// is refused with a one-line message.
     fn from_str(s: &str) -> Result<Self, String> {
         let t = s.trim();
         let bad =
@@ -72,6 +73,12 @@ impl FromStr for DecimateTarget {
         if let Some(p) = t.strip_suffix('%') {
             let p: f64 = p.trim().parse().map_err(|_| bad())?;
             return if p > 0.0 && p <= 100.0 { Ok(DecimateTarget::Ratio(p / 100.0)) } else { Err(bad()) };
+        }
+        if let Some(n) = t.strip_suffix("tris") {
+            return match n.trim().parse::<usize>() {
+                Ok(n) if n >= 2 => Ok(DecimateTarget::Triangles(n)),
+                _ => Err(bad()),
+            };
         }
         if let Ok(n) = t.parse::<usize>() {
             return match n {
@@ -106,6 +113,12 @@ pub struct Decimated {
     /// Whether the welded mesh was open, so its border vertices were locked.
     pub border_locked: bool,
 }
+
+/// Memory a decimation may take, as a multiple of the input's [`TriangleMesh::bytes_used`]:
+/// the position copy, the welded copy, meshopt's quadrics, adjacency and collapse tables
+/// (about 150 bytes a vertex and 100 a triangle against the input's 12 and 12) and the
+/// output, rounded up.
+pub const SCRATCH_FACTOR: u64 = 16;
 
 /// No limit on the simplifier's error: the triangle target alone decides where it stops.
 pub const NO_ERROR_LIMIT: f32 = f32::MAX;
@@ -270,7 +283,10 @@ mod tests {
         assert_eq!("25%".parse::<DecimateTarget>(), Ok(DecimateTarget::Ratio(0.25)));
         assert_eq!("1".parse::<DecimateTarget>(), Ok(DecimateTarget::Ratio(1.0)));
         assert_eq!("5000".parse::<DecimateTarget>(), Ok(DecimateTarget::Triangles(5000)));
-        for bad in ["0", "0.0", "-0.5", "1.5", "150%", "0%", "NaN", "inf", "", "half", "2.5e3"] {
+        for t in [DecimateTarget::Ratio(0.02), DecimateTarget::Ratio(0.5), DecimateTarget::Triangles(7)] {
+            assert_eq!(t.to_string().parse::<DecimateTarget>(), Ok(t), "{t} round trip");
+        }
+        for bad in ["0", "0.0", "-0.5", "1.5", "150%", "0%", "NaN", "inf", "", "half", "2.5e3", "1tris"] {
             let e = bad.parse::<DecimateTarget>().unwrap_err();
             assert!(e.contains(&format!("'{bad}'")) && !e.contains('\n'), "{bad}: {e}");
         }
