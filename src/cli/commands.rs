@@ -193,10 +193,10 @@ pub fn convert_command(
             let took = start.elapsed() - load;
             save_mesh(&d.mesh, output)?;
             Ok(format!(
-                "{}: {} triangles, {} vertices loaded in {:.1} ms
-                 decimated to {target} ({} triangles asked): {} triangles, {} vertices, closed: {},                  {} vertices welded by position, border {}, meshopt error {:.3e} ({:.3e} of the extent),                  in {:.1} ms
-wrote {}
-",
+                "{}: {} triangles, {} vertices loaded in {:.1} ms\n\
+                 decimated to {target} ({} triangles asked): {} triangles, {} vertices, closed: {}, \
+                 {} vertices welded by position, border {}, {} folded triangles removed, meshopt error \
+                 {:.3e} ({:.3e} of the extent), in {:.1} ms\nwrote {}\n",
                 input.display(),
                 mesh.triangles.len(),
                 mesh.positions.len(),
@@ -207,6 +207,7 @@ wrote {}
                 d.mesh.is_closed(),
                 d.vertices_welded,
                 if d.border_locked { "locked" } else { "free (closed mesh)" },
+                d.folds_removed,
                 d.error,
                 d.relative_error,
                 took.as_secs_f64() * 1e3,
