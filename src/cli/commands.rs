@@ -180,6 +180,40 @@ pub fn convert_command(
                 output.display()
             ))
         }
+        ConvertTarget::Decimate { target } => {
+            let (mesh, _) = load_mesh(input)?;
+            // The simplifier's scratch and the output are smaller than the mesh times this.
+            budget.check(
+                &format!("decimating {}", input.display()),
+                mesh.bytes_used() as u64 * crate::mesh::simplify::SCRATCH_FACTOR,
+            )?;
+            let load = start.elapsed();
+            let d = crate::mesh::simplify::decimate(&mesh, target, crate::mesh::simplify::NO_ERROR_LIMIT)
+                .map_err(|m| Error::input(input, None, format!("cannot decimate: {m}")))?;
+            let took = start.elapsed() - load;
+            save_mesh(&d.mesh, output)?;
+            Ok(format!(
+                "{}: {} triangles, {} vertices loaded in {:.1} ms\n\
+                 decimated to {target} ({} triangles asked): {} triangles, {} vertices, closed: {}, \
+                 {} vertices welded by position, border {}, {} folded triangles removed, meshopt error \
+                 {:.3e} ({:.3e} of the extent), in {:.1} ms\nwrote {}\n",
+                input.display(),
+                mesh.triangles.len(),
+                mesh.positions.len(),
+                load.as_secs_f64() * 1e3,
+                d.target,
+                d.mesh.triangles.len(),
+                d.mesh.positions.len(),
+                d.mesh.is_closed(),
+                d.vertices_welded,
+                if d.border_locked { "locked" } else { "free (closed mesh)" },
+                d.folds_removed,
+                d.error,
+                d.relative_error,
+                took.as_secs_f64() * 1e3,
+                output.display()
+            ))
+        }
         ConvertTarget::Mesh { res, method } => {
             budget.check(&format!("extracting at {res} cells"), extraction_bytes(res, method))?;
             let scene = load_scene(input)?;

@@ -34,6 +34,7 @@ use crate::geometry::Geometry;
 use crate::geometry::grid::SdfGrid;
 use crate::geometry::march::MarchParams;
 use crate::geometry::scene::SceneGeometry;
+use crate::mesh::simplify::{DecimateTarget, NO_ERROR_LIMIT, SCRATCH_FACTOR, decimate};
 use crate::mesh::{TriangleMesh, save_mesh};
 use crate::metrics::{self, Probe};
 use crate::plan::budget::{MemoryBudget, reextract_bytes};
@@ -298,6 +299,8 @@ enum RunGeometry {
     /// The input mesh sampled or voxelized into a grid at a resolution and re-extracted
     /// with marching cubes.
     Reextract { fill: GridFill, resolution: u32 },
+    /// The input mesh decimated by meshoptimizer's quadric-error simplifier.
+    Decimate { target: DecimateTarget },
 }
 
 /// The `class` column of an input: for a scene file under a `data/scenes` folder, its
@@ -355,11 +358,20 @@ struct Run {
 
 impl Run {
     /// The march knob asked for: `(tolerance_px, relaxation)`; `None` for re-extracted
-    /// meshes, which march nothing.
+    /// and decimated meshes, which march nothing.
     fn knob(&self) -> Option<(f64, f64)> {
         match self.build {
             RunGeometry::Scene(r) => Some((r.march().tolerance_px, r.march().relaxation)),
-            RunGeometry::Reextract { .. } => None,
+            RunGeometry::Reextract { .. } | RunGeometry::Decimate { .. } => None,
+        }
+    }
+
+    /// The `method` column: `method`, with the target for a decimated mesh
+    /// ([`DecimateTarget::method_name`], `decimated-25%`).
+    fn method(&self) -> String {
+        match self.build {
+            RunGeometry::Decimate { target } => target.method_name(),
+            _ => self.method.to_string(),
         }
     }
 }
@@ -422,6 +434,16 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
                 method: "from-voxelize",
                 resolution: res,
                 build: RunGeometry::Reextract { fill: GridFill::Voxelize, resolution: r },
+            });
+        }
+        // The original decimated (meshoptimizer), as a polygon pipeline would ship it:
+        // mesh-side candidates without a resolution, like the original.
+        for &target in &opts.decimate {
+            runs.push(Run {
+                repr: ReprKind::Mesh,
+                method: "decimated",
+                resolution: None,
+                build: RunGeometry::Decimate { target },
             });
         }
     } else {
@@ -508,6 +530,15 @@ fn build(scene: &Scene, b: RunGeometry, budget: &MemoryBudget) -> Result<Built> 
             "this run",
             reextract_bytes(mesh_input(scene).map_or(0, |m| m.triangles.len()), fill, resolution),
         )?,
+        RunGeometry::Decimate { .. } => budget.check(
+            "this run",
+            mesh_input(scene).map_or(0, |m| m.bytes_used() as u64 * SCRATCH_FACTOR).saturating_add(
+                crate::plan::budget::scene_bytes(
+                    scene,
+                    Representation::Analytic { march: MarchParams::default() },
+                ),
+            ),
+        )?,
     }
     let start = Instant::now();
     match b {
@@ -527,6 +558,24 @@ fn build(scene: &Scene, b: RunGeometry, budget: &MemoryBudget) -> Result<Built> 
             let (geometry, plans) =
                 build_scene_with_plans(&s, Representation::Analytic { march: MarchParams::default() });
             Ok(Built { geometry, plans, build_ms: ms(start), mesh: Some(mesh), grid: Some(grid) })
+        }
+        // Decimation time is build time, as extraction is.
+        RunGeometry::Decimate { target } => {
+            let original = mesh_input(scene).ok_or_else(|| Error::Usage("not a mesh input".into()))?;
+            let decimated = decimate(original, target, NO_ERROR_LIMIT)
+                .map_err(|e| Error::Usage(format!("decimating to {target}: {e}")))?;
+            let mut s = scene.clone();
+            let ObjectKind::Mesh { source, shading, .. } = &scene.objects[0].kind else {
+                unreachable!("mesh_input is a mesh object")
+            };
+            s.objects[0].kind = ObjectKind::Mesh {
+                mesh: Arc::new(decimated.mesh),
+                source: source.clone(),
+                shading: *shading,
+            };
+            let (geometry, plans) =
+                build_scene_with_plans(&s, Representation::Analytic { march: MarchParams::default() });
+            Ok(Built { geometry, plans, build_ms: ms(start), mesh: None, grid: None })
         }
     }
 }
@@ -853,7 +902,7 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
                 input: name.clone(),
                 replicate: opts.replicate,
                 repr: run.repr.to_string(),
-                method: run.method.to_string(),
+                method: run.method(),
                 resolution: run.resolution,
                 knob: run.knob().map(|(t, r)| (t.to_bits(), r.to_bits())),
             };
@@ -862,7 +911,7 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
             bar.set_message(format!(
                 "{name} {}/{} {}",
                 run.repr,
-                run.method,
+                run.method(),
                 run.resolution.map_or(String::new(), |r| r.to_string())
             ));
             if done_already && !is_reference {
@@ -877,20 +926,20 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
                 // the next input runs.
                 Ok(Err(e)) | Err(e) if is_reference => {
                     bar.suspend(|| {
-                        eprintln!("error: {name}: {}/{} (the reference): {e}", run.repr, run.method)
+                        eprintln!("error: {name}: {}/{} (the reference): {e}", run.repr, run.method())
                     });
                     failed.push(input_path(name));
                     bar.inc((runs.len() - at) as u64);
                     continue 'inputs;
                 }
                 Err(e) => {
-                    bar.suspend(|| eprintln!("error: {name}: {}/{}: {e}", run.repr, run.method));
+                    bar.suspend(|| eprintln!("error: {name}: {}/{}: {e}", run.repr, run.method()));
                     failed.push(input_path(name));
                     bar.inc(1);
                     continue;
                 }
                 Ok(Err(e)) => {
-                    bar.suspend(|| eprintln!("{name}: {}/{} skipped: {e}", run.repr, run.method));
+                    bar.suspend(|| eprintln!("{name}: {}/{} skipped: {e}", run.repr, run.method()));
                     bar.inc(1);
                     continue;
                 }
@@ -964,7 +1013,7 @@ fn measure(
     let points = metrics::subsample(&probe.points, opts.surface_samples);
     let origin = scene.camera.position.as_dvec3();
     let angle = metrics::pixel_angle(&scene.camera);
-    let label = format!("{}/{}", run.repr, run.method);
+    let label = format!("{}/{}", run.repr, run.method());
     let is_reference = reference.is_none();
     let r = match reference {
         Some(r) => r,
@@ -1008,7 +1057,7 @@ fn measure(
         replicate: opts.replicate,
         repr: traced_repr(&built.plans, run.repr).name(),
         asked_repr: run.repr.to_string(),
-        method: run.method.to_string(),
+        method: run.method(),
         resolution: run.resolution,
         tolerance_px: knob.map(|k| k.0),
         relaxation: knob.map(|k| k.1),
@@ -1067,8 +1116,8 @@ fn save_artifacts(
 ) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let mut base = match run.resolution {
-        Some(r) => format!("{}-{}-{r}", run.repr, run.method),
-        None => format!("{}-{}", run.repr, run.method),
+        Some(r) => format!("{}-{}-{r}", run.repr, run.method()),
+        None => format!("{}-{}", run.repr, run.method()),
     };
     // The SDF sweep's runs differ only in their knob.
     if let (ReprKind::Sdf, Some((t, r))) = (run.repr, run.knob()) {
@@ -1101,6 +1150,8 @@ fn save_artifacts(
 fn representation(run: &Run) -> Representation {
     match run.build {
         RunGeometry::Scene(r) => r,
-        RunGeometry::Reextract { .. } => Representation::Analytic { march: MarchParams::default() },
+        RunGeometry::Reextract { .. } | RunGeometry::Decimate { .. } => {
+            Representation::Analytic { march: MarchParams::default() }
+        }
     }
 }

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use crate::convert::extract::ExtractMethod;
+use crate::mesh::simplify::DecimateTarget;
 use crate::plan::budget::MemoryBudget;
 use crate::plan::{GridFill, MeshPlane, ReprKind};
 
@@ -56,10 +57,11 @@ pub enum Command {
         march: MarchArgs,
     },
     /// Convert a mesh file (OBJ, glTF, GLB, PLY, STL) to a signed distance grid (.sdf, .npy,
-    /// .vti), or a scene file's SDF objects to a triangle mesh (.obj, .ply, .glb).
+    /// .vti), a scene file's SDF objects to a triangle mesh (.obj, .ply, .glb), or a mesh
+    /// file to a decimated mesh (--to mesh --decimate R).
     #[command(allow_negative_numbers = true)]
     Convert {
-        /// Mesh file (--to grid) or scene file (--to mesh).
+        /// Mesh file (--to grid, --decimate) or scene file (--to mesh).
         input: PathBuf,
         /// Output file; its extension picks the format.
         #[arg(short, long)]
@@ -84,6 +86,11 @@ pub enum Command {
         /// grid (--to grid; 0 = no report). The written file is always dense.
         #[arg(long, default_value_t = 0)]
         band: u32,
+        /// Decimate a mesh file instead (--to mesh) with meshoptimizer's quadric-error
+        /// simplifier, keeping R of its triangles: a ratio in (0, 1], a percentage (25%) or
+        /// a triangle count (an integer of at least 2).
+        #[arg(long, value_name = "R")]
+        decimate: Option<DecimateTarget>,
     },
     /// Render scenes and meshes in every representation across a resolution sweep (sphere
     /// tracing across --sdf-tolerance-px and --sdf-relax) and write one CSV row per run
@@ -114,6 +121,14 @@ pub enum Command {
         /// Half-width of narrow-band grids, in cells.
         #[arg(long, default_value_t = 3)]
         band: u32,
+        /// Decimations of each mesh input, comma-separated, each a run `mesh/decimated-T`
+        /// (meshoptimizer's quadric-error simplifier): ratios in (0, 1], percentages (25%)
+        /// or triangle counts (integers of at least 2).
+        #[arg(long, value_delimiter = ',', value_name = "R", default_values_t = super::DEFAULT_DECIMATIONS)]
+        decimate: Vec<DecimateTarget>,
+        /// No decimated runs of mesh inputs.
+        #[arg(long, conflicts_with = "decimate")]
+        no_decimate: bool,
         /// Also write the summary as JSON.
         #[arg(long)]
         summary_json: Option<PathBuf>,

@@ -23,6 +23,7 @@ use crate::convert::extract::ExtractMethod;
 use crate::error::{Error, Result};
 use crate::geometry::grid::DEFAULT_MAX_GRID_BYTES;
 use crate::geometry::march::MarchParams;
+use crate::mesh::simplify::DecimateTarget;
 use crate::plan::budget::MemoryBudget;
 use crate::plan::{
     GRID_MARGIN_CELLS, GridFill, GridStorage, MAX_EXTRACT_RESOLUTION, MeshMethod, ReprKind, Representation,
@@ -133,6 +134,16 @@ pub const MAX_EPSILON: f64 = 1.0;
 
 /// The default resolution sweep of `compare --res`.
 pub const DEFAULT_RESOLUTIONS: [u32; 6] = [8, 16, 32, 64, 128, 256];
+
+/// The default decimations of compare's mesh inputs (`--decimate`): these fractions of the
+/// original's triangles.
+pub const DEFAULT_DECIMATIONS: [DecimateTarget; 5] = [
+    DecimateTarget::Ratio(0.5),
+    DecimateTarget::Ratio(0.25),
+    DecimateTarget::Ratio(0.1),
+    DecimateTarget::Ratio(0.05),
+    DecimateTarget::Ratio(0.02),
+];
 
 /// The default hit tolerances of compare's SDF sweep (`--sdf-tolerance-px`), pixels.
 pub const DEFAULT_SDF_TOLERANCES_PX: [f64; 3] = [0.25, 1.0, 2.0];
@@ -292,6 +303,12 @@ pub enum ConvertTarget {
         /// The extraction method.
         method: ExtractMethod,
     },
+    /// A mesh file decimated with meshoptimizer's quadric-error simplifier
+    /// ([`crate::mesh::simplify::decimate`]).
+    Decimate {
+        /// How many triangles to keep.
+        target: DecimateTarget,
+    },
 }
 
 /// Options of `toolkit compare`.
@@ -326,6 +343,9 @@ pub struct CompareOptions {
     pub order_seed: Option<u64>,
     /// Half-width of narrow-band grids, cells, in [`BAND_CELLS`].
     pub band_cells: u32,
+    /// Decimations of mesh inputs: one `mesh/decimated-T` run each (deduplicated; empty
+    /// with `--no-decimate`).
+    pub decimate: Vec<DecimateTarget>,
     /// Also write the summary as JSON here.
     pub summary_json: Option<PathBuf>,
     /// Write renders, meshes and grids of the runs here.
@@ -415,15 +435,21 @@ impl Task {
                     budget,
                 })
             }
-            Command::Convert { input, output, to, res, margin, method, fill, band } => {
-                let target = match to {
-                    Target::Grid => ConvertTarget::Grid {
+            Command::Convert { input, output, to, res, margin, method, fill, band, decimate } => {
+                let target = match (to, decimate) {
+                    (Target::Grid, Some(r)) => {
+                        return Err(Error::Usage(format!(
+                            "--decimate {r} needs --to mesh (a mesh file to decimate)"
+                        )));
+                    }
+                    (Target::Mesh, Some(target)) => ConvertTarget::Decimate { target },
+                    (Target::Grid, None) => ConvertTarget::Grid {
                         res: SAMPLING_RESOLUTION.check("--res", res)?,
                         margin,
                         fill,
                         band,
                     },
-                    Target::Mesh => {
+                    (Target::Mesh, None) => {
                         ConvertTarget::Mesh { res: EXTRACTION_RESOLUTION.check("--res", res)?, method }
                     }
                 };
@@ -459,6 +485,8 @@ impl Task {
                 resume,
                 overwrite,
                 band,
+                decimate,
+                no_decimate,
                 summary_json,
                 artifacts,
                 surface_samples,
@@ -508,6 +536,17 @@ impl Task {
                     replicate,
                     order_seed,
                     band_cells: band,
+                    decimate: if no_decimate {
+                        Vec::new()
+                    } else {
+                        let mut unique: Vec<DecimateTarget> = Vec::new();
+                        for t in decimate {
+                            if !unique.contains(&t) {
+                                unique.push(t);
+                            }
+                        }
+                        unique
+                    },
                     summary_json,
                     artifacts,
                     surface_samples,

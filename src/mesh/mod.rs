@@ -14,6 +14,8 @@
 //! mesh); triangles with a repeated vertex or zero area are dropped and counted;
 //! vertices no triangle uses are removed.
 //!
+//! [`simplify::decimate`] decimates a mesh with meshoptimizer's quadric-error simplifier.
+//!
 //! [`save_mesh`] writes OBJ, binary little-endian PLY and GLB, through a temporary file in
 //! the destination's directory that is renamed over the destination only once complete.
 
@@ -29,6 +31,7 @@ mod build;
 mod gltf_io;
 mod obj;
 mod ply;
+pub mod simplify;
 mod stl;
 mod text;
 pub(crate) mod write;

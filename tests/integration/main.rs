@@ -13,6 +13,7 @@ mod cli;
 mod compare;
 mod compare_metrics;
 mod contract;
+mod decimate;
 mod extract;
 mod extract_dc;
 mod extract_mc;

@@ -48,6 +48,16 @@ SCALING_COLUMNS = (
 SDF_REPRS = ("sdf", "grid")
 MESH_REPRS = ("mesh",)
 
+# Mesh inputs' decimations (meshoptimizer) are `mesh` runs named `decimated-<target>`
+# (`decimated-25%`, `decimated-5000tris`), without a resolution: mesh-side candidates like
+# the original, outside the resolution sweep.
+DECIMATED_PREFIX = "decimated-"
+
+
+def is_decimated(row: dict) -> bool:
+    """Whether a row is a decimation of a mesh input (`method` `decimated-<target>`)."""
+    return (row.get("method") or "").startswith(DECIMATED_PREFIX)
+
 
 def read_csv(path: str | Path | None) -> list[dict[str, str]]:
     """All rows of a CSV as dicts (empty list when the path is None or missing)."""

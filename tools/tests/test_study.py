@@ -325,3 +325,39 @@ def test_a_fallback_row_is_never_the_mesh_sides_best(tmp_path):
     assert [r["asked_repr"] for r in read] == ["analytic", "sdf", "mesh"]
     assert [data.side(r) for r in read] == [None, "sdf", "mesh"]
     assert data.is_reference(read[0]) and not data.is_reference(read[1])
+
+
+def test_decimated_meshes_are_mesh_side_candidates_outside_the_resolution_sweep():
+    """A scan's decimations (`mesh/decimated-<target>`, no resolution) count for the mesh
+    side like the original: the fastest and the smallest mesh runs meeting a level may be
+    one; the per-resolution crossover table and the resolution sweep leave them out."""
+    ref = "mesh/original"
+    rows = [
+        row("bunny", "scan", 0, "mesh", "original", frame=3.0, total_bytes=5_000_000, quality=0.5, reference=ref),
+        row("bunny", "scan", 0, "mesh", "decimated-25%", frame=2.0, total_bytes=1_300_000, quality=1.0,
+            reference=ref),
+        row("bunny", "scan", 0, "mesh", "decimated-2%", frame=1.5, total_bytes=100_000, quality=2.0,
+            reference=ref),
+        row("bunny", "scan", 0, "grid", "sample", res=16, frame=4.0, total_bytes=50_000, quality=2.0, reference=ref),
+        row("bunny", "scan", 0, "grid", "sample", res=32, frame=5.0, total_bytes=300_000, quality=1.0,
+            reference=ref),
+        row("bunny", "scan", 0, "mesh", "from-sample", res=16, frame=2.5, total_bytes=200_000, quality=2.0,
+            reference=ref),
+        row("bunny", "scan", 0, "mesh", "from-sample", res=32, frame=2.6, total_bytes=800_000, quality=1.0,
+            reference=ref),
+    ]
+    for r in rows:
+        r["schema_version"] = 3
+        data.normalize(r)
+    assert [data.is_decimated(r) for r in rows] == [False, True, True, False, False, False, False]
+    assert all(data.side(r) == "mesh" for r in rows if data.is_decimated(r))
+    assert data.label(rows[1]) == "mesh/decimated-25%"
+    best = analysis.best_per_run(rows, 1.0, "frame_ms_median")[("bunny", "0")]
+    assert best["mesh"]["method"] == "decimated-25%"
+    smallest = analysis.best_per_run(rows, 2.0, "total_bytes")[("bunny", "0")]
+    assert smallest["mesh"]["method"] == "decimated-2%" and smallest["sdf"]["resolution"] == 16
+    table, _ = report.crossover(rows)
+    assert [t[0] for t in table] == [16, 32]
+    assert not any("decimated" in t[1] or "decimated" in t[3] for t in table)
+    sweep = [f for f in analysis.families(rows) if f["class"] == "scan"]
+    assert sweep and sweep[0]["xs"] == [16, 32]
