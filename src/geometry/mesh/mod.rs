@@ -451,7 +451,8 @@ fn local_packet(transform: &Transform, rays: &[Ray]) -> ([Ray; PACKET], [Vec3; P
 }
 
 /// [`Geometry::closest_hits`] of a [`MeshGeometry`] as a [`Kernel`]: the batch in packets of
-/// [`PACKET`] rays through [`packet::closest_packet`], in one function compiled for the
+/// [`PACKET`] rays through [`packet::closest_coherent`] (incoherent packets one ray at a
+/// time), in one function compiled for the
 /// backend.
 struct ClosestHits<'a> {
     mesh: &'a MeshGeometry,
@@ -503,7 +504,7 @@ impl Kernel for ClosestHits<'_> {
 }
 
 /// [`Geometry::any_hits`] of a [`MeshGeometry`] as a [`Kernel`]: the batch in packets of
-/// [`PACKET`] rays through [`packet::any_packet`].
+/// [`PACKET`] rays through [`packet::any_coherent`] (incoherent packets one ray at a time).
 struct AnyHits<'a> {
     mesh: &'a MeshGeometry,
     rays: &'a [Ray],
