@@ -25,7 +25,8 @@ use glam::Vec3;
 use crate::geometry::RayStats;
 use crate::geometry::mesh::triangle::ShearedRay;
 use crate::geometry::mesh::wide_bvh::{
-    LEAF, LEAF_MAX, LeafHit, Packet, WIDTH, WideBvh, WideNode, leaf_range, order_key, stack_needed, tie_wins,
+    LEAF, LEAF_MAX, LeafHit, WIDTH, WideBvh, WideNode, leaf_range, leaf_test, order_key, stack_needed,
+    tie_wins,
 };
 use crate::simd::{Lane, Lane8, Mask8, Simd};
 
@@ -131,27 +132,6 @@ fn safe_inverse8<S: Simd>(s: S, x: S::F32x8) -> S::F32x8 {
     let small = x.vabs().mask_le(s.splat8(f32::EPSILON));
     let clamped = s.splat8(1.0 / f32::EPSILON).or(x.and(s.splat8(-0.0)));
     small.select(clamped, s.splat8(1.0) / x)
-}
-
-/// The triangles of one leaf tested with one ray: per lane the hit's `t` and the mask of
-/// lanes hit within `[t_min, t_max]`, as the one-ray walk's leaf test.
-#[inline(always)]
-fn leaf_test<S: Simd>(
-    s: S,
-    sheared: &ShearedRay,
-    packets: &[Packet],
-    t_min: f32,
-    t_max: f32,
-) -> ([f32; 8], u32) {
-    match packets {
-        [a, b] => sheared.intersect8(s, &a.tri, &b.tri, t_min, t_max),
-        _ => {
-            let (t4, mask) = sheared.intersect4(s, &packets[0].tri, t_min, t_max);
-            let mut t = [0.0; 8];
-            t[..LEAF_MAX].copy_from_slice(&t4);
-            (t, mask)
-        }
-    }
 }
 
 /// The bounds of a coherent packet's rays, for one conservative eight-box test per node
@@ -460,13 +440,7 @@ pub fn closest_coherent<S: Simd>(
     // packet tests each node once for all of its rays, counted once per ray of the packet.
     stats.bvh_nodes += nodes * n as u64;
     stats.prim_tests += tests;
-    Some(std::array::from_fn(|r| {
-        best[r].map(|(packet, lane)| {
-            let p = &bvh.packets[packet];
-            let corner = |v: usize| Vec3::new(p.tri[v][0][lane], p.tri[v][1][lane], p.tri[v][2][lane]);
-            LeafHit { triangle: p.ids[lane], t: t_max[r], corners: [corner(0), corner(1), corner(2)] }
-        })
-    }))
+    Some(std::array::from_fn(|r| best[r].map(|at| bvh.leaf_hit(at, t_max[r]))))
 }
 
 /// For the rays `origins[l] + t * dirs[l]`, `l < n`, not yet occluded (bit `l` clear in

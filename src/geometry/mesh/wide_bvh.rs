@@ -196,15 +196,30 @@ impl<S: Simd> BoxRay<S> {
     /// hit within `[t_min, t_max]`. Two packets go through one eight-lane test.
     #[inline(always)]
     fn leaf(&self, sheared: &ShearedRay, packets: &[Packet], t_min: f32, t_max: f32) -> ([f32; 8], u32) {
-        const { assert!(LEAF_PACKETS == 2) };
-        match packets {
-            [a, b] => sheared.intersect8(self.s, &a.tri, &b.tri, t_min, t_max),
-            _ => {
-                let (t4, mask) = sheared.intersect4(self.s, &packets[0].tri, t_min, t_max);
-                let mut t = [0.0; 8];
-                t[..LEAF_MAX].copy_from_slice(&t4);
-                (t, mask)
-            }
+        leaf_test(self.s, sheared, packets, t_min, t_max)
+    }
+}
+
+/// Tests the triangles of one leaf (its one or two packets) with `sheared` on backend `s`:
+/// per lane (`LEAF_MAX * k + l` for lane `l` of packet `k`) the hit's `t`, and the mask of
+/// lanes hit within `[t_min, t_max]`. Two packets go through one eight-lane test. The leaf
+/// test of the one-ray walks and of the packet walks ([`super::packet`]).
+#[inline(always)]
+pub(crate) fn leaf_test<S: Simd>(
+    s: S,
+    sheared: &ShearedRay,
+    packets: &[Packet],
+    t_min: f32,
+    t_max: f32,
+) -> ([f32; 8], u32) {
+    const { assert!(LEAF_PACKETS == 2) };
+    match packets {
+        [a, b] => sheared.intersect8(s, &a.tri, &b.tri, t_min, t_max),
+        _ => {
+            let (t4, mask) = sheared.intersect4(s, &packets[0].tri, t_min, t_max);
+            let mut t = [0.0; 8];
+            t[..LEAF_MAX].copy_from_slice(&t4);
+            (t, mask)
         }
     }
 }
@@ -372,6 +387,15 @@ impl WideBvh {
     #[inline(always)]
     pub(crate) fn leaf_packets(&self, (first, count): (usize, usize)) -> &[Packet] {
         &self.packets[first..first + count.div_ceil(LEAF_MAX)]
+    }
+
+    /// The hit at `t` on the triangle in lane `lane` of leaf packet `packet`: its index and
+    /// its corners, read from the packet.
+    #[inline(always)]
+    pub(crate) fn leaf_hit(&self, (packet, lane): (usize, usize), t: f32) -> LeafHit {
+        let p = &self.packets[packet];
+        let corner = |v: usize| Vec3::new(p.tri[v][0][lane], p.tri[v][1][lane], p.tri[v][2][lane]);
+        LeafHit { triangle: p.ids[lane], t, corners: [corner(0), corner(1), corner(2)] }
     }
 
     /// The smallest `dist(triangle)` over the triangles for a query at `p`, visiting
@@ -706,11 +730,7 @@ fn closest_walk_in<S: Simd>(
     }
     stats.bvh_nodes += nodes;
     stats.prim_tests += tests;
-    best.map(|(packet, lane)| {
-        let p = &bvh.packets[packet];
-        let corner = |v: usize| Vec3::new(p.tri[v][0][lane], p.tri[v][1][lane], p.tri[v][2][lane]);
-        LeafHit { triangle: p.ids[lane], t: t_max, corners: [corner(0), corner(1), corner(2)] }
-    })
+    best.map(|at| bvh.leaf_hit(at, t_max))
 }
 
 /// [`WideBvh::any_hit`] on backend `s` with a stack from [`with_stack`].
