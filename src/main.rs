@@ -5,12 +5,19 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::Parser;
+use sdfmesh::base::heap::{INSTRUMENTED_SYSTEM, PeakMemAlloc};
 use sdfmesh::cli::commands;
 use sdfmesh::config::Task;
 use sdfmesh::config::args::{Cli, Command};
 use sdfmesh::plan::budget::MemoryBudget;
 
+/// The system allocator with a count of live and peak heap bytes, which `compare` reads per
+/// run ([`sdfmesh::base::heap`]).
+#[global_allocator]
+static ALLOCATOR: &PeakMemAlloc<std::alloc::System> = &INSTRUMENTED_SYSTEM;
+
 fn main() -> ExitCode {
+    sdfmesh::base::heap::install(&INSTRUMENTED_SYSTEM);
     let mut cli = match Cli::try_parse() {
         Ok(cli) => cli,
         // Help and version go to stdout as clap writes them; a usage error is one line, as

@@ -27,6 +27,7 @@ use glam::DVec3;
 use image::RgbImage;
 use serde::{Deserialize, Serialize};
 
+use crate::base::heap;
 use crate::config::{CompareOptions, sweep_mesh_resolution};
 use crate::convert::extract::ExtractMethod;
 use crate::error::{Error, Result, catch_panic};
@@ -47,10 +48,10 @@ use crate::scene::shape::{ObjectKind, Shading};
 use crate::scene::{Scene, load_input};
 
 /// Version of the CSV schema; bumped whenever a column changes meaning or order.
-pub const SCHEMA_VERSION: u32 = 3;
+pub const SCHEMA_VERSION: u32 = 4;
 
 /// The CSV columns, in order (units in the names; see the README).
-pub const COLUMNS: [&str; 44] = [
+pub const COLUMNS: [&str; 45] = [
     "input",
     "class",
     "replicate",
@@ -86,6 +87,7 @@ pub const COLUMNS: [&str; 44] = [
     "chamfer_rel",
     "hausdorff_rel",
     "peak_rss_bytes",
+    "peak_heap_bytes",
     "threads",
     "width",
     "height",
@@ -182,6 +184,11 @@ pub struct Row {
     /// Peak resident memory of the process during this run (build and frames), bytes;
     /// empty where the OS does not say.
     pub peak_rss_bytes: Option<u64>,
+    /// The most heap this run held at once (build and frames) on top of what was live
+    /// before it, bytes, counted by the toolkit's allocator ([`crate::base::heap`]); reset
+    /// per run, unlike the kernel's peak RSS, which only resets where the kernel allows.
+    /// Empty where no counting allocator is installed (the library used from elsewhere).
+    pub peak_heap_bytes: Option<u64>,
     /// Rendering threads.
     pub threads: usize,
     /// Image width, pixels.
@@ -676,9 +683,14 @@ pub fn commit_id() -> String {
     }
 }
 
-/// Reads the rows of an existing CSV, checking its header against [`COLUMNS`]. A CSV of
-/// schema version 2 (without `asked_repr`) is read too, each row's `asked_repr` taken to
-/// be its `repr` (version 2 wrote the asked representation there).
+/// Columns that later schema versions added, and how a row of an older CSV fills them:
+/// `asked_repr` (version 3) from `repr` (version 2 wrote the asked representation there),
+/// `peak_heap_bytes` (version 4) empty.
+const ADDED_COLUMNS: [(&str, Option<&str>); 2] = [("asked_repr", Some("repr")), ("peak_heap_bytes", None)];
+
+/// Reads the rows of an existing CSV, checking its header against [`COLUMNS`]. A CSV of an
+/// older schema version (2 or 3: [`COLUMNS`] without some of [`ADDED_COLUMNS`]) is read too,
+/// the missing columns filled as that list says.
 ///
 /// # Errors
 /// [`Error::Input`] naming the file and line when the header or a row does not match.
@@ -686,20 +698,32 @@ pub fn read_rows(path: &Path) -> Result<Vec<Row>> {
     read_rows_of(path, true)
 }
 
-/// [`read_rows`]; a version 2 CSV is refused unless `old_too`.
+/// [`read_rows`]; an older schema is refused unless `old_too`.
 fn read_rows_of(path: &Path, old_too: bool) -> Result<Vec<Row>> {
     let mut reader = csv::Reader::from_path(path).map_err(|e| Error::io(path, e))?;
     let header = reader.headers().map_err(|e| Error::input(path, None, e))?.clone();
-    let asked_at = COLUMNS.iter().position(|c| *c == "asked_repr").expect("a column");
-    let version_2 = || COLUMNS.iter().enumerate().filter(|&(i, _)| i != asked_at).map(|(_, c)| *c);
-    let old = old_too && header.iter().eq(version_2());
-    if !old && header.iter().ne(COLUMNS.iter().copied()) {
+    let added = |c: &str| ADDED_COLUMNS.iter().any(|(a, _)| *a == c);
+    // The header must be COLUMNS in order, less (in an older CSV) some added columns.
+    let present: Vec<&str> = header.iter().collect();
+    let matches = {
+        let mut h = present.iter().peekable();
+        COLUMNS.iter().all(|c| {
+            if h.peek() == Some(&c) {
+                h.next();
+                true
+            } else {
+                old_too && added(c)
+            }
+        }) && h.next().is_none()
+    };
+    if !matches {
         return Err(Error::input(
             path,
             Some(crate::error::Location { line: 1, column: 1 }),
             format!("the header is not compare schema version {SCHEMA_VERSION}; write a new file"),
         ));
     }
+    let old = present.len() < COLUMNS.len();
     let columns = csv::StringRecord::from(COLUMNS.to_vec());
     let mut rows = Vec::new();
     for (i, r) in reader.records().enumerate() {
@@ -707,10 +731,15 @@ fn read_rows_of(path: &Path, old_too: bool) -> Result<Vec<Row>> {
         let at = Some(crate::error::Location { line: i + 2, column: 1 });
         let mut record = r.map_err(|e| Error::input(path, at, e))?;
         if old {
-            let mut fields: Vec<&str> = record.iter().collect();
-            if fields.len() >= asked_at {
-                fields.insert(asked_at, fields[asked_at - 1]);
-            }
+            let cell = |name: &str| present.iter().position(|h| *h == name).and_then(|k| record.get(k));
+            let fields: Option<Vec<&str>> = COLUMNS
+                .iter()
+                .map(|c| match ADDED_COLUMNS.iter().find(|(a, _)| a == c) {
+                    Some((_, from)) if !present.contains(c) => Some(from.map_or(Some(""), cell)?),
+                    _ => cell(c),
+                })
+                .collect();
+            let fields = fields.ok_or_else(|| Error::input(path, at, "the row has too few fields"))?;
             record = csv::StringRecord::from(fields);
         }
         rows.push(record.deserialize::<Row>(Some(&columns)).map_err(|e| Error::input(path, at, e))?);
@@ -1006,9 +1035,11 @@ fn measure(
 ) -> Result<Row> {
     let (name, class) = input;
     reset_peak_rss();
+    heap::reset();
     let built = build(scene, run.build, &opts.budget)?;
     let (timing, frame) = time_frames(scene, &built.geometry, opts.frames);
     let peak = peak_rss_bytes();
+    let peak_heap = heap::peak();
     let probe = metrics::probe(&scene.camera, &built.geometry, scene.settings.max_distance);
     let points = metrics::subsample(&probe.points, opts.surface_samples);
     let origin = scene.camera.position.as_dvec3();
@@ -1087,6 +1118,7 @@ fn measure(
         chamfer_rel: chamfer,
         hausdorff_rel: hausdorff,
         peak_rss_bytes: peak,
+        peak_heap_bytes: peak_heap,
         threads: rayon::current_num_threads(),
         width: scene.camera.width,
         height: scene.camera.height,

@@ -103,7 +103,7 @@ fn csv_header_is_the_documented_schema() {
     assert_eq!(rows.len(), 1 + 6 + 5 * 2);
     assert!(rows.iter().all(|r| r.reference == "analytic/closed-form"));
     let class = dir.file_name().unwrap().to_string_lossy().into_owned();
-    assert!(rows.iter().all(|r| r.class == class && r.replicate == 0 && r.schema_version == 3));
+    assert!(rows.iter().all(|r| r.class == class && r.replicate == 0 && r.schema_version == 4));
     let reference = &rows[0];
     assert_eq!((reference.image_rmse, reference.chamfer_rel), (0.0, Some(0.0)));
     assert_eq!((reference.flip_mean, reference.silhouette_mismatch_pct), (0.0, 0.0));
@@ -163,6 +163,7 @@ fn without_timings(mut r: Row) -> Row {
     r.frame_ms_max = 0.0;
     r.mrays_per_s = 0.0;
     r.peak_rss_bytes = None;
+    r.peak_heap_bytes = None;
     r.timestamp.clear();
     r.frame_ms_samples.clear();
     r
@@ -439,4 +440,45 @@ fn default_inputs_are_searched_recursively_with_their_class() {
     let out = run("b.csv");
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("`top`"));
+}
+
+/// The toolkit counts heap bytes per run (its allocator, `sdfmesh::base::heap`): every row
+/// has a peak, reset per run, and a run that built a BVH or a grid held at least the bytes it
+/// declares for it while it rendered.
+#[test]
+fn heap_peak_is_measured_per_run_and_covers_the_declared_bytes() {
+    let dir = temp_dir("heap_peak");
+    let scene = dir.join("two.toml");
+    std::fs::write(&scene, SCENE).unwrap();
+    let csv = dir.join("rows.csv");
+    let out = Command::new(env!("CARGO_BIN_EXE_toolkit"))
+        .args(["compare", "--csv"])
+        .arg(&csv)
+        .arg(&scene)
+        .args(["--res", "16,32", "--frames", "1", "--quiet", "--no-decimate"])
+        .args(["--sdf-tolerance-px", "1", "--sdf-relax", "1"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let rows = read_rows(&csv).unwrap();
+    assert!(rows.len() > 3);
+    for r in &rows {
+        let heap = r.peak_heap_bytes.unwrap_or_else(|| panic!("{}: no heap peak", r.method));
+        assert!(heap > 0, "{}/{}", r.repr, r.method);
+        if r.repr == "mesh" || r.repr == "grid" {
+            let declared = r.accel_bytes + r.geometry_bytes;
+            assert!(
+                heap >= declared,
+                "{}/{} at {:?}: heap peak {heap} below the declared {declared} bytes",
+                r.repr,
+                r.method,
+                r.resolution
+            );
+        }
+    }
+    // Reset per run: a run at resolution 16 does not inherit the peak of an earlier run at 32.
+    let peaks: Vec<u64> = rows.iter().filter_map(|r| r.peak_heap_bytes).collect();
+    let smallest = *peaks.iter().min().unwrap();
+    let largest = *peaks.iter().max().unwrap();
+    assert!(smallest < largest, "every run reports the same heap peak {smallest}");
 }

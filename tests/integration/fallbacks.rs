@@ -1,7 +1,8 @@
 //! Honest fallbacks in `toolkit compare` (issue 34, item 3): a run in which an object is
 //! traced in another representation than the one asked records what traced it (`repr`)
 //! beside what was asked (`asked_repr`), its note names the true cause, and the summary
-//! never counts it for the asked side; CSVs of schema 2 (no `asked_repr`) still read.
+//! never counts it for the asked side; CSVs of schema 2 (no `asked_repr`, no
+//! `peak_heap_bytes`) still read.
 
 use std::path::Path;
 
@@ -94,13 +95,19 @@ fn an_empty_extraction_is_recorded_as_sphere_traced_and_never_counts_as_a_mesh()
         "{fastest:?}"
     );
 
-    // The same CSV written as schema 2 (no asked_repr): read with asked_repr = repr.
-    let asked_at = COLUMNS.iter().position(|c| *c == "asked_repr").unwrap();
+    // The same CSV written as schema 2 (no asked_repr, no peak_heap_bytes): read with
+    // asked_repr = repr and no heap peak.
+    let dropped: Vec<usize> = COLUMNS
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| ["asked_repr", "peak_heap_bytes"].contains(c))
+        .map(|(i, _)| i)
+        .collect();
     let text = std::fs::read_to_string(dir.join("out.csv")).unwrap();
     let mut reader = csv::Reader::from_reader(text.as_bytes());
     let mut w = csv::Writer::from_writer(Vec::new());
     let drop_asked = |r: &csv::StringRecord| -> Vec<String> {
-        r.iter().enumerate().filter(|&(i, _)| i != asked_at).map(|(_, f)| f.to_string()).collect()
+        r.iter().enumerate().filter(|(i, _)| !dropped.contains(i)).map(|(_, f)| f.to_string()).collect()
     };
     w.write_record(drop_asked(reader.headers().unwrap())).unwrap();
     for r in reader.records() {
@@ -112,7 +119,10 @@ fn an_empty_extraction_is_recorded_as_sphere_traced_and_never_counts_as_a_mesh()
     assert_eq!(read.len(), rows.len());
     for (a, b) in read.iter().zip(&rows) {
         assert_eq!((&a.repr, &a.asked_repr), (&b.repr, &b.repr));
-        assert_eq!(Row { asked_repr: b.asked_repr.clone(), ..a.clone() }, *b);
+        assert_eq!(a.peak_heap_bytes, None);
+        let filled =
+            Row { asked_repr: b.asked_repr.clone(), peak_heap_bytes: b.peak_heap_bytes, ..a.clone() };
+        assert_eq!(filled, *b);
     }
     // ... but never appended to: its rows would not match its header.
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/scenes/thin/thin_shell.toml");
@@ -120,5 +130,5 @@ fn an_empty_extraction_is_recorded_as_sphere_traced_and_never_counts_as_a_mesh()
         toolkit(&["compare", scene.to_str().unwrap(), "--csv", old.to_str().unwrap(), "--resume", "--quiet"]);
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("v2.csv:1:1") && err.contains("schema version 3"), "{err}");
+    assert!(err.contains("v2.csv:1:1") && err.contains("schema version 4"), "{err}");
 }

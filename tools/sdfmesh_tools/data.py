@@ -1,4 +1,4 @@
-"""Reading the CSVs that `toolkit compare` writes (schema version 3; version 1 and 2 rows read
+"""Reading the CSVs that `toolkit compare` writes (schema version 4; version 1 to 3 rows read
 too, with the columns later versions added left empty, except `asked_repr`, which rows
 without it take from `repr`: before version 3 `repr` was the asked representation).
 
@@ -23,8 +23,8 @@ COMPARE_COLUMNS = (
     "grid_cells_stored geometry_bytes accel_bytes total_bytes build_ms frame_ms_median "
     "frame_ms_min frame_ms_max frames mrays_per_s steps_per_ray nodes_per_ray image_rmse "
     "image_psnr_db image_ssim flip_mean silhouette_mismatch_pct px_err_mean px_err_p95 "
-    "px_err_max quality_px chamfer_rel hausdorff_rel peak_rss_bytes threads width height depth "
-    "commit timestamp frame_ms_samples schema_version note"
+    "px_err_max quality_px chamfer_rel hausdorff_rel peak_rss_bytes peak_heap_bytes threads width "
+    "height depth commit timestamp frame_ms_samples schema_version note"
 ).split()
 
 # Schema version 1, for the synthetic CSVs of older tests.
@@ -73,7 +73,7 @@ def read_csv(path: str | Path | None) -> list[dict[str, str]]:
         normalize(r)
     version = {r.get("schema_version", "") for r in rows} - {"", None}
     if version - {"1", "2", "3"}:
-        print(f"note: {p} has schema_version {sorted(version)}; this reader knows versions 1 to 3")
+        print(f"note: {p} has schema_version {sorted(version)}; this reader knows versions 1 to 4")
     return rows
 
 
