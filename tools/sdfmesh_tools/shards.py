@@ -160,6 +160,53 @@ def machines(shards: list[dict]) -> list[dict]:
     return list(out.values())
 
 
+# Columns that measure time or the process (they differ between any two runs); every other
+# column of a compare or scaling CSV is a deterministic function of the input and settings.
+TIMING_COLUMNS = frozenset({"build_ms", "frame_ms_median", "frame_ms_min", "frame_ms_max", "fps_median",
+                            "mrays_per_s", "frame_ms_samples", "timestamp", "peak_rss_bytes"})
+# The columns that identify a row of the compare and the scaling CSVs.
+KEY_COLUMNS = ("input", "replicate", "repr", "asked_repr", "method", "resolution", "tolerance_px",
+               "relaxation", "primitive", "count")
+
+
+def differences(a_path, b_path, limit: int = 10) -> list[str]:
+    """Where two CSVs of the same runs differ outside TIMING_COLUMNS (rows matched by their key
+    columns, in any order); empty when they agree."""
+    def load(p):
+        with open(p, newline="") as f:
+            r = csv.DictReader(f)
+            return r.fieldnames or [], list(r)
+    ha, ra = load(a_path)
+    hb, rb = load(b_path)
+    if ha != hb:
+        return [f"the headers differ: {a_path}: {ha} vs {b_path}: {hb}"]
+    key_cols = [c for c in KEY_COLUMNS if c in ha]
+
+    def index(rows, path):
+        out = {}
+        for n, r in enumerate(rows, start=2):
+            k = tuple(r[c] for c in key_cols)
+            if k in out:
+                raise ShardError(f"{path}: line {n}: the run {k} appears twice")
+            out[k] = r
+        return out
+    ia, ib = index(ra, a_path), index(rb, b_path)
+    out = [f"only in {a_path}: {k}" for k in ia if k not in ib] + \
+        [f"only in {b_path}: {k}" for k in ib if k not in ia]
+    for k in ia.keys() & ib.keys():
+        for c in ha:
+            if c not in TIMING_COLUMNS and ia[k][c] != ib[k][c]:
+                out.append(f"{k}: {c}: {ia[k][c]!r} vs {ib[k][c]!r}")
+    if not ia and not ib:
+        out.append(f"{a_path} and {b_path} have no rows")
+    return out[:limit] + ([f"... and {len(out) - limit} more"] if len(out) > limit else [])
+
+
+def not_slurm(shards_csv) -> list[str]:
+    """The shards of a shards.csv that did not run as a Slurm job (empty slurm_job)."""
+    return [f"{s['input']} replicate {s['replicate']}" for s in read_shards(shards_csv) if not s.get("slurm_job")]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m sdfmesh_tools.shards", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -170,13 +217,40 @@ def main(argv=None) -> int:
     m.add_argument("--out-summary")
     m.add_argument("--manifests", nargs="+", required=True)
     m.add_argument("--summaries", nargs="*", default=[])
+    same = sub.add_parser("same", help="two CSVs of the same runs agree in every non-timing column")
+    same.add_argument("a")
+    same.add_argument("b")
+    same_text = sub.add_parser("same-text", help="two files are identical (e.g. hard-case tables)")
+    same_text.add_argument("a")
+    same_text.add_argument("b")
+    cs = sub.add_parser("check-slurm", help="every shard of a shards.csv ran as a Slurm job")
+    cs.add_argument("shards")
     a = ap.parse_args(argv)
     try:
-        n = merge(a.manifests, a.out_csv, a.out_shards, a.out_summary, a.summaries)
-    except ShardError as e:
+        if a.cmd == "merge":
+            n = merge(a.manifests, a.out_csv, a.out_shards, a.out_summary, a.summaries)
+            print(f"merged {len(a.manifests)} shards, {n} rows into {a.out_csv}")
+        elif a.cmd == "same":
+            diff = differences(a.a, a.b)
+            if diff:
+                print(f"{a.a} and {a.b} differ in non-timing columns:", *diff, sep="\n  ", file=sys.stderr)
+                return 1
+            print(f"same: {a.a} and {a.b} agree in every non-timing column")
+        elif a.cmd == "same-text":
+            if Path(a.a).read_bytes() != Path(a.b).read_bytes():
+                print(f"{a.a} and {a.b} differ", file=sys.stderr)
+                return 1
+            print(f"same: {a.a} and {a.b} are identical")
+        else:
+            bad = not_slurm(a.shards)
+            n = len(read_shards(a.shards))
+            if bad or not n:
+                print(f"{a.shards}: not Slurm jobs: {', '.join(bad) or 'no shards at all'}", file=sys.stderr)
+                return 1
+            print(f"slurm: all {n} shards of {a.shards} ran as Slurm jobs")
+    except (ShardError, OSError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    print(f"merged {len(a.manifests)} shards, {n} rows into {a.out_csv}")
     return 0
 
 
