@@ -1,6 +1,6 @@
 """REPORT.md from `toolkit compare` results: plots, tables, hypothesis test, the answer.
 
-python -m sdfmesh_tools.report --csv compare.csv [--scaling scaling.csv]
+python -m sdfmesh_tools.report --csv compare.csv [--shards shards.csv] [--scaling scaling.csv]
     [--summary summary.json] [--artifacts DIR] --out reports/<date>/ [--commands "..."]
 
 Everything in the report's results, tables and answer is computed from the CSVs; nothing
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import analysis, data, plots, stats
+from . import analysis, data, plots, shards as shard_info, stats
 from .data import num
 
 THRESHOLDS = (1e-2, 3e-3, 1e-3)
@@ -228,6 +228,46 @@ def answer_table(verdicts) -> str:
     return md_table(["class (inputs)", "compared", "quality", "frame time", "run-to-run", "bytes"], trows)
 
 
+def machines_section(all_rows, shard_rows) -> str:
+    """The machines the shards ran on (workflow/Snakefile: one shard per input and replicate)
+    and, with more than one, the verdict per class and level on each machine's shards alone.
+    Every ratio is taken within one shard (one input in one replicate: one process on one
+    machine), so a machine's verdict never mixes timings of two machines."""
+    if not shard_rows:
+        return "No shard manifests (shards.csv) were given: the machine is the one above.\n"
+    ms = shard_info.machines(shard_rows)
+    L = [md_table(["host", "CPU", "cores", "threads per shard", "shards", "rows", "Slurm jobs"],
+                  [(m["host"], m["cpu"], m["cores"], m["threads"], m["shards"], m["rows"], m["slurm"])
+                   for m in ms])]
+    if len(ms) < 2:
+        L.append(f"\nAll {ms[0]['shards'] if ms else 0} shards ran on one machine, so the verdicts "
+                 "cannot differ between machines.\n")
+        return "".join(L)
+    host = shard_info.host_of(shard_rows)
+    per_host = {}
+    for m in ms:
+        sub = [r for r in all_rows if host.get((r.get("input", ""), data.replicate_of(r) or "0")) == m["host"]]
+        per_host[m["host"]] = {(v["class"], v["level"]): analysis.winner(v["time"])
+                               for v in analysis.class_verdicts(sub)}
+    found = {k for w in per_host.values() for k in w}
+    keys = [(c, lv) for c in analysis.classes(all_rows) for lv in analysis.LEVELS if (c, lv) in found]
+    rows, differ = [], []
+    for cls, level in keys:
+        ws = [per_host[m["host"]].get((cls, level)) for m in ms]
+        seen = {w for w in ws if w is not None}
+        # "noise" (the interval contains 1) does not contradict a side's win
+        split = len(seen - {"noise"}) > 1
+        if split:
+            differ.append(f"{cls} ≤ {level:g} px")
+        rows.append((cls, f"≤ {level:g} px", *(w or "–" for w in ws), "**yes**" if split else "no"))
+    L.append("\nFrame-time winner per class and level on each machine's shards alone "
+             "(`sdf`, `mesh`, `noise`: within noise, –: not compared there):\n\n")
+    L.append(md_table(["class", "quality", *(m["host"] for m in ms), "machines disagree"], rows))
+    L.append("\n" + (f"The verdicts differ between machines at: {', '.join(differ)}.\n" if differ else
+                     "The verdicts do not differ between the machines (where two machines both decide).\n"))
+    return "".join(L)
+
+
 def answer_legend(rows, verdicts) -> str:
     reps = sorted({data.replicate_of(r) for r in rows})
     spreads = [v["time"]["run_spread"] for v in verdicts if v["time"]["run_spread"]]
@@ -374,7 +414,7 @@ def _blank_lines_around_headings(text: str) -> str:
 
 
 def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, commands=None,
-                 invocation=None, hard=None) -> Path:
+                 invocation=None, hard=None, shards=None) -> Path:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     all_rows = data.read_csv(csv_path)
@@ -431,6 +471,8 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
         ("3D views rendered with", _window_name()),
         ("inputs", len(data.inputs(rows))), ("compare rows", len(rows)), ("scaling rows", len(scaling_rows)),
     ]))
+    L.append("\n### Machines of the shards\n\n")
+    L.append(machines_section(all_rows, shard_info.read_shards(shards)))
     L.append("\n### Commands\n")
     cmd = commands or "(not given; pass --commands)"
     L.append("```sh\n" + cmd.strip() + "\n" + (invocation + "\n" if invocation else "") + "```\n")
@@ -581,10 +623,12 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True, help="output folder, e.g. reports/2026-11-22/")
     ap.add_argument("--commands", help="the exact commands that produced the CSVs, quoted into the report")
     ap.add_argument("--hard", help="hard-case table (toolkit hard --table) to include")
+    ap.add_argument("--shards", help="shards.csv of the workflow (host and CPU of every input and replicate)")
     a = ap.parse_args(argv)
     argv = sys.argv[1:] if argv is None else list(argv)
     write_report(a.csv, a.out, a.scaling, a.summary, a.artifacts, a.commands,
-                 invocation="python -m sdfmesh_tools.report " + shlex.join(argv), hard=a.hard)
+                 invocation="python -m sdfmesh_tools.report " + shlex.join(argv), hard=a.hard,
+                 shards=a.shards)
     return 0
 
 
