@@ -279,10 +279,10 @@ fn load_mesh(py: Python<'_>, path: PathBuf) -> PyResult<Mesh> {
 /// The indices of `points` in Morton (Z-curve) order of their positions, so that
 /// consecutive queries are close together.
 fn morton_order(points: &[Vec3]) -> Vec<u32> {
-    let (lo, hi) = points.par_iter().fold(
-        || (Vec3::INFINITY, Vec3::NEG_INFINITY),
-        |(lo, hi), &p| (lo.min(p), hi.max(p)),
-    ).reduce(|| (Vec3::INFINITY, Vec3::NEG_INFINITY), |a, b| (a.0.min(b.0), a.1.max(b.1)));
+    let (lo, hi) = points
+        .par_iter()
+        .fold(|| (Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| (lo.min(p), hi.max(p)))
+        .reduce(|| (Vec3::INFINITY, Vec3::NEG_INFINITY), |a, b| (a.0.min(b.0), a.1.max(b.1)));
     let scale = 1023.0 / (hi - lo).max_element().max(f32::MIN_POSITIVE);
     let spread = |v: u32| -> u64 {
         let mut x = v as u64 & 0x3ff;
@@ -306,10 +306,7 @@ fn morton_order(points: &[Vec3]) -> Vec<u32> {
 
 /// Runs `f` over `points` in Morton order in parallel chunks; `f` gets a chunk's points
 /// (in that order) and writes one `T` per point.
-fn in_order<T: Copy + Default + Send + Sync>(
-    points: &[Vec3],
-    f: impl Fn(&[u32], &mut [T]) + Sync,
-) -> Vec<T> {
+fn in_order<T: Copy + Default + Send + Sync>(points: &[Vec3], f: impl Fn(&[u32], &mut [T]) + Sync) -> Vec<T> {
     let order = morton_order(points);
     let mut sorted = vec![T::default(); points.len()];
     sorted.par_chunks_mut(CHUNK).zip(order.par_chunks(CHUNK)).for_each(|(out, idx)| f(idx, out));
@@ -359,7 +356,11 @@ type ClosestResult<'py> = (Bound<'py, PyArray2<f32>>, Bound<'py, PyArray1<f32>>,
 /// distance (N,) float32, face (N,) int64)`, the face indexing the mesh's faces (the
 /// faces given to `Mesh.from_arrays`).
 #[pyfunction]
-fn closest_points<'py>(py: Python<'py>, mesh: &Mesh, points: &Bound<'py, PyAny>) -> PyResult<ClosestResult<'py>> {
+fn closest_points<'py>(
+    py: Python<'py>,
+    mesh: &Mesh,
+    points: &Bound<'py, PyAny>,
+) -> PyResult<ClosestResult<'py>> {
     let pts = points_arg(points, "points", true)?;
     check_points(pts.len())?;
     let p = mesh.prepared(py);
@@ -487,9 +488,17 @@ impl Grid {
     /// A grid from a float32 array of shape (nx, ny, nz) (copied), the position of sample
     /// (0, 0, 0) and the sample spacing.
     #[new]
-    fn py_new(py: Python<'_>, values: &Bound<'_, PyAny>, origin: [f32; 3], voxel_size: f32) -> PyResult<Grid> {
+    fn py_new(
+        py: Python<'_>,
+        values: &Bound<'_, PyAny>,
+        origin: [f32; 3],
+        voxel_size: f32,
+    ) -> PyResult<Grid> {
         let a = values.cast::<PyArray3<f32>>().map_err(|_| match values.cast::<PyUntypedArray>() {
-            Ok(u) => value_error(format!("values must be a float32 array of shape (nx, ny, nz); got {}", describe(u))),
+            Ok(u) => value_error(format!(
+                "values must be a float32 array of shape (nx, ny, nz); got {}",
+                describe(u)
+            )),
             Err(_) => value_error("values must be a numpy float32 array of shape (nx, ny, nz)"),
         })?;
         let r = a.try_readonly().map_err(|e| value_error(format!("values: {e}")))?;
@@ -562,7 +571,13 @@ fn mesh_to_grid(
         return Err(value_error("band must be at least 1 voxel (or None)"));
     }
     let mut g = py
-        .detach(|| if voxelize { voxelize_mesh(&mesh.mesh, res, margin) } else { sample_mesh(&mesh.mesh, res, margin) })
+        .detach(|| {
+            if voxelize {
+                voxelize_mesh(&mesh.mesh, res, margin)
+            } else {
+                sample_mesh(&mesh.mesh, res, margin)
+            }
+        })
         .map_err(py_err)?;
     if let Some(k) = band {
         let t = k as f32 * g.voxel;
@@ -676,7 +691,12 @@ fn extract_method(method: &str) -> PyResult<ExtractMethod> {
 /// "dc" (dual contouring, sharp edges).
 #[pyfunction]
 #[pyo3(signature = (source, method = "mc", resolution = None))]
-fn extract(py: Python<'_>, source: &Bound<'_, PyAny>, method: &str, resolution: Option<u32>) -> PyResult<Mesh> {
+fn extract(
+    py: Python<'_>,
+    source: &Bound<'_, PyAny>,
+    method: &str,
+    resolution: Option<u32>,
+) -> PyResult<Mesh> {
     let method = extract_method(method)?;
     let mesh = if let Ok(grid) = source.cast::<Grid>() {
         let g = grid.borrow().to_sdf(py)?;
@@ -754,7 +774,14 @@ fn render<'py>(
     args: Option<Vec<String>>,
 ) -> PyResult<Bound<'py, PyArray3<u8>>> {
     let mut a: Vec<String> = vec!["render".into(), scene.to_string_lossy().into_owned()];
-    a.extend(["-o".into(), "unused.png".into(), "--repr".into(), repr.into(), "--res".into(), res.to_string()]);
+    a.extend([
+        "-o".into(),
+        "unused.png".into(),
+        "--repr".into(),
+        repr.into(),
+        "--res".into(),
+        res.to_string(),
+    ]);
     for (flag, v) in [("--width", width), ("--height", height), ("--depth", depth)] {
         if let Some(v) = v {
             a.extend([flag.to_string(), v.to_string()]);
@@ -772,7 +799,8 @@ fn render<'py>(
         })
         .map_err(py_err)?;
     let (w, h) = (image.width() as usize, image.height() as usize);
-    let a = numpy::ndarray::Array3::from_shape_vec((h, w, 3), image.into_raw()).map_err(|e| value_error(e.to_string()))?;
+    let a = numpy::ndarray::Array3::from_shape_vec((h, w, 3), image.into_raw())
+        .map_err(|e| value_error(e.to_string()))?;
     Ok(a.into_pyarray(py))
 }
 
