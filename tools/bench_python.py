@@ -89,6 +89,7 @@ def main():
     tools = peers()
     rows = []
     rng = np.random.default_rng(1)
+    tasks = os.environ.get("BENCH_TASKS", "points,grid").split(",")
     for key in WANT:
         path = SHARED / MESHES[key]
         if not path.exists():
@@ -111,10 +112,13 @@ def main():
         ginside = reference_inside(v, f, gq)
         ref_time = time.perf_counter() - t0
         unsigned = np.abs(sdfmesh.signed_distance(mesh, q))
-        gunsigned = np.abs(g.values.reshape(-1, order="F"))
+        # gq runs k fastest (C order of values[i, j, k]).
+        gunsigned = np.abs(g.values.reshape(-1))
         far, gfar = unsigned > 1e-4 * scale, gunsigned > 1e-4 * scale
         print(f"{key}: {len(f)} faces, closed {mesh.is_closed()}, reference in {ref_time:.1f} s", flush=True)
         for task, pts, ins, ok in (("points", q, inside, far), ("grid", gq, ginside, gfar)):
+            if task not in tasks:
+                continue
             for name, (fn, slow) in tools.items():
                 n = len(pts)
                 sub = pts
@@ -126,7 +130,7 @@ def main():
                     idx = None
                 t0 = time.perf_counter()
                 if name == "sdfmesh" and task == "grid":
-                    vals = sdfmesh.mesh_to_grid(mesh, GRID).values.reshape(-1, order="F")
+                    vals = sdfmesh.mesh_to_grid(sdfmesh.Mesh.from_arrays(v, f), GRID).values.reshape(-1)
                 else:
                     vals = np.asarray(fn(mesh, v, f, tm, sub), dtype=np.float64)
                 wall = time.perf_counter() - t0
@@ -143,7 +147,8 @@ def main():
                 })
                 print("  " + ", ".join(f"{k}={v}" for k, v in rows[-1].items()), flush=True)
     out = REPO / "reports" / "bench"
-    with open(out / "python.csv", "w", newline="") as fh:
+    suffix = os.environ.get("BENCH_SUFFIX", "")
+    with open(out / f"python{suffix}.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
@@ -166,7 +171,7 @@ def main():
             f"{r['wall_s_at_points'] / ours['wall_s_at_points']:8.1f} "
             f"{r['sign_errors']:>8} / {r['signs_counted']:<8} ({r['sign_error_rate']})"
         )
-    (out / "python.txt").write_text("\n".join(lines) + "\n")
+    (out / f"python{suffix}.txt").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

@@ -609,6 +609,8 @@ impl SplitMix {
     }
 }
 
+type PointsAndDistances<'py> = (Bound<'py, PyArray2<f32>>, Bound<'py, PyArray1<f32>>);
+
 /// The DeepSDF recipe: `n` points near the surface of `mesh` and their signed distances.
 /// Points are drawn uniformly on the surface (area-weighted) and moved by Gaussian noise:
 /// half with standard deviation `sigma`, half with `sigma / sqrt(10)` (DeepSDF's variances
@@ -624,7 +626,7 @@ fn sample_near_surface<'py>(
     sigma: f64,
     uniform: f64,
     seed: u64,
-) -> PyResult<(Bound<'py, PyArray2<f32>>, Bound<'py, PyArray1<f32>>)> {
+) -> PyResult<PointsAndDistances<'py>> {
     if !(sigma.is_finite() && sigma >= 0.0) {
         return Err(value_error(format!("sigma must be finite and >= 0; got {sigma}")));
     }
@@ -662,7 +664,7 @@ fn sample_near_surface<'py>(
                 if u + v > 1.0 {
                     (u, v) = (1.0 - u, 1.0 - v);
                 }
-                let s = if (i - n_uniform) % 2 == 0 { sigma } else { sigma / 10f64.sqrt() };
+                let s = if (i - n_uniform).is_multiple_of(2) { sigma } else { sigma / 10f64.sqrt() };
                 let noise = glam::DVec3::new(r.normal(), r.normal(), r.normal()) * s;
                 (a + (b - a) * u + (c - a) * v + noise).as_vec3()
             })
