@@ -271,7 +271,7 @@ mod tests {
             let meshes =
                 [RasterMesh { positions: &positions, triangles: &triangles, to_world: Affine3A::IDENTITY }];
             let cam = Camera {
-                position: Vec3::new(0.0, 0.0, -3.0),
+                position: Vec3::new(0.0, 0.0, 0.5),
                 width: 61 + seed as u32 * 13,
                 height: 47 + seed as u32 * 5,
                 ..Camera::default()
