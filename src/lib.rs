@@ -12,6 +12,7 @@
 //!  cli                      the toolkit's commands (main.rs parses their arguments)
 //!  metrics                  image and geometric error
 //!  plan        render       one decision per object and repr; the Whitted tracer
+//!              raster       z-buffer rasterizer: primary visibility of triangle meshes
 //!  convert                  tessellate, mesh -> grid, SDF -> mesh
 //!  geometry                 the Geometry trait: closed form, marched SDF/grid, mesh BVH
 //!  scene                    scene file, objects, camera; load_input for any input file
@@ -36,7 +37,8 @@
 //!   [`geometry::sdf`] and [`geometry::grid`]), triangle meshes ([`geometry::mesh`]) and the
 //!   scene aggregate ([`geometry::scene`]).
 //! - [`convert`]: conversions between representations.
-//! - [`render`]: the tracer and frame loop; [`metrics`]: error measures.
+//! - [`render`]: the tracer and frame loop (with primary visibility traced or rasterized);
+//!   [`raster`]: the z-buffer rasterizer of triangle meshes; [`metrics`]: error measures.
 //! - [`compare`]: the study's runs, CSV and summaries; [`cli`]: the `toolkit` subcommands.
 //! - [`config`]: the command line validated once (every flag's range stated there) into
 //!   the options the commands take.
@@ -57,6 +59,7 @@ pub mod grid;
 pub mod mesh;
 pub mod metrics;
 pub mod plan;
+pub mod raster;
 pub mod render;
 pub mod scene;
 pub mod simd;

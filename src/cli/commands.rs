@@ -21,7 +21,7 @@ use crate::mesh::{TriangleMesh, load_mesh, save_mesh};
 use crate::plan::GridFill;
 use crate::plan::budget::{MemoryBudget, check_evaluations, extraction_bytes, mesh_to_grid_bytes};
 use crate::plan::{MeshMethod, Representation, grid_file_mesh};
-use crate::render::report::{RenderReport, render_scene};
+use crate::render::report::{RenderReport, render_scene, render_scene_with};
 use crate::render::write_png;
 use crate::scene::{Scene, load_input, load_scene};
 
@@ -30,7 +30,7 @@ pub fn render_command(opts: &RenderOptions) -> Result<RenderReport> {
     let mut scene = load_input(&opts.scene, opts.shading)?;
     opts.overrides.apply(&mut scene);
     check_budget(&opts.budget, &scene, opts.repr, &opts.scene)?;
-    let report = render_scene(&scene, opts.repr);
+    let report = render_scene_with(&scene, opts.repr, opts.primary);
     write_png(&report.frame.image, &opts.output)?;
     Ok(report)
 }

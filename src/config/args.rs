@@ -49,6 +49,10 @@ pub enum Command {
         /// The mesh and grid representations' flags.
         #[command(flatten)]
         mesh: MeshArgs,
+        /// Primary visibility: traced, or (with --repr mesh) the triangle meshes rasterized
+        /// by the z-buffer rasterizer and shaded by the same tracer.
+        #[arg(long, value_enum, default_value_t = Primary::Trace)]
+        primary: Primary,
         /// Overrides of the scene's settings.
         #[command(flatten)]
         settings: SettingArgs,
@@ -203,6 +207,15 @@ pub enum Command {
         #[command(flatten)]
         march: MarchArgs,
     },
+}
+
+/// `--primary`: how `toolkit render` finds what each pixel sees first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Primary {
+    /// Primary rays traced through the BVH.
+    Trace,
+    /// Triangle meshes rasterized (z-buffer), everything else traced (--repr mesh only).
+    Raster,
 }
 
 /// `--to`: what `toolkit convert` produces.

@@ -28,9 +28,10 @@ use crate::plan::budget::MemoryBudget;
 use crate::plan::{
     GRID_MARGIN_CELLS, GridFill, GridStorage, MAX_EXTRACT_RESOLUTION, MeshMethod, ReprKind, Representation,
 };
+use crate::render::PrimaryVisibility;
 use crate::scene::Scene;
 use crate::scene::shape::Shading;
-use args::{Command, MarchArgs, MeshArgs, SettingArgs, Target};
+use args::{Command, MarchArgs, MeshArgs, Primary, SettingArgs, Target};
 
 /// The accepted values of an integer flag, `min..=max`, and what the range is for (named
 /// in the error).
@@ -269,6 +270,8 @@ pub struct RenderOptions {
     pub output: PathBuf,
     /// Representation (checked: [`check_representation`]).
     pub repr: Representation,
+    /// Primary visibility (rasterized only with the mesh representation).
+    pub primary: PrimaryVisibility,
     /// Setting overrides.
     pub overrides: Overrides,
     /// Shading of a mesh given instead of a scene file.
@@ -424,12 +427,23 @@ impl Task {
     /// [`Error::Usage`] (one line, exit code 2) for the first flag out of its range.
     pub fn new(command: Command, budget: MemoryBudget) -> Result<Task> {
         Ok(match command {
-            Command::Render { scene, output, repr, mesh, settings, march } => {
+            Command::Render { scene, output, repr, mesh, primary, settings, march } => {
                 let repr = representation(repr, &mesh, march_params(&march, MarchParams::default().epsilon))?;
+                let primary = match primary {
+                    Primary::Trace => PrimaryVisibility::Trace,
+                    Primary::Raster if repr.kind() == ReprKind::Mesh => PrimaryVisibility::Raster,
+                    Primary::Raster => {
+                        return Err(Error::Usage(format!(
+                            "--primary raster needs --repr mesh (the rasterizer draws triangle meshes), not --repr {}",
+                            repr.name()
+                        )));
+                    }
+                };
                 Task::Render(RenderOptions {
                     scene,
                     output,
                     repr,
+                    primary,
                     overrides: overrides(&settings)?,
                     shading: shading(&mesh),
                     budget,

@@ -187,6 +187,12 @@ pub trait Geometry: Send + Sync {
     fn instances(&self) -> &[mesh::MeshGeometry] {
         &[]
     }
+
+    /// This geometry as one placed triangle mesh, where it is one (the rasterizer draws
+    /// it); `None` for every other geometry.
+    fn as_mesh(&self) -> Option<&mesh::MeshGeometry> {
+        None
+    }
 }
 
 /// Data shared between geometries (see [`Geometry::shared`]).

@@ -5,6 +5,7 @@
 //! one after the other, which marched geometry marches side by side (a lane taking the
 //! next ray as its march ends); everything else traces them one by one.
 
+pub mod hybrid;
 pub mod report;
 pub mod tracer;
 
@@ -39,6 +40,31 @@ pub struct Frame {
     pub time: Duration,
     /// Work counters summed over all threads.
     pub stats: RayStats,
+    /// Of `time`, the primary visibility, where it is a pass of its own (a hybrid frame,
+    /// [`hybrid::render_hybrid`]); `None` for a traced frame, whose primary rays are
+    /// shaded as they are traced.
+    pub primary: Option<Duration>,
+}
+
+/// How a frame finds what each pixel sees first.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PrimaryVisibility {
+    /// Primary rays traced, as every other ray (the default).
+    #[default]
+    Trace,
+    /// The triangle meshes rasterized ([`crate::raster`]), the rest traced
+    /// ([`hybrid::render_hybrid`]).
+    Raster,
+}
+
+impl PrimaryVisibility {
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            PrimaryVisibility::Trace => "trace",
+            PrimaryVisibility::Raster => "raster",
+        }
+    }
 }
 
 impl Frame {
@@ -130,7 +156,7 @@ pub fn render(scene: &Scene, geometry: &dyn Geometry) -> Frame {
             }
         }
     }
-    Frame { image, time, stats }
+    Frame { image, time, stats, primary: None }
 }
 
 /// Writes `image` as PNG to `path` through [`crate::files::write_atomic`]: a temporary

@@ -7,7 +7,8 @@ use std::fmt::Write as _;
 
 use crate::geometry::Geometry;
 use crate::plan::{Representation, build_scene};
-use crate::render::{Frame, render};
+use crate::render::hybrid::render_hybrid;
+use crate::render::{Frame, PrimaryVisibility, render};
 use crate::scene::Scene;
 
 /// A rendered scene with a printable summary.
@@ -22,8 +23,16 @@ pub struct RenderReport {
 
 /// Renders a loaded scene in a representation and describes the result.
 pub fn render_scene(scene: &Scene, repr: Representation) -> RenderReport {
+    render_scene_with(scene, repr, PrimaryVisibility::Trace)
+}
+
+/// [`render_scene`] with primary visibility traced or rasterized.
+pub fn render_scene_with(scene: &Scene, repr: Representation, primary: PrimaryVisibility) -> RenderReport {
     let geometry = build_scene(scene, repr);
-    let frame = render(scene, &geometry);
+    let frame = match primary {
+        PrimaryVisibility::Trace => render(scene, &geometry),
+        PrimaryVisibility::Raster => render_hybrid(scene, &geometry),
+    };
     let mut text = String::new();
     for o in geometry.objects() {
         let _ = writeln!(text, "  {}", o.describe());
@@ -49,5 +58,10 @@ pub fn render_scene(scene: &Scene, repr: Representation) -> RenderReport {
         s.step_limit_hits,
         geometry.bytes_used(),
     );
+    if let Some(p) = frame.primary {
+        let total = frame.time.as_secs_f64() * 1e3;
+        let p = p.as_secs_f64() * 1e3;
+        let _ = writeln!(text, "primary visibility rasterized: {p:.1} ms, shading {:.1} ms", total - p);
+    }
     RenderReport { geometry_bytes: geometry.bytes_used(), frame, text }
 }

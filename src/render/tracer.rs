@@ -70,6 +70,16 @@ impl<'a> Tracer<'a> {
         let mut hits: [Option<Hit>; BATCH] = [None; BATCH];
         stats.rays += n as u64;
         self.geometry.closest_hits(&rays[..n], 0.0, &mut t_max[..n], &mut hits[..n], stats);
+        self.shade_hits(&rays[..n], &hits[..n], out, stats);
+    }
+
+    /// The colours of a batch of up to [`BATCH`] primary rays whose closest hits are known
+    /// (`hits[i]` of `rays[i]`; found by [`Self::trace_batch`], or by a rasterizer): the
+    /// shadow rays of the first [`PACKET_LIGHTS`] lights together, then each hit shaded as
+    /// [`Self::trace`] does. Counts no primary ray (the caller does).
+    pub fn shade_hits(&self, rays: &[Ray], hits: &[Option<Hit>], out: &mut [Vec3], stats: &mut RayStats) {
+        debug_assert!(rays.len() <= BATCH && out.len() == rays.len() && hits.len() == rays.len());
+        let n = rays.len().min(BATCH);
         // occluded[i][l]: whether hit i's shadow ray towards light l is blocked (only read
         // where that ray exists, i.e. where the light is in front of the surface).
         let mut occluded = [[false; PACKET_LIGHTS]; BATCH];

@@ -35,6 +35,7 @@ mod layering;
 mod limits;
 mod mesh_io;
 mod mesh_tracing;
+mod raster;
 mod representations;
 mod round_trip;
 mod scene_errors;

@@ -86,6 +86,17 @@ impl MeshShape {
         self.triangles.len()
     }
 
+    /// Vertex positions, the shape's frame.
+    pub fn positions(&self) -> &[Vec3] {
+        &self.positions
+    }
+
+    /// Triangles (indices into [`Self::positions`]), in BVH leaf order: the triangle
+    /// indices a rasterizer reports are those of [`MeshGeometry::triangle_hit`].
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+
     /// The box of the triangles in the shape's frame (the mesh's, unless
     /// [`MeshShape::unit`] scales it), `None` without triangles.
     pub fn local_bounds(&self) -> Option<Aabb> {
@@ -286,6 +297,29 @@ impl MeshGeometry {
     /// The transform from the mesh's frame to the world (as placed).
     pub fn transform(&self) -> &Transform {
         self.placement.as_deref().unwrap_or(&self.transform)
+    }
+
+    /// The transform from the shape's frame ([`MeshShape::positions`]) to the world: the
+    /// placement, composed with the shape's unit scale where it has one.
+    pub fn shape_to_world(&self) -> &Transform {
+        &self.transform
+    }
+
+    /// The hit of `ray` with triangle `triangle` alone (an index into
+    /// [`MeshShape::triangles`]), for `t` in `[0, t_max]`: the hit record
+    /// [`Geometry::closest_hit`] gives when that triangle is the closest (the same
+    /// watertight test and hit record), for a caller that already knows which triangle is
+    /// visible (the rasterizer). `None` when the ray misses it, or for a mesh placed under a
+    /// scale far from 1 (see [`far_scale`]; the caller then traces the ray).
+    pub fn triangle_hit(&self, ray: &Ray, triangle: u32, t_max: f32) -> Option<Hit> {
+        if self.far_scale || triangle as usize >= self.shape.triangles.len() {
+            return None;
+        }
+        let local = if self.transform.identity { *ray } else { self.transform.ray_to_local(ray) };
+        let corners = self.corners(triangle);
+        let [a, b, c] = corners;
+        let h = ShearedRay::new(local.origin, local.dir).intersect(a, b, c, 0.0, t_max)?;
+        Some(self.hit_record(ray, &local, LeafHit { triangle, t: h.t, corners }, h.t, &self.transform))
     }
 
     /// The triangles in world space (positions transformed; no normals).
@@ -624,6 +658,10 @@ impl Geometry for MeshGeometry {
 
     fn shared(&self) -> Option<Shared> {
         Some(Shared::of(&self.shape, self.shape.bytes_used(), self.shape.census()))
+    }
+
+    fn as_mesh(&self) -> Option<&MeshGeometry> {
+        Some(self)
     }
 
     fn surface_distance(&self, p: DVec3) -> f64 {
