@@ -48,8 +48,9 @@ pub const ORDINARY_EXTENT: std::ops::RangeInclusive<f64> = 9.5367431640625e-7..=
 enum Accel {
     /// [`MeshLayout::Full`].
     Full(WideBvh),
-    /// [`MeshLayout::Compact`]: it holds the triangles and vertices too.
-    Compact(CompactBvh),
+    /// [`MeshLayout::Compact`]: it holds the triangles and vertices too. Boxed, so that the
+    /// full layout's shape keeps its size (and byte count).
+    Compact(Box<CompactBvh>),
 }
 
 /// The part of a traced mesh that instances share: positions, triangles, normals and the
@@ -84,12 +85,12 @@ impl MeshShape {
     }
 
     /// Bytes of the BVH on the heap: the full layout's nodes and leaf packets (which hold
-    /// the corners), the compact layout's nodes and triangle list (its leaves), not its
-    /// vertices.
+    /// the corners), the compact layout's boxed struct, nodes, triangle list (its leaves)
+    /// and 16-bit vertices (it holds the mesh).
     pub fn accel_bytes(&self) -> usize {
         match &self.bvh {
             Accel::Full(b) => b.bytes_used() - std::mem::size_of::<WideBvh>(),
-            Accel::Compact(b) => b.bytes_used() - std::mem::size_of::<CompactBvh>(),
+            Accel::Compact(b) => b.bytes_used(),
         }
     }
 
@@ -345,7 +346,7 @@ impl MeshGeometry {
         let local_bounds = boxes.iter().copied().reduce(|a, b| a.union(&b));
         let compact = grid.and_then(|g| CompactBvh::from_wide(&bvh, triangles.clone(), &positions, g));
         let (positions, triangles, bvh) = match compact {
-            Some(c) => (Vec::new(), Vec::new(), Accel::Compact(c)),
+            Some(c) => (Vec::new(), Vec::new(), Accel::Compact(Box::new(c))),
             None => (positions, triangles, Accel::Full(bvh)),
         };
         let shape = Arc::new(MeshShape { positions, triangles, normals, bvh, local_bounds, unit });
@@ -468,7 +469,7 @@ impl MeshGeometry {
         let (o, d) = (local.origin, local.dir);
         let leaf = match &self.shape.bvh {
             Accel::Full(b) => closest_walk(Portable, b, o, d, t_min * f, t_max * f, stats),
-            Accel::Compact(b) => closest_walk(Portable, b, o, d, t_min * f, t_max * f, stats),
+            Accel::Compact(b) => closest_walk(Portable, &**b, o, d, t_min * f, t_max * f, stats),
         };
         Some(leaf.map(|leaf| self.hit_record(ray, &local, leaf, leaf.t / f, self.transform())))
     }
@@ -688,7 +689,7 @@ impl Geometry for MeshGeometry {
         }
         match &self.shape.bvh {
             Accel::Full(bvh) => dispatch(ClosestHit { mesh: self, bvh, ray, t_min, t_max, stats }),
-            Accel::Compact(bvh) => dispatch(ClosestHit { mesh: self, bvh, ray, t_min, t_max, stats }),
+            Accel::Compact(bvh) => dispatch(ClosestHit { mesh: self, bvh: &**bvh, ray, t_min, t_max, stats }),
         }
     }
 
@@ -737,7 +738,7 @@ impl Geometry for MeshGeometry {
         }
         match &self.shape.bvh {
             Accel::Full(b) => b.any_hit(local.origin, dir, t_min, t_max, stats),
-            Accel::Compact(b) => any_hit_of(b, local.origin, dir, t_min, t_max, stats),
+            Accel::Compact(b) => any_hit_of(&**b, local.origin, dir, t_min, t_max, stats),
         }
     }
 
