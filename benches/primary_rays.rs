@@ -51,7 +51,7 @@ use glam::Vec3;
 use obvhs::BvhBuildParams;
 use rayon::ThreadPool;
 use rayon::prelude::*;
-use sdfmesh::geometry::mesh::{MeshGeometry, Shading};
+use sdfmesh::geometry::mesh::{MeshGeometry, MeshLayout, Shading};
 use sdfmesh::geometry::{Geometry, Hit, PACKET, Ray, RayStats};
 use sdfmesh::mesh::{TriangleMesh, load_mesh};
 use sdfmesh::render::tracer::spawn_offset;
@@ -380,6 +380,8 @@ fn ours_tile(geom: &MeshGeometry) -> TileFn<'_> {
 
 /// Tracer name of our one-by-one rows (primary rays): what they call.
 const OURS_ONE: &str = "ours closest_hit";
+/// Ours in the compact layout, one ray at a time (its batches go one by one too).
+const OURS_COMPACT: &str = "ours compact closest_hit";
 /// Tracer name of our batch rows (primary rays): what they call.
 const OURS_BATCH: &str = "ours closest_hits batch";
 /// Tracer name of our one-by-one shadow rows.
@@ -885,12 +887,55 @@ fn bench_mesh(path: &Path, plan: &Plan) -> Vec<Row> {
             first,
         ));
     }
+    compact_race(&mesh, &ours, &frame, plan);
     #[cfg(feature = "embree")]
     println!("agreement {}", emb.robust_agreement(&frame, &ours_out).describe("ours", "embree robust"));
     if plan.presets {
         preset_sweep(&label, &mesh, &frame, plan);
     }
     rows
+}
+
+/// The compact layout ([`MeshLayout::Compact`]) against the full one (`full`), one ray at
+/// a time, frames interleaved: bytes per triangle (total and BVH, as
+/// `MeshShape::bvh_bytes` counts it) and throughput by the wall clock and by CPU time.
+fn compact_race(mesh: &TriangleMesh, full: &MeshGeometry, frame: &Frame, plan: &Plan) {
+    let params = MeshGeometry::BUILD_PARAMS;
+    let compact = MeshGeometry::with_options(
+        mesh.clone(),
+        Shading::Flat,
+        Transform::IDENTITY,
+        0,
+        "bench".into(),
+        params,
+        MeshLayout::Compact,
+    );
+    let tris = mesh.triangle_count() as f64;
+    let per_tri = |g: &MeshGeometry| (g.bytes_used() as f64 / tris, g.shape().bvh_bytes() as f64 / tris);
+    let ((ft, fb), (ct, cb)) = (per_tri(full), per_tri(&compact));
+    println!(
+        "compact layout: {}; bytes per triangle total {ct:.1} (full {ft:.1}), BVH {cb:.1} (full {fb:.1})",
+        compact.describe()
+    );
+    for &threads in plan.threads {
+        let pool = pool(threads);
+        let mut cs = vec![
+            Contender::new(OURS_ONE, ours_tile(full)),
+            Contender::new(OURS_COMPACT, ours_tile(&compact)),
+        ];
+        race(&mut cs, &pool, frame, plan.frames);
+        let m = |c: &Contender<'_>| median(&c.mrays(frame));
+        let cpu = |c: &Contender<'_>| c.mrays_cpu(frame);
+        let (f, c) = (m(&cs[0]), m(&cs[1]));
+        println!(
+            "compact layout, {threads} thread(s): {c:.2} Mrays/s against full {f:.2} ({:.1}% of full); by CPU time {} \
+             against {} ({}% of full)",
+            100.0 * c / f,
+            opt(cpu(&cs[1]), 2),
+            opt(cpu(&cs[0]), 2),
+            opt(cpu(&cs[1]).zip(cpu(&cs[0])).map(|(c, f)| 100.0 * c / f), 1)
+        );
+    }
 }
 
 /// Checks of the smoke run (`cargo test --all-targets`): [`Frame::packet_order`] is the

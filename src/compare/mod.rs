@@ -44,7 +44,7 @@ use crate::plan::{
     build_scene_with_plans, reextract_mesh, traced_repr,
 };
 use crate::render::{Frame, render, write_png};
-use crate::scene::shape::{ObjectKind, Shading};
+use crate::scene::shape::{MeshLayout, ObjectKind, Shading};
 use crate::scene::{Scene, load_input};
 
 /// Version of the CSV schema; bumped whenever a column changes meaning or order.
@@ -308,6 +308,9 @@ enum RunGeometry {
     Reextract { fill: GridFill, resolution: u32 },
     /// The input mesh decimated by meshoptimizer's quadric-error simplifier.
     Decimate { target: DecimateTarget },
+    /// The input mesh (decimated to `target` where given) traced in the compact layout
+    /// ([`MeshLayout::Compact`]: quantised nodes, 16-bit vertices).
+    Compact { target: Option<DecimateTarget> },
 }
 
 /// The `class` column of an input: for a scene file under a `data/scenes` folder, its
@@ -369,15 +372,19 @@ impl Run {
     fn knob(&self) -> Option<(f64, f64)> {
         match self.build {
             RunGeometry::Scene(r) => Some((r.march().tolerance_px, r.march().relaxation)),
-            RunGeometry::Reextract { .. } | RunGeometry::Decimate { .. } => None,
+            RunGeometry::Reextract { .. } | RunGeometry::Decimate { .. } | RunGeometry::Compact { .. } => {
+                None
+            }
         }
     }
 
     /// The `method` column: `method`, with the target for a decimated mesh
-    /// ([`DecimateTarget::method_name`], `decimated-25%`).
+    /// ([`DecimateTarget::method_name`], `decimated-25%`), and `-compact` after it for the
+    /// compact layout (`compact` for the original, `decimated-25%-compact`).
     fn method(&self) -> String {
         match self.build {
             RunGeometry::Decimate { target } => target.method_name(),
+            RunGeometry::Compact { target: Some(target) } => format!("{}-compact", target.method_name()),
             _ => self.method.to_string(),
         }
     }
@@ -452,6 +459,19 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
                 resolution: None,
                 build: RunGeometry::Decimate { target },
             });
+        }
+        // With `--layout compact`: the original and its decimations in the compact layout
+        // too (the runs above stay in the full one).
+        if opts.overrides.layout() == Some(MeshLayout::Compact) {
+            let targets = std::iter::once(None).chain(opts.decimate.iter().copied().map(Some));
+            for target in targets {
+                runs.push(Run {
+                    repr: ReprKind::Mesh,
+                    method: "compact",
+                    resolution: None,
+                    build: RunGeometry::Compact { target },
+                });
+            }
         }
     } else {
         runs.push(Run {
@@ -537,7 +557,7 @@ fn build(scene: &Scene, b: RunGeometry, budget: &MemoryBudget) -> Result<Built> 
             "this run",
             reextract_bytes(mesh_input(scene).map_or(0, |m| m.triangles.len()), fill, resolution),
         )?,
-        RunGeometry::Decimate { .. } => budget.check(
+        RunGeometry::Decimate { .. } | RunGeometry::Compact { target: Some(_) } => budget.check(
             "this run",
             mesh_input(scene).map_or(0, |m| m.bytes_used() as u64 * SCRATCH_FACTOR).saturating_add(
                 crate::plan::budget::scene_bytes(
@@ -545,6 +565,11 @@ fn build(scene: &Scene, b: RunGeometry, budget: &MemoryBudget) -> Result<Built> 
                     Representation::Analytic { march: MarchParams::default() },
                 ),
             ),
+        )?,
+        RunGeometry::Compact { target: None } => budget.check_scene(
+            "this run",
+            scene,
+            Representation::Analytic { march: MarchParams::default() },
         )?,
     }
     let start = Instant::now();
@@ -568,23 +593,36 @@ fn build(scene: &Scene, b: RunGeometry, budget: &MemoryBudget) -> Result<Built> 
         }
         // Decimation time is build time, as extraction is.
         RunGeometry::Decimate { target } => {
-            let original = mesh_input(scene).ok_or_else(|| Error::Usage("not a mesh input".into()))?;
-            let decimated = decimate(original, target, NO_ERROR_LIMIT)
-                .map_err(|e| Error::Usage(format!("decimating to {target}: {e}")))?;
-            let mut s = scene.clone();
-            let ObjectKind::Mesh { source, shading, .. } = &scene.objects[0].kind else {
-                unreachable!("mesh_input is a mesh object")
+            let s = decimated_scene(scene, target)?;
+            let (geometry, plans) =
+                build_scene_with_plans(&s, Representation::Analytic { march: MarchParams::default() });
+            Ok(Built { geometry, plans, build_ms: ms(start), mesh: None, grid: None })
+        }
+        RunGeometry::Compact { target } => {
+            let mut s = match target {
+                Some(target) => decimated_scene(scene, target)?,
+                None => scene.clone(),
             };
-            s.objects[0].kind = ObjectKind::Mesh {
-                mesh: Arc::new(decimated.mesh),
-                source: source.clone(),
-                shading: *shading,
-            };
+            s.settings.mesh_layout = MeshLayout::Compact;
             let (geometry, plans) =
                 build_scene_with_plans(&s, Representation::Analytic { march: MarchParams::default() });
             Ok(Built { geometry, plans, build_ms: ms(start), mesh: None, grid: None })
         }
     }
+}
+
+/// The scene of the mesh input `scene` with its mesh decimated to `target`.
+fn decimated_scene(scene: &Scene, target: DecimateTarget) -> Result<Scene> {
+    let original = mesh_input(scene).ok_or_else(|| Error::Usage("not a mesh input".into()))?;
+    let decimated = decimate(original, target, NO_ERROR_LIMIT)
+        .map_err(|e| Error::Usage(format!("decimating to {target}: {e}")))?;
+    let mut s = scene.clone();
+    let ObjectKind::Mesh { source, shading, .. } = &scene.objects[0].kind else {
+        unreachable!("mesh_input is a mesh object")
+    };
+    s.objects[0].kind =
+        ObjectKind::Mesh { mesh: Arc::new(decimated.mesh), source: source.clone(), shading: *shading };
+    Ok(s)
 }
 
 fn ms(start: Instant) -> f64 {
@@ -886,6 +924,8 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
         let loaded = catch_panic(|| {
             let mut scene = load_input(path, Shading::Smooth)?;
             opts.overrides.apply(&mut scene);
+            // `--layout compact` adds compact runs ([`plan`]); the others keep the full layout.
+            scene.settings.mesh_layout = MeshLayout::Full;
             Ok(scene)
         })
         .and_then(|r| r);
@@ -1182,7 +1222,7 @@ fn save_artifacts(
 fn representation(run: &Run) -> Representation {
     match run.build {
         RunGeometry::Scene(r) => r,
-        RunGeometry::Reextract { .. } | RunGeometry::Decimate { .. } => {
+        RunGeometry::Reextract { .. } | RunGeometry::Decimate { .. } | RunGeometry::Compact { .. } => {
             Representation::Analytic { march: MarchParams::default() }
         }
     }

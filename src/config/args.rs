@@ -11,6 +11,7 @@ use crate::convert::extract::ExtractMethod;
 use crate::mesh::simplify::DecimateTarget;
 use crate::plan::budget::MemoryBudget;
 use crate::plan::{GridFill, MeshPlane, ReprKind};
+use crate::scene::shape::MeshLayout;
 
 /// The `toolkit` command line.
 #[derive(Parser)]
@@ -268,6 +269,10 @@ pub struct SettingArgs {
     /// Maximum reflection/refraction depth (overrides the scene).
     #[arg(long)]
     pub depth: Option<u32>,
+    /// How mesh files (and scene `mesh` objects) traced as triangles store their BVH: full
+    /// (f32 boxes and corners, fastest) or compact (quantised nodes, 16-bit vertices).
+    #[arg(long, value_enum)]
+    pub layout: Option<MeshLayout>,
 }
 
 /// Sphere tracing flags (see [`MarchParams`](crate::geometry::march::MarchParams)).

@@ -30,7 +30,7 @@ use crate::plan::{
 };
 use crate::render::PrimaryVisibility;
 use crate::scene::Scene;
-use crate::scene::shape::Shading;
+use crate::scene::shape::{MeshLayout, Shading};
 use args::{Command, MarchArgs, MeshArgs, Primary, SettingArgs, Target};
 
 /// The accepted values of an integer flag, `min..=max`, and what the range is for (named
@@ -209,11 +209,12 @@ pub struct Overrides {
     width: Option<u32>,
     height: Option<u32>,
     depth: Option<u32>,
+    layout: Option<MeshLayout>,
 }
 
 impl Overrides {
     /// No override.
-    pub const NONE: Overrides = Overrides { width: None, height: None, depth: None };
+    pub const NONE: Overrides = Overrides { width: None, height: None, depth: None, layout: None };
 
     /// Image width and height ([`IMAGE_EDGE`]) and maximum recursion depth ([`DEPTH`]),
     /// each where given.
@@ -229,7 +230,17 @@ impl Overrides {
         if let Some(d) = depth {
             DEPTH.check("--depth", d)?;
         }
-        Ok(Overrides { width, height, depth })
+        Ok(Overrides { width, height, depth, layout: None })
+    }
+
+    /// These overrides with the mesh layout `layout` where given.
+    pub fn with_layout(self, layout: Option<MeshLayout>) -> Overrides {
+        Overrides { layout, ..self }
+    }
+
+    /// The mesh layout, where overridden.
+    pub fn layout(&self) -> Option<MeshLayout> {
+        self.layout
     }
 
     /// Image width, pixels, where overridden.
@@ -257,6 +268,9 @@ impl Overrides {
         }
         if let Some(d) = self.depth {
             scene.settings.max_depth = d;
+        }
+        if let Some(l) = self.layout {
+            scene.settings.mesh_layout = l;
         }
     }
 }
@@ -600,7 +614,7 @@ fn shading(mesh: &MeshArgs) -> Shading {
 
 /// `--width`, `--height`, `--depth`, checked.
 fn overrides(s: &SettingArgs) -> Result<Overrides> {
-    Overrides::new(s.width, s.height, s.depth)
+    Ok(Overrides::new(s.width, s.height, s.depth)?.with_layout(s.layout))
 }
 
 /// `--repr KIND` with the mesh flags and `march`, checked ([`check_representation`]).

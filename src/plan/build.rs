@@ -149,7 +149,7 @@ fn build_with_plans(scene: &Scene, repr: Representation) -> (Vec<Box<dyn Geometr
                 }
             }
             Build::MeshTriangles => {
-                let m = mesh_triangles(o);
+                let m = mesh_triangles(scene, o);
                 let keep = m.placed(*m.transform(), o.material, String::new());
                 (Box::new(m), plan, Some(keep))
             }
@@ -275,7 +275,7 @@ fn own_mesh(scene: &Scene, o: &Object, repr: Representation) -> (MeshGeometry, O
                 .expect("a tessellation always has triangles");
             (m, ObjectPlan::as_asked(build))
         }
-        _ => (mesh_triangles(o), ObjectPlan::as_asked(Build::MeshTriangles)),
+        _ => (mesh_triangles(scene, o), ObjectPlan::as_asked(Build::MeshTriangles)),
     }
 }
 
@@ -299,7 +299,7 @@ fn build_object(
             (Box::new(AnalyticObject::new(*p, o)), plan)
         }
         Build::Marched { march } => (sphere_traced(o, repr, march, plan.fallback), plan),
-        Build::MeshTriangles => (Box::new(mesh_triangles(o)), plan),
+        Build::MeshTriangles => (Box::new(mesh_triangles(scene, o)), plan),
         Build::Tessellated { .. } | Build::PlaneDisc { .. } | Build::Extracted { .. } => {
             match mesh_geometry(scene, o, plan.build) {
                 Some((g, build)) => (Box::new(g), ObjectPlan { build, ..plan }),
@@ -364,7 +364,7 @@ fn build_object(
         Build::Grid { .. } => match gridded(o, plan) {
             Some(built) => built,
             None if matches!(o.kind, ObjectKind::Mesh { .. }) => (
-                Box::new(mesh_triangles(o)),
+                Box::new(mesh_triangles(scene, o)),
                 ObjectPlan::fallback(Build::MeshTriangles, Fallback::GridNotBuilt),
             ),
             None => marched(Fallback::GridNotBuilt),
@@ -412,15 +412,17 @@ fn sphere_traced(
     }
 }
 
-/// A loaded mesh traced as its triangles.
-fn mesh_triangles(o: &Object) -> MeshGeometry {
+/// A loaded mesh traced as its triangles, in the scene's mesh layout
+/// ([`crate::scene::Settings::mesh_layout`]).
+fn mesh_triangles(scene: &Scene, o: &Object) -> MeshGeometry {
     let ObjectKind::Mesh { mesh, shading, .. } = &o.kind else { unreachable!("called for meshes only") };
-    MeshGeometry::new(
+    MeshGeometry::with_layout(
         TriangleMesh::clone(mesh),
         *shading,
         o.compiled_transform(),
         o.material,
         format!("mesh '{}'", o.label),
+        scene.settings.mesh_layout,
     )
 }
 

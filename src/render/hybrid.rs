@@ -22,7 +22,7 @@ use glam::Vec3;
 use image::RgbImage;
 use rayon::prelude::*;
 
-use crate::geometry::mesh::MeshGeometry;
+use crate::geometry::mesh::{MeshGeometry, MeshLayout};
 use crate::geometry::scene::SceneGeometry;
 use crate::geometry::{Geometry, Hit, RayStats};
 use crate::raster::{RasterMesh, RasterStats, TILE, TILE_PIXELS, rasterize};
@@ -44,13 +44,16 @@ pub struct Primary {
 }
 
 /// The meshes of `geometry` (each instance of an instanced mesh on its own) and the
-/// objects that are not meshes.
+/// objects that are not meshes. A mesh in the compact layout counts as not a mesh here:
+/// the rasterizer reads full-precision positions, which it does not keep, so its primary
+/// rays are traced like the other objects'.
 pub fn split_meshes(geometry: &SceneGeometry) -> (Vec<&MeshGeometry>, Vec<&dyn Geometry>) {
     let (mut meshes, mut others) = (Vec::new(), Vec::new());
+    let full = |m: &MeshGeometry| m.shape().layout() == MeshLayout::Full;
     for o in geometry.objects() {
-        if !o.instances().is_empty() {
+        if !o.instances().is_empty() && o.instances().iter().all(full) {
             meshes.extend(o.instances().iter());
-        } else if let Some(m) = o.as_mesh() {
+        } else if let Some(m) = o.as_mesh().filter(|m| full(m)) {
             meshes.push(m);
         } else {
             others.push(o.as_ref());

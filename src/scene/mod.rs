@@ -12,7 +12,7 @@ pub use crate::base::transform;
 
 use glam::Vec3;
 
-use crate::scene::shape::Object;
+use crate::scene::shape::{MeshLayout, Object};
 
 pub use file::{load_scene, parse_scene};
 pub use input::{grid_preview_scene, load_input, mesh_preview_scene};
@@ -56,11 +56,14 @@ pub struct Settings {
     pub background: Vec3,
     /// Rays are traced up to this distance, scene units.
     pub max_distance: f32,
+    /// How loaded meshes (mesh files and scene `mesh` objects) store their BVH when traced
+    /// as triangles: not in the scene file, set by `--layout`.
+    pub mesh_layout: MeshLayout,
 }
 
 impl Default for Settings {
     fn default() -> Self {
-        Settings { max_depth: 3, background: Vec3::ZERO, max_distance: 1.0e5 }
+        Settings { max_depth: 3, background: Vec3::ZERO, max_distance: 1.0e5, mesh_layout: MeshLayout::Full }
     }
 }
 

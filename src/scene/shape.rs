@@ -209,6 +209,31 @@ pub enum ObjectKind {
     },
 }
 
+/// How a traced mesh stores its BVH and vertices; the command line's `--layout` values.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum MeshLayout {
+    /// `f32` positions, 256-byte nodes with `f32` child boxes, leaves of pre-gathered
+    /// `f32` corners (`geometry::mesh::wide_bvh`): the fastest.
+    #[default]
+    Full,
+    /// 16-bit positions on one grid per mesh, 96-byte quantised nodes, leaves that are
+    /// ranges of the triangle list (`geometry::mesh::compact`): the smallest. Traces the quantised mesh.
+    Compact,
+}
+
+impl MeshLayout {
+    /// Both layouts.
+    pub const ALL: [MeshLayout; 2] = [MeshLayout::Full, MeshLayout::Compact];
+
+    /// The name on the command line and in `compare`'s method names: `full`, `compact`.
+    pub fn name(self) -> &'static str {
+        match self {
+            MeshLayout::Full => "full",
+            MeshLayout::Compact => "compact",
+        }
+    }
+}
+
 /// How mesh normals are shaded.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum Shading {

@@ -104,6 +104,12 @@ impl Simd for Avx2 {
         A8(unsafe { _mm256_loadu_ps(a.as_ptr()) })
     }
     #[inline(always)]
+    fn bytes8(self, a: &[u8; 8]) -> A8 {
+        // SAFETY: the token proves AVX2; an unaligned load of the 8 bytes of `a`, widened
+        // to eight 32-bit integers (exact in f32).
+        A8(unsafe { _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(a.as_ptr().cast()))) })
+    }
+    #[inline(always)]
     fn halves8(self, lo: &[f32; 4], hi: &[f32; 4]) -> A8 {
         // SAFETY: the token proves AVX; unaligned loads of the 16 bytes of `lo` and `hi`.
         A8(unsafe { _mm256_set_m128(_mm_loadu_ps(hi.as_ptr()), _mm_loadu_ps(lo.as_ptr())) })

@@ -41,6 +41,9 @@ pub trait Simd: Copy + Send + Sync + 'static {
     fn u32_masks4(self, v: &[u32], i: usize, limit: i32) -> (Self::F64x4, Self::F64x4);
     /// Loads a packet.
     fn load8(self, a: &[f32; 8]) -> Self::F32x8;
+    /// Eight bytes as a packet, lane `l` the value of `a[l]` (0 to 255, exact): the
+    /// quantised child boxes of the compact BVH's nodes.
+    fn bytes8(self, a: &[u8; 8]) -> Self::F32x8;
     /// A packet of lanes 0..4 from `lo` and lanes 4..8 from `hi`.
     fn halves8(self, lo: &[f32; 4], hi: &[f32; 4]) -> Self::F32x8;
     /// A packet of `lo` in lanes 0..4 and `hi` in lanes 4..8.
@@ -130,6 +133,10 @@ impl Simd for Portable {
     #[inline(always)]
     fn load8(self, a: &[f32; 8]) -> F8 {
         F8(*a)
+    }
+    #[inline(always)]
+    fn bytes8(self, a: &[u8; 8]) -> F8 {
+        F8(a.map(f32::from))
     }
     #[inline(always)]
     fn halves8(self, lo: &[f32; 4], hi: &[f32; 4]) -> F8 {

@@ -43,6 +43,11 @@ fn same(a: f32, b: f32) -> bool {
 
 /// Runs every lane operation of backend `S` on packets of `values()` against `f32`.
 fn check_backend<S: Simd>(s: S) {
+    // Bytes to lanes: every byte value, exactly.
+    for k in 0..32u8 {
+        let b: [u8; 8] = std::array::from_fn(|l| k.wrapping_mul(8).wrapping_add(l as u8).wrapping_mul(37));
+        assert_eq!(s.bytes8(&b).store(), b.map(f32::from));
+    }
     let v = values();
     for i in 0..v.len() {
         let a: [f32; 8] = std::array::from_fn(|l| v[(i + l) % v.len()]);

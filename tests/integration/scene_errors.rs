@@ -765,7 +765,12 @@ fn full_scene_round_trips() {
     assert!((s.camera.fov_y_deg - 53.130_104).abs() < 1e-4);
     assert_eq!(
         s.settings,
-        Settings { max_depth: 3, background: Vec3::new(0.1, 0.2, 0.3), max_distance: 1.0e5 }
+        Settings {
+            max_depth: 3,
+            background: Vec3::new(0.1, 0.2, 0.3),
+            max_distance: 1.0e5,
+            ..Settings::default()
+        }
     );
 
     assert_eq!(s.lights.len(), 3);

@@ -80,7 +80,12 @@ pub fn lit_scene(objects: Vec<Object>, size: u32) -> Scene {
             width: size,
             height: size,
         },
-        settings: Settings { max_depth: 2, background: Vec3::new(0.1, 0.1, 0.15), max_distance: 1e5 },
+        settings: Settings {
+            max_depth: 2,
+            background: Vec3::new(0.1, 0.1, 0.15),
+            max_distance: 1e5,
+            ..Settings::default()
+        },
         lights: vec![
             Light::Ambient { intensity: 0.2 },
             Light::Point { position: Vec3::new(3.0, 4.0, -4.0), intensity: 0.6, color: Vec3::ONE },

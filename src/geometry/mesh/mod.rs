@@ -10,6 +10,7 @@
 //! one transform per instance, as a polygon renderer instances repeated geometry
 //! ([`instance`]: the copies of a repetition).
 
+pub mod compact;
 pub mod instance;
 pub mod packet;
 pub mod triangle;
@@ -22,15 +23,16 @@ use glam::{DVec3, Vec3};
 use obvhs::BvhBuildParams;
 
 use crate::geometry::bvh2;
+use crate::geometry::mesh::compact::{CompactBvh, VertexGrid};
 use crate::geometry::mesh::instance::compose;
 use crate::geometry::mesh::triangle::{ShearedRay, closest_point_on_triangle};
-use crate::geometry::mesh::wide_bvh::{LeafHit, WideBvh, any_walk, closest_walk};
+use crate::geometry::mesh::wide_bvh::{LeafHit, WideBvh, WideLayout, any_hit_of, any_walk, closest_walk};
 use crate::geometry::{
     Aabb, Census, Geometry, Hit, MaterialId, PACKET, Ray, RayStats, Shared, aabb, any_hits_one_by_one,
     closest_hits_one_by_one, f32_error, max_abs,
 };
 use crate::mesh::TriangleMesh;
-pub use crate::scene::shape::Shading;
+pub use crate::scene::shape::{MeshLayout, Shading};
 use crate::scene::transform::{Transform, TransformDesc};
 use crate::simd::{Kernel, Portable, Simd, dispatch};
 
@@ -42,14 +44,25 @@ use crate::simd::{Kernel, Portable, Simd, dispatch};
 /// mesh of the example scenes and `shared/meshes` lies within.
 pub const ORDINARY_EXTENT: std::ops::RangeInclusive<f64> = 9.5367431640625e-7..=1048576.0;
 
+/// A mesh's acceleration structure in one of the layouts.
+enum Accel {
+    /// [`MeshLayout::Full`].
+    Full(WideBvh),
+    /// [`MeshLayout::Compact`]: it holds the triangles and vertices too. Boxed, so that the
+    /// full layout's shape keeps its size (and byte count).
+    Compact(Box<CompactBvh>),
+}
+
 /// The part of a traced mesh that instances share: positions, triangles, normals and the
 /// BVH, in the mesh's own frame.
 pub struct MeshShape {
+    /// Vertex positions (the full layout; empty in the compact one, whose BVH holds them).
     positions: Vec<Vec3>,
-    /// Triangles in BVH leaf order: leaf primitive `i` is `triangles[i]`.
+    /// Triangles in BVH leaf order: leaf primitive `i` is `triangles[i]` (the full layout;
+    /// empty in the compact one, whose BVH holds them).
     triangles: Vec<[u32; 3]>,
     normals: Option<Vec<Vec3>>,
-    bvh: WideBvh,
+    bvh: Accel,
     /// The box of the triangles (padded as the BVH's leaves), `None` without triangles.
     local_bounds: Option<Aabb>,
     /// For a mesh whose extent lies outside [`ORDINARY_EXTENT`] (1e19 or 1e-30 across, say),
@@ -68,22 +81,69 @@ impl MeshShape {
             + self.positions.capacity() * std::mem::size_of::<Vec3>()
             + self.triangles.capacity() * std::mem::size_of::<[u32; 3]>()
             + self.normals.as_ref().map_or(0, |n| n.capacity() * std::mem::size_of::<Vec3>())
-            + self.bvh.bytes_used()
-            - std::mem::size_of::<WideBvh>()
+            + self.accel_bytes()
+    }
+
+    /// Bytes of the BVH on the heap: the full layout's nodes and leaf packets (which hold
+    /// the corners), the compact layout's boxed struct, nodes, triangle list (its leaves)
+    /// and 16-bit vertices (it holds the mesh).
+    pub fn accel_bytes(&self) -> usize {
+        match &self.bvh {
+            Accel::Full(b) => b.bytes_used() - std::mem::size_of::<WideBvh>(),
+            Accel::Compact(b) => b.bytes_used(),
+        }
+    }
+
+    /// Bytes of the BVH as the benchmarks count it per triangle: the full layout's nodes
+    /// and leaf packets, the compact layout's nodes and triangle list.
+    pub fn bvh_bytes(&self) -> usize {
+        match &self.bvh {
+            Accel::Full(b) => b.bytes_used() - std::mem::size_of::<WideBvh>(),
+            Accel::Compact(b) => b.node_bytes() + b.triangles.capacity() * std::mem::size_of::<[u32; 3]>(),
+        }
     }
 
     /// What the shape stores: its triangles and the BVH's nodes and packets.
     pub fn census(&self) -> Census {
         Census {
-            triangles: self.triangles.len() as u64,
+            triangles: self.triangle_count() as u64,
             grid_samples: 0,
-            accel_bytes: (self.bvh.bytes_used() - std::mem::size_of::<WideBvh>()) as u64,
+            accel_bytes: self.bvh_bytes() as u64,
         }
     }
 
     /// Number of triangles.
     pub fn triangle_count(&self) -> usize {
-        self.triangles.len()
+        match &self.bvh {
+            Accel::Full(_) => self.triangles.len(),
+            Accel::Compact(b) => b.triangles.len(),
+        }
+    }
+
+    /// The layout of the BVH.
+    pub fn layout(&self) -> MeshLayout {
+        match &self.bvh {
+            Accel::Full(_) => MeshLayout::Full,
+            Accel::Compact(_) => MeshLayout::Compact,
+        }
+    }
+
+    /// Triangle `i` (leaf order): its vertex indices.
+    #[inline(always)]
+    fn triangle(&self, i: u32) -> [u32; 3] {
+        match &self.bvh {
+            Accel::Full(_) => self.triangles[i as usize],
+            Accel::Compact(b) => b.triangles[i as usize],
+        }
+    }
+
+    /// The corners of triangle `i` (leaf order).
+    #[inline]
+    fn corners(&self, i: u32) -> [Vec3; 3] {
+        match &self.bvh {
+            Accel::Full(_) => self.triangle(i).map(|v| self.positions[v as usize]),
+            Accel::Compact(b) => b.corners(i as usize),
+        }
     }
 
     /// Vertex positions, the shape's frame.
@@ -170,6 +230,34 @@ impl MeshGeometry {
         label: String,
         params: BvhBuildParams,
     ) -> Self {
+        Self::with_options(mesh, shading, transform, material, label, params, MeshLayout::Full)
+    }
+
+    /// [`MeshGeometry::new`] in layout `layout`. The compact layout traces the mesh with its
+    /// positions snapped to a 16-bit grid ([`VertexGrid`]); a mesh it cannot represent
+    /// (boxes beyond `f32`, more than 2^26 triangles) keeps the full layout
+    /// ([`MeshShape::layout`] says which was built).
+    pub fn with_layout(
+        mesh: TriangleMesh,
+        shading: Shading,
+        transform: Transform,
+        material: MaterialId,
+        label: String,
+        layout: MeshLayout,
+    ) -> Self {
+        Self::with_options(mesh, shading, transform, material, label, Self::BUILD_PARAMS, layout)
+    }
+
+    /// [`MeshGeometry::with_params`] in layout `layout` ([`MeshGeometry::with_layout`]).
+    pub fn with_options(
+        mesh: TriangleMesh,
+        shading: Shading,
+        transform: Transform,
+        material: MaterialId,
+        label: String,
+        params: BvhBuildParams,
+        layout: MeshLayout,
+    ) -> Self {
         let start = Instant::now();
         let TriangleMesh { mut positions, triangles, mut normals } = mesh;
         // Outside the ordinary range of extents, to the unit frame (see `MeshShape::unit`)
@@ -203,6 +291,18 @@ impl MeshGeometry {
                 Some(Box::new(Transform::new(&desc)))
             }
         };
+        // The compact layout traces the mesh snapped to its grid: snapped before the BVH
+        // is built, so that its boxes hold the triangles the walks test.
+        let grid = if layout == MeshLayout::Compact && !triangles.is_empty() {
+            VertexGrid::of(&positions)
+        } else {
+            None
+        };
+        if let Some(g) = &grid {
+            for p in &mut positions {
+                *p = g.snap(*p);
+            }
+        }
         // Triangles in axis-aligned planes have flat boxes, which the PLOC builder clusters
         // badly (measured: a cylinder's flat caps cost 326 leaf triangles per ray against 5
         // with padding); pad every box by a millionth of the mesh's size.
@@ -255,6 +355,11 @@ impl MeshGeometry {
             Shading::Smooth => {}
         }
         let local_bounds = boxes.iter().copied().reduce(|a, b| a.union(&b));
+        let compact = grid.and_then(|g| CompactBvh::from_wide(&bvh, triangles.clone(), &positions, g));
+        let (positions, triangles, bvh) = match compact {
+            Some(c) => (Vec::new(), Vec::new(), Accel::Compact(Box::new(c))),
+            None => (positions, triangles, Accel::Full(bvh)),
+        };
         let shape = Arc::new(MeshShape { positions, triangles, normals, bvh, local_bounds, unit });
         let build_time = start.elapsed();
         Self::on_shape(shape, transform, material, label, build_time)
@@ -316,7 +421,7 @@ impl MeshGeometry {
             return None;
         }
         let local = if self.transform.identity { *ray } else { self.transform.ray_to_local(ray) };
-        let corners = self.corners(triangle);
+        let corners = self.shape.corners(triangle);
         let [a, b, c] = corners;
         let h = ShearedRay::new(local.origin, local.dir).intersect(a, b, c, 0.0, t_max)?;
         Some(self.hit_record(ray, &local, LeafHit { triangle, t: h.t, corners }, h.t, &self.transform))
@@ -324,21 +429,22 @@ impl MeshGeometry {
 
     /// The triangles in world space (positions transformed; no normals).
     pub fn world_mesh(&self) -> TriangleMesh {
+        let (positions, triangles) = match &self.shape.bvh {
+            Accel::Full(_) => (self.shape.positions.clone(), self.shape.triangles.clone()),
+            Accel::Compact(b) => {
+                (b.vertices.iter().map(|&q| b.grid.position(q)).collect(), b.triangles.clone())
+            }
+        };
         TriangleMesh {
-            positions: self
-                .shape
-                .positions
-                .iter()
-                .map(|&p| self.transform.to_world.transform_point3(p))
-                .collect(),
-            triangles: self.shape.triangles.clone(),
+            positions: positions.into_iter().map(|p| self.transform.to_world.transform_point3(p)).collect(),
+            triangles,
             normals: None,
         }
     }
 
     /// Number of triangles.
     pub fn triangle_count(&self) -> usize {
-        self.shape.triangles.len()
+        self.shape.triangle_count()
     }
 
     /// Bytes of this instance alone: its struct and label, without the shared shape.
@@ -348,25 +454,30 @@ impl MeshGeometry {
             + self.placement.as_ref().map_or(0, |_| std::mem::size_of::<Transform>())
     }
 
-    /// Bytes of the BVH alone (its struct, nodes and leaf packets).
+    /// Bytes of the BVH alone: its struct and what it holds ([`MeshShape::accel_bytes`]
+    /// and the struct).
     pub fn accel_bytes(&self) -> usize {
-        self.shape.bvh.bytes_used()
+        match &self.shape.bvh {
+            Accel::Full(b) => b.bytes_used(),
+            Accel::Compact(b) => b.bytes_used(),
+        }
     }
 
     /// [`Geometry::closest_hit`] on backend `s`: ray setup, walk and hit record in one
     /// body (inlined into [`ClosestHit::run`], so that under AVX2 all of it is compiled
     /// with AVX2, in one function).
     #[inline(always)]
-    fn closest_hit_on<S: Simd>(
+    fn closest_hit_on<S: Simd, L: WideLayout>(
         &self,
         s: S,
+        bvh: &L,
         ray: &Ray,
         t_min: f32,
         t_max: f32,
         stats: &mut RayStats,
     ) -> Option<Hit> {
         let local = if self.transform.identity { *ray } else { self.transform.ray_to_local(ray) };
-        let leaf = closest_walk(s, &self.shape.bvh, local.origin, local.dir, t_min, t_max, stats)?;
+        let leaf = closest_walk(s, bvh, local.origin, local.dir, t_min, t_max, stats)?;
         Some(self.hit_record(ray, &local, leaf, leaf.t, &self.transform))
     }
 
@@ -389,8 +500,11 @@ impl MeshGeometry {
         let local = self.transform.ray_to_local(ray);
         let f = rescale(local.dir)?;
         let local = Ray::spawned(local.origin, local.dir / f, local.spread);
-        let leaf =
-            closest_walk(Portable, &self.shape.bvh, local.origin, local.dir, t_min * f, t_max * f, stats);
+        let (o, d) = (local.origin, local.dir);
+        let leaf = match &self.shape.bvh {
+            Accel::Full(b) => closest_walk(Portable, b, o, d, t_min * f, t_max * f, stats),
+            Accel::Compact(b) => closest_walk(Portable, &**b, o, d, t_min * f, t_max * f, stats),
+        };
         Some(leaf.map(|leaf| self.hit_record(ray, &local, leaf, leaf.t / f, self.transform())))
     }
 
@@ -407,7 +521,7 @@ impl MeshGeometry {
             let bary = ShearedRay::new(local.origin, local.dir)
                 .intersect(a, b, c, t, t)
                 .map_or([1.0 / 3.0; 3], |h| h.bary);
-            let t = self.shape.triangles[i as usize];
+            let t = self.shape.triangle(i);
             let s = vertex_normals[t[0] as usize] * bary[0]
                 + vertex_normals[t[1] as usize] * bary[1]
                 + vertex_normals[t[2] as usize] * bary[2];
@@ -421,11 +535,16 @@ impl MeshGeometry {
         let m = max_abs(point).max(max_abs(ray.origin)).max(max_abs(local_point) * self.transform.max_scale);
         Hit { t: t_world, point, normal, shading_normal, material: self.material, error: f32_error(m) }
     }
+}
 
-    #[inline]
-    fn corners(&self, i: u32) -> [Vec3; 3] {
-        let (t, p) = (self.shape.triangles[i as usize], &self.shape.positions);
-        [p[t[0] as usize], p[t[1] as usize], p[t[2] as usize]]
+impl MeshGeometry {
+    /// Whether batches can go in packets ([`packet`]): the full layout, a BVH shallow
+    /// enough for a packet's stack. The compact layout traces batches one ray at a time.
+    fn packets_fit(&self) -> bool {
+        match &self.shape.bvh {
+            Accel::Full(b) => packet::fits(b),
+            Accel::Compact(_) => false,
+        }
     }
 }
 
@@ -449,21 +568,23 @@ fn rescale(dir: Vec3) -> Option<f32> {
     Some(2f32.powi(m.log2().floor() as i32))
 }
 
-/// [`Geometry::closest_hit`] of a [`MeshGeometry`] as a [`Kernel`].
-struct ClosestHit<'a> {
+/// [`Geometry::closest_hit`] of a [`MeshGeometry`] whose BVH is `bvh` as a [`Kernel`]
+/// (one per layout, so that each is compiled apart).
+struct ClosestHit<'a, L> {
     mesh: &'a MeshGeometry,
+    bvh: &'a L,
     ray: &'a Ray,
     t_min: f32,
     t_max: f32,
     stats: &'a mut RayStats,
 }
 
-impl Kernel for ClosestHit<'_> {
+impl<L: WideLayout> Kernel for ClosestHit<'_, L> {
     type Output = Option<Hit>;
     #[inline(always)]
     fn run<S: Simd>(self, s: S) -> Option<Hit> {
         let ray = Ray::new(self.ray.origin, self.ray.dir);
-        self.mesh.closest_hit_on(s, &ray, self.t_min, self.t_max, self.stats)
+        self.mesh.closest_hit_on(s, self.bvh, &ray, self.t_min, self.t_max, self.stats)
     }
 }
 
@@ -502,14 +623,14 @@ impl Kernel for ClosestHits<'_> {
     #[inline(always)]
     fn run<S: Simd>(self, s: S) {
         let mesh = self.mesh;
-        let bounds = packet::PacketBounds::of(&mesh.shape.bvh);
+        let Accel::Full(bvh) = &mesh.shape.bvh else { unreachable!("packets of the full layout only") };
+        let bounds = packet::PacketBounds::of(bvh);
         let packets =
             self.rays.chunks(PACKET).zip(self.t_max.chunks_mut(PACKET)).zip(self.hits.chunks_mut(PACKET));
         for ((rays, t_max), hits) in packets {
             let (local, origins, dirs) = local_packet(&mesh.transform, rays);
             let mut reach = [f32::NEG_INFINITY; PACKET];
             reach[..rays.len()].copy_from_slice(t_max);
-            let bvh = &mesh.shape.bvh;
             let (n, t_min) = (rays.len(), self.t_min);
             let coherent =
                 packet::closest_coherent(s, bvh, bounds, &origins, &dirs, n, t_min, &mut reach, self.stats);
@@ -553,7 +674,8 @@ impl Kernel for AnyHits<'_> {
     #[inline(always)]
     fn run<S: Simd>(self, s: S) {
         let mesh = self.mesh;
-        let bounds = packet::PacketBounds::of(&mesh.shape.bvh);
+        let Accel::Full(bvh) = &mesh.shape.bvh else { unreachable!("packets of the full layout only") };
+        let bounds = packet::PacketBounds::of(bvh);
         let packets =
             self.rays.chunks(PACKET).zip(self.t_max.chunks(PACKET)).zip(self.occluded.chunks_mut(PACKET));
         for ((rays, t_max), occluded) in packets {
@@ -564,7 +686,6 @@ impl Kernel for AnyHits<'_> {
             let (_, origins, dirs) = local_packet(&mesh.transform, rays);
             let mut reach = [f32::NEG_INFINITY; PACKET];
             reach[..rays.len()].copy_from_slice(t_max);
-            let bvh = &mesh.shape.bvh;
             let (n, t_min) = (rays.len(), self.t_min);
             let found = match packet::any_coherent(
                 s, bvh, bounds, &origins, &dirs, n, t_min, &reach, given, self.stats,
@@ -600,7 +721,10 @@ impl Geometry for MeshGeometry {
         {
             return hit;
         }
-        dispatch(ClosestHit { mesh: self, ray, t_min, t_max, stats })
+        match &self.shape.bvh {
+            Accel::Full(bvh) => dispatch(ClosestHit { mesh: self, bvh, ray, t_min, t_max, stats }),
+            Accel::Compact(bvh) => dispatch(ClosestHit { mesh: self, bvh: &**bvh, ray, t_min, t_max, stats }),
+        }
     }
 
     /// Packets of [`PACKET`] rays through the BVH together ([`packet`]), each ray's hit
@@ -614,7 +738,7 @@ impl Geometry for MeshGeometry {
         hits: &mut [Option<Hit>],
         stats: &mut RayStats,
     ) {
-        if self.far_scale || !packet::fits(&self.shape.bvh) {
+        if self.far_scale || !self.packets_fit() {
             return closest_hits_one_by_one(self, rays, t_min, t_max, hits, stats);
         }
         dispatch(ClosestHits { mesh: self, rays, t_min, t_max, hits, stats });
@@ -631,7 +755,7 @@ impl Geometry for MeshGeometry {
 
     /// As [`Self::closest_hits`], for the rays not yet occluded.
     fn any_hits(&self, rays: &[Ray], t_min: f32, t_max: &[f32], occluded: &mut [bool], stats: &mut RayStats) {
-        if self.far_scale || !packet::fits(&self.shape.bvh) {
+        if self.far_scale || !self.packets_fit() {
             return any_hits_one_by_one(self, rays, t_min, t_max, occluded, stats);
         }
         dispatch(AnyHits { mesh: self, rays, t_min, t_max, occluded, stats });
@@ -639,13 +763,17 @@ impl Geometry for MeshGeometry {
 
     fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
         let local = self.transform.ray_to_local(ray);
+        let (mut dir, mut t_min, mut t_max) = (local.dir, t_min, t_max);
         if self.far_scale
             && let Some(f) = rescale(local.dir)
         {
             // As in `closest_hit_rescaled`.
-            return self.shape.bvh.any_hit(local.origin, local.dir / f, t_min * f, t_max * f, stats);
+            (dir, t_min, t_max) = (local.dir / f, t_min * f, t_max * f);
         }
-        self.shape.bvh.any_hit(local.origin, local.dir, t_min, t_max, stats)
+        match &self.shape.bvh {
+            Accel::Full(b) => b.any_hit(local.origin, dir, t_min, t_max, stats),
+            Accel::Compact(b) => any_hit_of(&**b, local.origin, dir, t_min, t_max, stats),
+        }
     }
 
     fn bytes_used(&self) -> usize {
@@ -670,26 +798,41 @@ impl Geometry for MeshGeometry {
         let local = self.transform.point_to_local_f64(p);
         let to_world = |x: DVec3| self.transform.to_world.transform_point3(x.as_vec3()).as_dvec3();
         let mut best = f64::INFINITY;
-        self.shape.bvh.nearest(local, |i| {
-            let [a, b, c] = self.corners(i);
+        let dist = |i| {
+            let [a, b, c] = self.shape.corners(i);
             let x = closest_point_on_triangle(local.as_vec3().into(), a.into(), b.into(), c.into());
             let d = (to_world(Vec3::from(x).as_dvec3()) - p).length();
             best = best.min(d);
             // The BVH prunes by local distance: convert the world distance back.
             d / self.transform.max_scale.max(f32::MIN_POSITIVE) as f64
-        });
+        };
+        match &self.shape.bvh {
+            Accel::Full(b) => b.nearest(local, dist),
+            Accel::Compact(b) => b.nearest(local, dist),
+        };
         best
     }
 
     fn describe(&self) -> String {
+        let bvh = match &self.shape.bvh {
+            Accel::Full(b) => {
+                format!(
+                    "8-wide BVH of {} nodes and {} leaf packets (depth {})",
+                    b.nodes.len(),
+                    b.packets.len(),
+                    b.depth
+                )
+            }
+            Accel::Compact(b) => format!(
+                "compact 8-wide BVH of {} quantised nodes over 16-bit vertices (depth {})",
+                b.nodes.len(),
+                b.depth
+            ),
+        };
         format!(
-            "{}: {} triangles, 8-wide BVH of {} nodes and {} leaf packets (depth {}) built in {:.1} ms, {}, \
-             {} lanes",
+            "{}: {} triangles, {bvh} built in {:.1} ms, {}, {} lanes",
             self.label,
-            self.shape.triangles.len(),
-            self.shape.bvh.nodes.len(),
-            self.shape.bvh.packets.len(),
-            self.shape.bvh.depth,
+            self.shape.triangle_count(),
             self.build_time.as_secs_f64() * 1e3,
             if self.shape.normals.is_some() { "smooth shading" } else { "flat shading" },
             crate::simd::backend().name()

@@ -34,7 +34,7 @@ pub const LEAF_PACKETS: usize = 2;
 /// Marks a child reference as a leaf: `LEAF | first_packet << LEAF_SHIFT | (triangles - 1)`.
 pub(crate) const LEAF: u32 = 1 << 31;
 /// Bits of a leaf reference that hold its triangle count less one.
-const LEAF_SHIFT: u32 = 5;
+pub(crate) const LEAF_SHIFT: u32 = 5;
 const _: () = assert!(LEAF_MAX * LEAF_PACKETS <= 1 << LEAF_SHIFT);
 // Node references are byte offsets, and `WideBvh::node` checks them as such.
 const _: () = assert!(size_of::<WideNode>() == 256);
@@ -167,10 +167,26 @@ impl<S: Simd> BoxRay<S> {
     #[inline(always)]
     fn hit<const ROOT: bool>(&self, n: &WideNode, t_min: f32, t_max: f32) -> (u32, [u32; WIDTH]) {
         let b = &n.bounds;
+        let s = self.s;
+        let rows =
+            [s.load8(&b[0]), s.load8(&b[1]), s.load8(&b[2]), s.load8(&b[3]), s.load8(&b[4]), s.load8(&b[5])];
+        self.hit_rows::<ROOT>(rows, t_min, t_max)
+    }
+
+    /// [`BoxRay::hit`] on the eight boxes whose bound rows (minimum x, y, z, then maximum
+    /// x, y, z) are `rows`: the full layout's rows as stored, the compact layout's
+    /// dequantised ([`super::compact`]).
+    #[inline(always)]
+    pub(crate) fn hit_rows<const ROOT: bool>(
+        &self,
+        rows: [S::F32x8; 6],
+        t_min: f32,
+        t_max: f32,
+    ) -> (u32, [u32; WIDTH]) {
         let fused = !ROOT;
-        let (x0, x1) = (self.slab(fused, &b[0], 0), self.slab(fused, &b[3], 3));
-        let (y0, y1) = (self.slab(fused, &b[1], 1), self.slab(fused, &b[4], 4));
-        let (z0, z1) = (self.slab(fused, &b[2], 2), self.slab(fused, &b[5], 5));
+        let (x0, x1) = (self.slab(fused, rows[0], 0), self.slab(fused, rows[3], 3));
+        let (y0, y1) = (self.slab(fused, rows[1], 1), self.slab(fused, rows[4], 4));
+        let (z0, z1) = (self.slab(fused, rows[2], 2), self.slab(fused, rows[5], 5));
         // Per axis, the entry and exit distances of the slab. `min` and `max` return their
         // second operand where either is NaN, so the NaN of an empty lane carries through
         // every step below and fails the final comparison.
@@ -182,21 +198,19 @@ impl<S: Simd> BoxRay<S> {
     /// The slab distances of bound row `row` (values `bound`): fused below the root, else
     /// `(bound - origin) * inv`.
     #[inline(always)]
-    fn slab(&self, fused: bool, bound: &[f32; WIDTH], row: usize) -> S::F32x8 {
+    fn slab(&self, fused: bool, bound: S::F32x8, row: usize) -> S::F32x8 {
         let a = row % 3;
         if fused {
-            self.s.load8(bound).mul_sub(self.inv[a], self.offset[row])
+            bound.mul_sub(self.inv[a], self.offset[row])
         } else {
-            (self.s.load8(bound) - self.origin[a]) * self.inv[a]
+            (bound - self.origin[a]) * self.inv[a]
         }
     }
 
-    /// Tests the triangles of one leaf (its one or two packets) with `sheared`: per lane
-    /// (`LEAF_MAX * k + l` for lane `l` of packet `k`) the hit's `t`, and the mask of lanes
-    /// hit within `[t_min, t_max]`. Two packets go through one eight-lane test.
+    /// The backend token.
     #[inline(always)]
-    fn leaf(&self, sheared: &ShearedRay, packets: &[Packet], t_min: f32, t_max: f32) -> ([f32; 8], u32) {
-        leaf_test(self.s, sheared, packets, t_min, t_max)
+    pub(crate) fn simd(&self) -> S {
+        self.s
     }
 }
 
@@ -363,14 +377,14 @@ impl WideBvh {
         t_max: f32,
         stats: &mut RayStats,
     ) -> Option<LeafHit> {
-        dispatch(Walk::<false> { bvh: self, origin, dir, t_min, t_max, stats })
+        closest_hit_of(self, origin, dir, t_min, t_max, stats)
     }
 
     /// Whether any triangle is hit with `t` in `[t_min, t_max]`; stops at the first
     /// (shadow rays). Counts work as [`WideBvh::closest_hit`] does.
     #[inline]
     pub fn any_hit(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, stats: &mut RayStats) -> bool {
-        dispatch(Walk::<true> { bvh: self, origin, dir, t_min, t_max, stats })
+        any_hit_of(self, origin, dir, t_min, t_max, stats)
     }
 
     /// The node of inner-node reference `r` (its byte offset in [`WideBvh::nodes`]): one
@@ -438,6 +452,106 @@ impl WideBvh {
     }
 }
 
+/// A layout of the 8-wide BVH: what the one-ray walks ([`closest_walk`], [`any_walk`])
+/// need of it, so that the same walk code runs on the full layout ([`WideBvh`]) and the
+/// compact one ([`super::compact::CompactBvh`]). The walks are generic over it and
+/// monomorphised (every method `#[inline(always)]`, no `dyn`): the full layout's walks
+/// compile to what they were before the compact one existed.
+///
+/// Child references are shared: `LEAF | first << LEAF_SHIFT | (count - 1)` for a leaf of
+/// `count` triangles ([`leaf_range`]; `first` is a packet index in the full layout, a
+/// triangle index in the compact one), an opaque node reference otherwise, [`NONE`] for an
+/// unused lane.
+pub(crate) trait WideLayout {
+    /// An inner node.
+    type Node;
+    /// Whether there is no node (an empty mesh).
+    fn is_empty(&self) -> bool;
+    /// Deepest node level (root = 1), which bounds the traversal stack.
+    fn depth(&self) -> usize;
+    /// The root node.
+    fn root(&self) -> &Self::Node;
+    /// The node of inner-node reference `r`.
+    fn node(&self, r: u32) -> &Self::Node;
+    /// The child references of `n`, lane by lane.
+    fn children(n: &Self::Node) -> &[u32; WIDTH];
+    /// The lanes of `n` whose child box the ray `br` enters within `[t_min, t_max]` and
+    /// the [`order_key`]s of the entry distances, as [`BoxRay::hit`].
+    fn test_node<S: Simd, const ROOT: bool>(
+        br: &BoxRay<S>,
+        n: &Self::Node,
+        t_min: f32,
+        t_max: f32,
+    ) -> (u32, [u32; WIDTH]);
+    /// The triangle test of the leaf `leaf` (from [`leaf_range`]) with `sheared`: per lane
+    /// the hit's `t`, and the mask of lanes hit within `[t_min, t_max]`.
+    fn leaf_test<S: Simd>(
+        &self,
+        s: S,
+        sheared: &ShearedRay,
+        leaf: (usize, usize),
+        t_min: f32,
+        t_max: f32,
+    ) -> ([f32; 8], u32);
+    /// Where lane `lane` of leaf `leaf`'s test lies, as a pair ordered as the leaf order
+    /// (the tie rule [`tie_wins`] compares them).
+    fn leaf_at(leaf: (usize, usize), lane: usize) -> (usize, usize);
+    /// The hit at `t` on the triangle at `at` (from [`WideLayout::leaf_at`]).
+    fn leaf_hit(&self, at: (usize, usize), t: f32) -> LeafHit;
+}
+
+impl WideLayout for WideBvh {
+    type Node = WideNode;
+    #[inline(always)]
+    fn is_empty(&self) -> bool {
+        self.nodes.is_empty()
+    }
+    #[inline(always)]
+    fn depth(&self) -> usize {
+        self.depth
+    }
+    #[inline(always)]
+    fn root(&self) -> &WideNode {
+        &self.nodes[0]
+    }
+    #[inline(always)]
+    fn node(&self, r: u32) -> &WideNode {
+        WideBvh::node(self, r)
+    }
+    #[inline(always)]
+    fn children(n: &WideNode) -> &[u32; WIDTH] {
+        &n.children
+    }
+    #[inline(always)]
+    fn test_node<S: Simd, const ROOT: bool>(
+        br: &BoxRay<S>,
+        n: &WideNode,
+        t_min: f32,
+        t_max: f32,
+    ) -> (u32, [u32; WIDTH]) {
+        br.hit::<ROOT>(n, t_min, t_max)
+    }
+    #[inline(always)]
+    fn leaf_test<S: Simd>(
+        &self,
+        s: S,
+        sheared: &ShearedRay,
+        leaf: (usize, usize),
+        t_min: f32,
+        t_max: f32,
+    ) -> ([f32; 8], u32) {
+        leaf_test(s, sheared, self.leaf_packets(leaf), t_min, t_max)
+    }
+    #[inline(always)]
+    fn leaf_at((first, _): (usize, usize), lane: usize) -> (usize, usize) {
+        (first + lane / LEAF_MAX, lane % LEAF_MAX)
+    }
+    #[inline(always)]
+    fn leaf_hit(&self, at: (usize, usize), t: f32) -> LeafHit {
+        WideBvh::leaf_hit(self, at, t)
+    }
+}
+
 /// A traversal stack entry: the order key ([`order_key`]) of the distance at which the ray
 /// enters the child in the high 32 bits, its child reference in the low ones. Comparing
 /// entries as integers compares their distances, so sorting children is a few
@@ -494,8 +608,8 @@ fn ordered(a: Entry, b: Entry) -> (Entry, Entry) {
 /// Stack entries a walk over `bvh` needs at most: each level of the current path holds at
 /// most `WIDTH - 1` pending children, and [`visit_node`] may write two slots past the
 /// entries it keeps.
-pub(crate) fn stack_needed(bvh: &WideBvh) -> usize {
-    bvh.depth * (WIDTH - 1) + 1 + 2
+pub(crate) fn stack_needed(bvh: &impl WideLayout) -> usize {
+    bvh.depth() * (WIDTH - 1) + 1 + 2
 }
 
 /// Evaluates `$walk` with `$stack` bound to a traversal stack ([`WalkStack`], not zeroed)
@@ -516,10 +630,36 @@ macro_rules! with_stack {
     };
 }
 
+/// [`WideBvh::closest_hit`] on any layout.
+#[inline(always)]
+pub(crate) fn closest_hit_of<L: WideLayout>(
+    bvh: &L,
+    origin: Vec3,
+    dir: Vec3,
+    t_min: f32,
+    t_max: f32,
+    stats: &mut RayStats,
+) -> Option<LeafHit> {
+    dispatch(Walk::<L, false> { bvh, origin, dir, t_min, t_max, stats })
+}
+
+/// [`WideBvh::any_hit`] on any layout.
+#[inline(always)]
+pub(crate) fn any_hit_of<L: WideLayout>(
+    bvh: &L,
+    origin: Vec3,
+    dir: Vec3,
+    t_min: f32,
+    t_max: f32,
+    stats: &mut RayStats,
+) -> bool {
+    dispatch(Walk::<L, true> { bvh, origin, dir, t_min, t_max, stats })
+}
+
 /// A walk of [`WideBvh::closest_hit`] (`ANY` false) or [`WideBvh::any_hit`] (`ANY` true)
-/// as a [`Kernel`]: the ray and the work counters.
-struct Walk<'a, const ANY: bool> {
-    bvh: &'a WideBvh,
+/// on layout `L` as a [`Kernel`]: the ray and the work counters.
+struct Walk<'a, L, const ANY: bool> {
+    bvh: &'a L,
     origin: Vec3,
     dir: Vec3,
     t_min: f32,
@@ -527,7 +667,7 @@ struct Walk<'a, const ANY: bool> {
     stats: &'a mut RayStats,
 }
 
-impl Kernel for Walk<'_, false> {
+impl<L: WideLayout> Kernel for Walk<'_, L, false> {
     type Output = Option<LeafHit>;
     #[inline(always)]
     fn run<S: Simd>(self, s: S) -> Option<LeafHit> {
@@ -535,7 +675,7 @@ impl Kernel for Walk<'_, false> {
     }
 }
 
-impl Kernel for Walk<'_, true> {
+impl<L: WideLayout> Kernel for Walk<'_, L, true> {
     type Output = bool;
     #[inline(always)]
     fn run<S: Simd>(self, s: S) -> bool {
@@ -548,21 +688,21 @@ impl Kernel for Walk<'_, true> {
 /// callers, so that inside a kernel run by [`dispatch`] all of it is compiled for the
 /// backend.
 #[inline(always)]
-pub(crate) fn closest_walk<S: Simd>(
+pub(crate) fn closest_walk<S: Simd, L: WideLayout>(
     s: S,
-    bvh: &WideBvh,
+    bvh: &L,
     origin: Vec3,
     dir: Vec3,
     t_min: f32,
     t_max: f32,
     stats: &mut RayStats,
 ) -> Option<LeafHit> {
-    if bvh.nodes.is_empty() {
+    if bvh.is_empty() {
         return None;
     }
     let br = BoxRay::new(s, origin, dir);
     // The root, before the stack: most rays that miss end here.
-    let (mask, d) = br.hit::<true>(&bvh.nodes[0], t_min, t_max);
+    let (mask, d) = L::test_node::<S, true>(&br, bvh.root(), t_min, t_max);
     if mask == 0 {
         stats.bvh_nodes += 1;
         return None;
@@ -575,23 +715,29 @@ pub(crate) fn closest_walk<S: Simd>(
 /// [`NONE`] where the ray enters none. Two children are ordered by one compare-exchange of
 /// their entries, three or four by a network of four, more by insertion.
 #[inline(always)]
-fn visit_node<S: Simd>(br: &BoxRay<S>, n: &WideNode, t_min: f32, t_max: f32, stack: &mut WalkStack) -> u32 {
-    let (mask, d) = br.hit::<false>(n, t_min, t_max);
-    push_children(n, mask, d, stack)
+fn visit_node<S: Simd, L: WideLayout>(
+    br: &BoxRay<S>,
+    n: &L::Node,
+    t_min: f32,
+    t_max: f32,
+    stack: &mut WalkStack,
+) -> u32 {
+    let (mask, d) = L::test_node::<S, false>(br, n, t_min, t_max);
+    push_children(L::children(n), mask, d, stack)
 }
 
-/// [`visit_node`] after the box test: the children of `n` in `mask`, entered at the
+/// [`visit_node`] after the box test: the children `children` in `mask`, entered at the
 /// distances whose keys are `d`.
 #[inline(always)]
-fn push_children(n: &WideNode, mut mask: u32, d: [u32; WIDTH], stack: &mut WalkStack) -> u32 {
+fn push_children(children: &[u32; WIDTH], mut mask: u32, d: [u32; WIDTH], stack: &mut WalkStack) -> u32 {
     if mask == 0 {
         return NONE;
     }
     let l0 = next_lane(&mut mask);
     if mask == 0 {
-        return n.children[l0];
+        return children[l0];
     }
-    let key = |l: usize| entry(d[l], n.children[l]);
+    let key = |l: usize| entry(d[l], children[l]);
     let (a, b) = ordered(key(l0), key(next_lane(&mut mask)));
     if mask == 0 {
         // Two children, the commonest case after one: no network.
@@ -645,9 +791,9 @@ fn push_children(n: &WideNode, mut mask: u32, d: [u32; WIDTH], stack: &mut WalkS
 /// root); the second goes on from that leaf with it.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn closest_walk_in<S: Simd>(
+fn closest_walk_in<S: Simd, L: WideLayout>(
     br: &BoxRay<S>,
-    bvh: &WideBvh,
+    bvh: &L,
     stack: &mut WalkStack,
     root: (u32, [u32; WIDTH]),
     origin: Vec3,
@@ -657,14 +803,14 @@ fn closest_walk_in<S: Simd>(
     stats: &mut RayStats,
 ) -> Option<LeafHit> {
     let mut nodes = 1u64;
-    let mut cur = push_children(&bvh.nodes[0], root.0, root.1, stack);
+    let mut cur = push_children(L::children(bvh.root()), root.0, root.1, stack);
     // One step down (a macro: a closure would not inherit the walk's target feature):
     // the nearest child the ray enters, else the nearest pending one; where there is none
     // the ray misses.
     macro_rules! descend {
         () => {{
             nodes += 1;
-            cur = visit_node(br, bvh.node(cur), t_min, t_max, stack);
+            cur = visit_node::<S, L>(br, bvh.node(cur), t_min, t_max, stack);
             if cur == NONE {
                 let Some(e) = stack.pop() else {
                     stats.bvh_nodes += nodes;
@@ -694,21 +840,21 @@ fn closest_walk_in<S: Simd>(
     'walk: loop {
         if cur & LEAF == 0 {
             nodes += 1;
-            cur = visit_node(br, bvh.node(cur), t_min, t_max, stack);
+            cur = visit_node::<S, L>(br, bvh.node(cur), t_min, t_max, stack);
             if cur != NONE {
                 continue 'walk;
             }
         } else {
-            let (first, count) = leaf_range(cur);
-            tests += count as u64;
-            let (t, mut hits) = br.leaf(&sheared, bvh.leaf_packets((first, count)), t_min, t_max);
+            let leaf = leaf_range(cur);
+            tests += leaf.1 as u64;
+            let (t, mut hits) = bvh.leaf_test(br.simd(), &sheared, leaf, t_min, t_max);
             if hits != 0 {
                 // The nearest hit lane; among hits at the same distance, the last in leaf
                 // order, in this leaf or any other ([`tie_wins`]).
                 while hits != 0 {
                     let lane = hits.trailing_zeros() as usize & 7;
                     hits &= hits - 1;
-                    let at = (first + lane / LEAF_MAX, lane % LEAF_MAX);
+                    let at = L::leaf_at(leaf, lane);
                     if tie_wins(t[lane], t_max, at, best) {
                         t_max = t[lane];
                         best = Some(at);
@@ -735,9 +881,9 @@ fn closest_walk_in<S: Simd>(
 
 /// [`WideBvh::any_hit`] on backend `s` with a stack from [`with_stack`].
 #[inline(always)]
-pub(crate) fn any_walk<S: Simd>(
+pub(crate) fn any_walk<S: Simd, L: WideLayout>(
     s: S,
-    bvh: &WideBvh,
+    bvh: &L,
     origin: Vec3,
     dir: Vec3,
     t_min: f32,
@@ -750,9 +896,9 @@ pub(crate) fn any_walk<S: Simd>(
 /// [`any_walk`] on `stack` (at least [`stack_needed`] entries).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn any_walk_in<S: Simd>(
+fn any_walk_in<S: Simd, L: WideLayout>(
     s: S,
-    bvh: &WideBvh,
+    bvh: &L,
     stack: &mut WalkStack,
     origin: Vec3,
     dir: Vec3,
@@ -760,7 +906,7 @@ fn any_walk_in<S: Simd>(
     t_max: f32,
     stats: &mut RayStats,
 ) -> bool {
-    if bvh.nodes.is_empty() {
+    if bvh.is_empty() {
         return false;
     }
     let br = BoxRay::new(s, origin, dir);
@@ -778,16 +924,17 @@ fn any_walk_in<S: Simd>(
             let n = bvh.node(cur);
             stats.bvh_nodes += 1;
             // Every node, the root too, with the test below the root (as measured).
-            let (mut mask, _) = br.hit::<false>(n, t_min, t_max);
+            let (mut mask, _) = L::test_node::<S, false>(&br, n, t_min, t_max);
+            let children = L::children(n);
             while mask != 0 {
                 let l = mask.trailing_zeros() as usize;
                 mask &= mask - 1;
-                stack.push(u64::from(n.children[l]));
+                stack.push(u64::from(children[l]));
             }
         } else {
-            let (first, count) = leaf_range(cur);
-            stats.prim_tests += count as u64;
-            if br.leaf(&sheared, bvh.leaf_packets((first, count)), t_min, t_max).1 != 0 {
+            let leaf = leaf_range(cur);
+            stats.prim_tests += leaf.1 as u64;
+            if bvh.leaf_test(s, &sheared, leaf, t_min, t_max).1 != 0 {
                 found = true;
                 break;
             }
