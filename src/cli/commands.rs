@@ -46,8 +46,8 @@ fn is_vm(path: &Path) -> bool {
 /// `toolkit render MODEL.vm`: a model without `var-z` as the Prospero challenge's image
 /// (white where negative), default 1024 x 1024; a 3D model is refused (not yet supported).
 fn render_vm(opts: &RenderOptions) -> Result<RenderReport> {
-    use crate::implicit::image2d::render_2d;
     use crate::geometry::RayStats;
+    use crate::implicit::image2d::render_2d;
     use crate::render::Frame;
     let ssa = crate::implicit::load_vm(&opts.scene)?;
     if ssa.uses_z() {

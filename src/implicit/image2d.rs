@@ -69,7 +69,8 @@ struct Scratch {
 pub fn render_2d(ssa: &Ssa, width: usize, height: usize) -> (Mask, Census) {
     let tiles_x = width.div_ceil(TILE);
     let tiles_y = height.div_ceil(TILE);
-    let tiles: Vec<(usize, usize)> = (0..tiles_y).flat_map(|ty| (0..tiles_x).map(move |tx| (ty, tx))).collect();
+    let tiles: Vec<(usize, usize)> =
+        (0..tiles_y).flat_map(|ty| (0..tiles_x).map(move |tx| (ty, tx))).collect();
     let done: Vec<(usize, usize, Vec<u8>, Census)> = tiles
         .par_iter()
         .map_init(Scratch::default, |s, &(ty, tx)| {
@@ -118,7 +119,16 @@ fn settled(v: Interval) -> Option<bool> {
 }
 
 #[allow(clippy::too_many_arguments)]
-fn tile(ssa: &Ssa, w: usize, h: usize, i0: usize, j0: usize, px: &mut [u8], s: &mut Scratch, census: &mut Census) {
+fn tile(
+    ssa: &Ssa,
+    w: usize,
+    h: usize,
+    i0: usize,
+    j0: usize,
+    px: &mut [u8],
+    s: &mut Scratch,
+    census: &mut Census,
+) {
     let (i1, j1) = ((i0 + TILE).min(h), (j0 + TILE).min(w));
     let zero = Interval::new(0.0, 0.0);
     let (x, y) = region(w, h, i0, i1, j0, j1);
@@ -177,7 +187,9 @@ pub fn render_2d_reference(ssa: &Ssa, width: usize, height: usize) -> Mask {
         .flat_map_iter(|i| {
             let mut v = Vec::new();
             (0..width)
-                .map(|j| (ssa.eval_f64_into([pixel_x(j, width), pixel_y(i, height), 0.0], &mut v) < 0.0) as u8)
+                .map(|j| {
+                    (ssa.eval_f64_into([pixel_x(j, width), pixel_y(i, height), 0.0], &mut v) < 0.0) as u8
+                })
                 .collect::<Vec<u8>>()
         })
         .collect();

@@ -36,7 +36,11 @@ impl Interval {
 
     /// The single value `v` (NaN gives an interval that is only NaN).
     pub fn point(v: f64) -> Interval {
-        if v.is_nan() { Interval { lo: f64::INFINITY, hi: f64::NEG_INFINITY, nan: true } } else { Interval::new(v, v) }
+        if v.is_nan() {
+            Interval { lo: f64::INFINITY, hi: f64::NEG_INFINITY, nan: true }
+        } else {
+            Interval::new(v, v)
+        }
     }
 
     /// Whether `v` may be a value.
@@ -50,7 +54,8 @@ impl Interval {
     }
 
     fn widened(lo: f64, hi: f64, nan: bool) -> Interval {
-        let (lo, hi) = if lo.is_nan() || hi.is_nan() { (f64::NEG_INFINITY, f64::INFINITY) } else { (down(lo), up(hi)) };
+        let (lo, hi) =
+            if lo.is_nan() || hi.is_nan() { (f64::NEG_INFINITY, f64::INFINITY) } else { (down(lo), up(hi)) };
         Interval { lo, hi, nan }
     }
 
@@ -95,7 +100,11 @@ impl Interval {
             }
             Square => {
                 let (l, h) = (a.lo * a.lo, a.hi * a.hi);
-                if a.lo <= 0.0 && a.hi >= 0.0 { w(0.0, l.max(h), false) } else { w(l.min(h), l.max(h), false) }
+                if a.lo <= 0.0 && a.hi >= 0.0 {
+                    w(0.0, l.max(h), false)
+                } else {
+                    w(l.min(h), l.max(h), false)
+                }
             }
             Floor => Interval { lo: a.lo.floor(), hi: a.hi.floor(), nan },
             Ceil => Interval { lo: a.lo.ceil(), hi: a.hi.ceil(), nan },
@@ -110,11 +119,7 @@ impl Interval {
                 let k = ((a.lo - FRAC_PI_2) / PI).floor();
                 let next = FRAC_PI_2 + (k + 1.0) * PI;
                 // Keep a margin of rounding around the asymptote.
-                if a.hi >= next - 1e-9 * next.abs().max(1.0) {
-                    ANY
-                } else {
-                    w(a.lo.tan(), a.hi.tan(), false)
-                }
+                if a.hi >= next - 1e-9 * next.abs().max(1.0) { ANY } else { w(a.lo.tan(), a.hi.tan(), false) }
             }
             Asin | Acos => {
                 if a.hi < -1.0 || a.lo > 1.0 {
@@ -265,8 +270,8 @@ mod tests {
     fn every_opcode_contains_its_sampled_values() {
         use Opcode::*;
         let ops = [
-            Neg, Abs, Recip, Sqrt, Square, Floor, Ceil, Round, Sin, Cos, Tan, Asin, Acos, Atan, Exp, Ln, Not, Add,
-            Sub, Mul, Div, Min, Max, Atan2, Mod, Compare, And, Or,
+            Neg, Abs, Recip, Sqrt, Square, Floor, Ceil, Round, Sin, Cos, Tan, Asin, Acos, Atan, Exp, Ln, Not,
+            Add, Sub, Mul, Div, Min, Max, Atan2, Mod, Compare, And, Or,
         ];
         let mut s = 0x1234_5678_9abc_def0u64;
         let mut rnd = || {
@@ -294,7 +299,10 @@ mod tests {
                         if v.is_nan() {
                             assert!(out.nan, "{op:?} {a:?} {b:?} at ({x}, {y}): NaN not flagged in {out:?}");
                         } else {
-                            assert!(out.contains(v), "{op:?} {a:?} {b:?} at ({x}, {y}) = {v} outside {out:?}");
+                            assert!(
+                                out.contains(v),
+                                "{op:?} {a:?} {b:?} at ({x}, {y}) = {v} outside {out:?}"
+                            );
                         }
                     }
                 }

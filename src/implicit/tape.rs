@@ -172,7 +172,13 @@ pub struct Tape {
 
 impl Tape {
     /// `ssa` with registers allocated; `last_use` and `free` are scratch.
-    pub fn allocate_into(&mut self, ssa: &Ssa, last_use: &mut Vec<u32>, reg_of: &mut Vec<u32>, free: &mut Vec<u32>) {
+    pub fn allocate_into(
+        &mut self,
+        ssa: &Ssa,
+        last_use: &mut Vec<u32>,
+        reg_of: &mut Vec<u32>,
+        free: &mut Vec<u32>,
+    ) {
         let n = ssa.clauses.len();
         last_use.clear();
         last_use.resize(n, 0);
@@ -228,7 +234,14 @@ impl Tape {
 
     /// The f32 values at [`LANES`] points, into `out`; `regs` is resized to fit (no
     /// allocation once it has).
-    pub fn eval(&self, xs: &[f32; LANES], ys: &[f32; LANES], zs: &[f32; LANES], regs: &mut Vec<f32>, out: &mut [f32; LANES]) {
+    pub fn eval(
+        &self,
+        xs: &[f32; LANES],
+        ys: &[f32; LANES],
+        zs: &[f32; LANES],
+        regs: &mut Vec<f32>,
+        out: &mut [f32; LANES],
+    ) {
         if regs.len() < self.registers * LANES {
             regs.resize(self.registers * LANES, 0.0);
         }

@@ -37,7 +37,8 @@ pub fn parse_vm(text: &str, path: &Path) -> Result<Ssa> {
     let mut clauses = Vec::new();
     for (n, line) in text.lines().enumerate() {
         let line_no = n + 1;
-        let err = |column: usize, msg: String| Error::input(path, Some(Location { line: line_no, column }), msg);
+        let err =
+            |column: usize, msg: String| Error::input(path, Some(Location { line: line_no, column }), msg);
         let body = line.split('#').next().unwrap_or("");
         let mut tokens = body.split_whitespace();
         let Some(id) = tokens.next() else { continue };
@@ -53,7 +54,11 @@ pub fn parse_vm(text: &str, path: &Path) -> Result<Ssa> {
         if args.len() != want {
             return Err(err(
                 col(opname),
-                format!("`{opname}` takes {want} argument{}, found {}", if want == 1 { "" } else { "s" }, args.len()),
+                format!(
+                    "`{opname}` takes {want} argument{}, found {}",
+                    if want == 1 { "" } else { "s" },
+                    args.len()
+                ),
             ));
         }
         if let Some(&(_, first)) = ids.get(id) {
@@ -96,7 +101,11 @@ pub fn parse_vm(text: &str, path: &Path) -> Result<Ssa> {
 
 /// `s`, cut to a readable length for an error message.
 fn short(s: &str) -> String {
-    if s.chars().count() <= 40 { s.to_string() } else { format!("{}...", s.chars().take(40).collect::<String>()) }
+    if s.chars().count() <= 40 {
+        s.to_string()
+    } else {
+        format!("{}...", s.chars().take(40).collect::<String>())
+    }
 }
 
 #[cfg(test)]

@@ -44,10 +44,20 @@ fn render_writes_the_prospero_image_and_refuses_bad_files() {
     let dir = tempfile::tempdir().unwrap();
     let exe = env!("CARGO_BIN_EXE_toolkit");
     let model = dir.path().join("disc.vm");
-    std::fs::write(&model, "x var-x\ny var-y\na square x\nb square y\nc add a b\nr const 0.25\no sub c r\n").unwrap();
+    std::fs::write(&model, "x var-x\ny var-y\na square x\nb square y\nc add a b\nr const 0.25\no sub c r\n")
+        .unwrap();
     let png = dir.path().join("d.png");
     let out = Command::new(exe)
-        .args(["render", model.to_str().unwrap(), "--width", "40", "--height", "20", "-o", png.to_str().unwrap()])
+        .args([
+            "render",
+            model.to_str().unwrap(),
+            "--width",
+            "40",
+            "--height",
+            "20",
+            "-o",
+            png.to_str().unwrap(),
+        ])
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
