@@ -293,8 +293,9 @@ mod tests {
                 let out = Interval::apply(op, Interval::new(a.0, a.1), Interval::new(b.0, b.1));
                 for i in 0..=8 {
                     for j in 0..=8 {
-                        let x = a.0 + (a.1 - a.0) * i as f64 / 8.0;
-                        let y = b.0 + (b.1 - b.0) * j as f64 / 8.0;
+                        // Clamped: the rounded sample may fall just past the interval.
+                        let x = (a.0 + (a.1 - a.0) * i as f64 / 8.0).clamp(a.0, a.1);
+                        let y = (b.0 + (b.1 - b.0) * j as f64 / 8.0).clamp(b.0, b.1);
                         let v = apply_f64(op, x, y);
                         if v.is_nan() {
                             assert!(out.nan, "{op:?} {a:?} {b:?} at ({x}, {y}): NaN not flagged in {out:?}");
