@@ -16,7 +16,7 @@
 //!  convert                  tessellate, mesh -> grid, SDF -> mesh
 //!  geometry                 the Geometry trait: closed form, marched SDF/grid, mesh BVH
 //!  scene                    scene file, objects, camera; load_input for any input file
-//!  mesh        grid         triangle meshes and SDF grids, with their file formats
+//!  mesh   grid   implicit   triangle meshes and SDF grids, with their file formats; .vm models
 //!  files                    reading inputs and writing outputs (atomically)
 //!  base  error  simd        boxes, rays, transforms, progress; errors; SIMD backend
 //! ```
@@ -27,7 +27,8 @@
 //! - [`files`]: how every input file is read and every output file written (atomic
 //!   replacement included); [`error`]: the error type; [`simd`]: the SIMD backend.
 //! - [`mesh`]: triangle meshes and their file formats; [`grid`]: signed distance grids and
-//!   their file formats.
+//!   their file formats; [`implicit`]: implicit models in the `.vm` format (reader,
+//!   interval arithmetic, tape shortening, the 2D image).
 //! - [`scene`]: the scene file, objects, camera, and [`scene::load_input`], the one
 //!   function that loads any input (scene, mesh or grid file) into a scene.
 //! - [`plan`]: for each object and [`plan::Representation`], how it becomes a geometry
@@ -56,6 +57,7 @@ pub mod error;
 pub mod files;
 pub mod geometry;
 pub mod grid;
+pub mod implicit;
 pub mod mesh;
 pub mod metrics;
 pub mod plan;

@@ -36,7 +36,8 @@ pub struct Cli {
 pub enum Command {
     /// Render a scene file, or a mesh file (OBJ, glTF, GLB, PLY, STL) or a signed distance
     /// grid file (.sdf, .npy) framed by a default camera and lights, to a PNG with one
-    /// representation.
+    /// representation; or a 2D implicit model (.vm without var-z) as the Prospero challenge's
+    /// image of [-1, 1]^2 (white where negative, 1024 x 1024 unless --width/--height).
     #[command(allow_negative_numbers = true)]
     Render {
         /// Scene file (TOML, see docs/scene-format.md) or mesh file.

@@ -30,6 +30,7 @@ mod grid_speed_nearest;
 mod grid_voxelize;
 mod hard_cases;
 mod hard_suite;
+mod implicit;
 mod instancing;
 mod layering;
 mod limits;
