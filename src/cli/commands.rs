@@ -79,7 +79,11 @@ fn render_vm(opts: &RenderOptions) -> Result<RenderReport> {
         census.blocks,
         census.clauses_evaluated as f64 / census.blocks.max(1) as f64,
     );
-    Ok(RenderReport { frame: Frame { image, time, stats: RayStats::default() }, geometry_bytes: 0, text })
+    Ok(RenderReport {
+        frame: Frame { image, time, primary: None, stats: RayStats::default() },
+        geometry_bytes: 0,
+        text,
+    })
 }
 
 /// Fails when `scene` in `repr` would need more memory than `budget` allows.
