@@ -77,23 +77,19 @@ pub struct Projection {
 }
 
 impl Projection {
-    /// The projection of `cam`: the basis and image plane computed with the very operations
-    /// of [`crate::scene::camera::RayGenerator::new`].
+    /// The projection of `cam`: the basis and image plane of the tracer's camera rays
+    /// ([`crate::scene::camera::RayGenerator::new`], computed there once for both).
     pub fn new(cam: &Camera) -> Self {
-        let forward = cam.forward.normalize();
-        let right = cam.up.cross(forward).normalize();
-        let up = forward.cross(right);
-        let half_h = (cam.fov_y_deg.to_radians() * 0.5).tan();
-        let half_w = half_h * cam.width as f32 / cam.height as f32;
+        let g = crate::scene::camera::RayGenerator::new(cam);
         Projection {
-            origin: cam.position,
-            forward,
-            right,
-            up,
-            half_w,
-            half_h,
-            width: cam.width,
-            height: cam.height,
+            origin: g.origin,
+            forward: g.forward,
+            right: g.right,
+            up: g.up,
+            half_w: g.half_w,
+            half_h: g.half_h,
+            width: g.width,
+            height: g.height,
         }
     }
 

@@ -8,14 +8,22 @@ use crate::scene::Camera;
 /// A camera prepared for generating rays.
 #[derive(Clone, Copy, Debug)]
 pub struct RayGenerator {
-    origin: Vec3,
-    forward: Vec3,
-    right: Vec3,
-    up: Vec3,
-    half_w: f32,
-    half_h: f32,
-    width: u32,
-    height: u32,
+    /// Eye position.
+    pub origin: Vec3,
+    /// Unit viewing direction.
+    pub forward: Vec3,
+    /// Unit image x direction (`up x forward`).
+    pub right: Vec3,
+    /// Unit image up direction (image y grows downwards).
+    pub up: Vec3,
+    /// Half the image plane's width at unit distance.
+    pub half_w: f32,
+    /// Half the image plane's height at unit distance.
+    pub half_h: f32,
+    /// Image width, pixels.
+    pub width: u32,
+    /// Image height, pixels.
+    pub height: u32,
 }
 
 impl RayGenerator {
