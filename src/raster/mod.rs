@@ -33,6 +33,7 @@ use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 
 use crate::scene::Camera;
+use crate::scene::camera::RayGenerator;
 use crate::simd::{Kernel, Portable, dispatch};
 
 /// Tile edge, pixels: tiles are binned and rasterized as units.
@@ -55,52 +56,9 @@ pub struct RasterMesh<'a> {
     pub to_world: Affine3A,
 }
 
-/// The camera as the rasterizer projects with it: the tracer's basis and image plane.
-#[derive(Clone, Copy, Debug)]
-pub struct Projection {
-    /// Eye position.
-    pub origin: Vec3,
-    /// Unit viewing direction.
-    pub forward: Vec3,
-    /// Unit image x direction.
-    pub right: Vec3,
-    /// Unit image up direction (image y grows downwards).
-    pub up: Vec3,
-    /// Half the image plane's width at unit distance.
-    pub half_w: f32,
-    /// Half the image plane's height at unit distance.
-    pub half_h: f32,
-    /// Image width, pixels.
-    pub width: u32,
-    /// Image height, pixels.
-    pub height: u32,
-}
-
-impl Projection {
-    /// The projection of `cam`: the basis and image plane of the tracer's camera rays
-    /// ([`crate::scene::camera::RayGenerator::new`], computed there once for both).
-    pub fn new(cam: &Camera) -> Self {
-        let g = crate::scene::camera::RayGenerator::new(cam);
-        Projection {
-            origin: g.origin,
-            forward: g.forward,
-            right: g.right,
-            up: g.up,
-            half_w: g.half_w,
-            half_h: g.half_h,
-            width: g.width,
-            height: g.height,
-        }
-    }
-
-    /// The length of the (unnormalised) direction `forward + right u + up v` through pixel
-    /// (`x`, `y`)'s centre: a view depth times it is the distance along the unit ray.
-    pub fn depth_to_distance(&self, x: u32, y: u32) -> f32 {
-        let u = (2.0 * (x as f32 + 0.5) / self.width as f32 - 1.0) * self.half_w;
-        let v = (1.0 - 2.0 * (y as f32 + 0.5) / self.height as f32) * self.half_h;
-        (1.0 + u * u + v * v).sqrt()
-    }
-}
+/// The camera as the rasterizer projects with it: the tracer's own basis and image plane
+/// ([`RayGenerator`]: its fields), so that both see the same pixel centres.
+pub type Projection = RayGenerator;
 
 /// What a pixel sees: the winner of the depth test.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -67,6 +67,14 @@ impl RayGenerator {
         (1.0 - 2.0 * (y as f32 + 0.5) / self.height as f32) * self.half_h
     }
 
+    /// The length of the (unnormalised) direction `forward + right u + up v` through pixel
+    /// (`x`, `y`)'s centre: a view depth times it is the distance along the unit ray (the
+    /// rasterizer's depth to the tracer's `t`).
+    pub fn depth_to_distance(&self, x: u32, y: u32) -> f32 {
+        let (u, v) = (self.u(x), self.v(y));
+        (1.0 + u * u + v * v).sqrt()
+    }
+
     /// The unit-direction ray through image-plane point (`u`, `v`).
     #[inline]
     pub fn ray_uv(&self, u: f32, v: f32) -> Ray {
