@@ -22,10 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-from . import analysis, data, plots, shards as shard_info, stats
+from . import analysis, answer, data, plots, shards as shard_info, stats
+from . import duel as duel_mod
 from .data import num
 
 THRESHOLDS = (1e-2, 3e-3, 1e-3)
+APPENDIX = "appendix-inputs.md"
+DUEL_APPENDIX = "appendix-duels.md"
 
 HYPOTHESIS = (
     "- **H1:** for scenes made of few smooth analytic primitives, sphere tracing the analytic "
@@ -413,8 +416,20 @@ def _blank_lines_around_headings(text: str) -> str:
     return "\n".join(out)
 
 
+def write_duel_appendix(path: Path, ratios) -> None:
+    """Every duelled (input, level): the two runs, their duel medians and the ratio per process."""
+    rows = [(f"`{r['input']}`", r["class"], f"≤ {r['level']:g} px", f"`{r['sdf_run']}`", f"`{r['mesh_run']}`",
+             fmt_ms(r["sdf_ms"]), fmt_ms(r["mesh_ms"]), f"{math.exp(float(np.mean(r['logs']))):.3g}",
+             " ".join(f"{math.exp(x):.3g}" for x in r["logs"]), r["rounds"]) for r in ratios]
+    path.write_text("# Appendix: the duels\n\n[Back to the report](REPORT.md).\n\n"
+                    "SDF/mesh frame-time ratio of each input's chosen pair, per separate process (the median "
+                    "of the within-round ratios) and their geometric mean.\n\n"
+                    + md_table(["input", "class", "quality", "SDF run", "mesh run", "SDF ms", "mesh ms",
+                                "SDF/mesh", "per process", "rounds"], rows))
+
+
 def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, commands=None,
-                 invocation=None, hard=None, shards=None) -> Path:
+                 invocation=None, hard=None, shards=None, selection=None, duels=None) -> Path:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     all_rows = data.read_csv(csv_path)
@@ -450,9 +465,37 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
              f"{', '.join(f'`{c}`' for c in uniq('commit')) or '–'}. Report written "
              f"{datetime.now(timezone.utc).strftime('%Y-%m-%dT%H:%M:%SZ')} by "
              "`python -m sdfmesh_tools.report`; every number below comes from the CSVs of this run.\n")
+    sel = duel_mod.read_selection(Path(selection)) if selection and Path(selection).is_file() else None
+    duel_rows = duel_mod.read_duels(Path(duels)) if duels and Path(duels).is_file() else []
+    sizes = ", ".join(sorted({f"{r.get('width')}×{r.get('height')}" for r in all_rows if r.get("width")}))
     L.append("\n## The answer\n\n")
-    L.append("Which representation wins, per class of input and quality level (`quality_px`: the "
-             "largest geometric error in pixels a run is allowed), in frame time and in bytes:\n\n")
+    bytes_v = answer.bytes_verdicts(all_rows)
+    if sel is not None and duel_rows:
+        time_v, ratios = answer.time_verdicts(all_rows, sel, duel_rows)
+        for sentence in answer.sentences(time_v, bytes_v, len(data.inputs(all_rows)), n_classes, sizes):
+            L.append(sentence + " ")
+        L.append("\n\n")
+        L.append(answer.table(time_v, bytes_v))
+        procs = sorted({r.get("process") for r in duel_rows})
+        rounds = sorted({int(r.get("round", 0)) for r in duel_rows})
+        L.append(f"\nFrame time: each input's configuration of each side is chosen on the sweep (the fastest "
+                 f"median over its replicates among the configurations meeting the level in every replicate), "
+                 f"then the chosen pair is re-timed in {len(procs)} separate process(es) of {len(rounds)} "
+                 "rounds, one frame of each per round in alternating order; an input's ratio is the mean over "
+                 "processes of the median within-round log ratio, a class's the geometric mean over inputs "
+                 "with a 95% t-interval over inputs. Bytes: the smallest run of each side meeting the level. "
+                 + answer.candidates_text(sel) + " " + answer.optimism_text(ratios) + "\n")
+    else:
+        time_v, ratios = [], []
+        L.append("No duels were given (--selection, --duels): the answer below is the selection pass's "
+                 "best-of, which is biased towards the side with more configurations.\n")
+    L.append("\n> **Caveats.**\n")
+    for c in answer.caveats(all_rows, sel or [], ratios):
+        L.append(f"> - {c}\n")
+    L.append("\n## The selection pass, for comparison\n\n")
+    L.append("Best-of over each side's configurations in every replicate, the measurement the "
+             "configurations were chosen on (not the verdict: the minimum of noisy timings favours the "
+             "side with more candidates):\n\n")
     L.append(answer_table(verdicts))
     L.append("\n" + answer_legend(all_rows, verdicts))
     L.append("\n## Crossovers along the families\n\n")
@@ -521,6 +564,12 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
     L.append("\n## Many primitives: the scaling experiment\n\n")
     L.append(_answer_many(scaling_rows, []) + "\n")
 
+    L.append(f"\n## Appendices\n\n- [{APPENDIX}]({APPENDIX}): the results of every input (replicate "
+             f"{reps[0] if reps else '–'}), the per-input frame-time test and the per-input plots.\n")
+    if duel_rows:
+        L.append(f"- [{DUEL_APPENDIX}]({DUEL_APPENDIX}): every input's duelled pair and ratio.\n")
+        write_duel_appendix(out / DUEL_APPENDIX, ratios)
+    front, L = L, ["# Appendix: every input\n\n[Back to the report](REPORT.md).\n"]
     L.append(f"\n## Results per input (replicate {reps[0] if reps else '–'})\n")
     if not rows:
         L.append("No compare rows were read.\n")
@@ -607,8 +656,9 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
             L.append(f"{_img(p, out)}\n\n")
     else:
         L.append("No plots were written.\n")
+    (out / APPENDIX).write_text(_blank_lines_around_headings("".join(L)))
     report = out / "REPORT.md"
-    report.write_text(_blank_lines_around_headings("".join(L)))
+    report.write_text(_blank_lines_around_headings("".join(front)))
     print(f"wrote {report} and {len(images)} PNG(s)")
     return report
 
@@ -624,11 +674,13 @@ def main(argv=None) -> int:
     ap.add_argument("--commands", help="the exact commands that produced the CSVs, quoted into the report")
     ap.add_argument("--hard", help="hard-case table (toolkit hard --table) to include")
     ap.add_argument("--shards", help="shards.csv of the workflow (host and CPU of every input and replicate)")
+    ap.add_argument("--selection", help="selection.csv of the workflow (sdfmesh_tools.duel select)")
+    ap.add_argument("--duels", help="duels.csv of the workflow (toolkit compare --duel, every process)")
     a = ap.parse_args(argv)
     argv = sys.argv[1:] if argv is None else list(argv)
     write_report(a.csv, a.out, a.scaling, a.summary, a.artifacts, a.commands,
                  invocation="python -m sdfmesh_tools.report " + shlex.join(argv), hard=a.hard,
-                 shards=a.shards)
+                 shards=a.shards, selection=a.selection, duels=a.duels)
     return 0
 
 

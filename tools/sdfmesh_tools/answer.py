@@ -1,0 +1,183 @@
+"""The first screen of REPORT.md: the verdict in three sentences, the table they come from
+and the caveats (issue #37, item 8). Frame time comes from the paired duels (duel.py),
+bytes from the selection pass (bytes do not vary between processes). Pure functions of the
+rows; every number is computed here from the study's CSVs."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import analysis, data, duel
+from .data import num
+
+# The level the three sentences speak of (the table shows every level).
+HEADLINE_LEVEL = 1.0
+
+
+def _winner(c: dict) -> str | None:
+    """sdf, mesh, tie, few (a ratio without an interval), only-sdf, only-mesh or None."""
+    if c.get("ratio") is None:
+        if c["only_sdf"] and not c["only_mesh"]:
+            return "only-sdf"
+        if c["only_mesh"] and not c["only_sdf"]:
+            return "only-mesh"
+        return None
+    if c.get("too_few") or c.get("lo") is None:
+        return "few"
+    if c["within_noise"]:
+        return "tie"
+    return "sdf" if c["ratio"] < 1 else "mesh"
+
+
+def _list(items: list[str]) -> str:
+    if not items:
+        return "no class"
+    return ", ".join(items[:-1]) + (" and " if len(items) > 1 else "") + items[-1]
+
+
+def sentences(time_v: list[dict], bytes_v: list[dict], n_inputs: int, n_classes: int, size: str,
+              level: float = HEADLINE_LEVEL) -> list[str]:
+    """Three sentences: who is faster, who is smaller, and what the verdict does not cover."""
+    def by(verdicts, key):
+        out: dict[str, list[str]] = {}
+        for v in verdicts:
+            if v["level"] != level:
+                continue
+            c = v[key]
+            w = _winner(c)
+            if w is None:
+                continue
+            if w in ("sdf", "mesh"):
+                r = c["ratio"]
+                label = f"{v['class']} ({max(r, 1 / r):.2g}×)"
+            else:
+                label = v["class"]
+            out.setdefault(w, []).append(label)
+        return out
+
+    t = by(time_v, "time")
+    b = by(bytes_v, "bytes")
+    parts = []
+    if t.get("sdf"):
+        parts.append(f"faster than ray tracing triangle meshes in {_list(t['sdf'])}")
+    if t.get("mesh"):
+        parts.append(f"slower in {_list(t['mesh'])}")
+    if t.get("tie"):
+        parts.append(f"tied within the noise of paired re-timing in {_list(t['tie'])}")
+    if t.get("only-sdf"):
+        parts.append(f"the only side to meet the level in {_list(t['only-sdf'])}")
+    if t.get("only-mesh"):
+        parts.append(f"unable to meet the level where meshes do in {_list(t['only-mesh'])}")
+    few = (f"{_list(t['few'])} {'has' if len(t['few']) == 1 else 'have'} too few inputs for a verdict "
+           "with an interval") if t.get("few") else ""
+    if parts:
+        s1 = f"At {level:g} px of error, ray marching SDFs is " + "; ".join(parts) + (f"; {few}" if few else "") + "."
+    else:
+        s1 = f"At {level:g} px of error no class has a frame-time verdict" + (f": {few}" if few else "") + "."
+    bp = []
+    if b.get("sdf"):
+        bp.append(f"the SDF side is smaller in {_list(b['sdf'])}")
+    if b.get("mesh"):
+        bp.append(f"the mesh side in {_list(b['mesh'])}")
+    if b.get("tie"):
+        bp.append(f"neither clearly in {_list(b['tie'])}")
+    bfew = f"{_list(b['few'])}: too few inputs for an interval" if b.get("few") else ""
+    s2 = ("In bytes at the same level " + ("; ".join(bp) if bp else "no class has a verdict")
+          + (f" ({bfew})" if bfew else "") + ".")
+    s3 = (f"This holds for {n_inputs} inputs in {n_classes} classes, {size} images, frame time without "
+          "build time, on one CPU machine without a GPU, against ray-traced (not rasterized) polygons; "
+          "the caveats below say what else it does not cover.")
+    return [s1, s2, s3]
+
+
+def time_verdicts(rows, sel, duel_rows) -> tuple[list[dict], list[dict]]:
+    """(per class and level duel verdicts, the per-input duel ratios)."""
+    ratios = duel.duel_ratios(sel, duel_rows)
+    return duel.duel_verdicts(sel, ratios, analysis.classes(rows)), ratios
+
+
+def bytes_verdicts(rows) -> list[dict]:
+    """Per class and level: the bytes of the smallest run of each side meeting the level,
+    per input (stats.ratio_ci over inputs; fewer than duel.MIN_INPUTS inputs: no interval)."""
+    out = []
+    for cls in analysis.classes(rows):
+        sub = [r for r in rows if data.class_of(r) == cls]
+        for level in analysis.LEVELS:
+            c = analysis.compare_sides(sub, level, "total_bytes")
+            c["too_few"] = 0 < c["n_inputs"] < duel.MIN_INPUTS
+            if c["too_few"]:
+                c["lo"] = c["hi"] = c["within_noise"] = None
+            out.append({"class": cls, "level": level, "bytes": c})
+    return out
+
+
+def _bytes_cell(c: dict) -> str:
+    if c["ratio"] is None:
+        return analysis.verdict_text(c, "bytes")
+    r = c["ratio"]
+    who = "SDF" if r < 1 else "mesh"
+    fac = max(r, 1 / r)
+    if c["too_few"]:
+        return f"{who} {fac:.3g}× smaller, too few inputs ({c['n_inputs']})"
+    return analysis.verdict_text(c, "bytes")
+
+
+def table(time_v, bytes_v) -> str:
+    from .report import md_table
+
+    bmap = {(v["class"], v["level"]): v["bytes"] for v in bytes_v}
+    rows, last = [], None
+    for v in time_v:
+        t = v["time"]
+        b = bmap.get((v["class"], v["level"]))
+        cls = v["class"] if v["class"] != last else ""
+        last = v["class"]
+        rows.append((cls, f"≤ {v['level']:g} px", t["n_inputs"], duel.verdict_cell(t),
+                     _bytes_cell(b) if b else "–"))
+    return md_table(["class", "quality", "inputs duelled", "frame time (paired duels)", "bytes"], rows)
+
+
+def optimism_text(ratios) -> str:
+    o = duel.optimism(ratios)
+
+    def one(side):
+        d = o[side]
+        if d["median"] is None:
+            return f"{side}: no duel"
+        return f"{side} {d['median']:.3g} (p10 {d['p10']:.3g}, p90 {d['p90']:.3g}, {d['n']} input-levels)"
+
+    return ("Selection optimism, selected time / re-measured time (the selected configuration's best "
+            "frame-time median over the sweep's replicates against its median in the duels; below 1: "
+            "the sweep made that side look faster than it re-measures): " + one("sdf") + "; "
+            + one("mesh") + ".")
+
+
+def candidates_text(sel) -> str:
+    c = {"sdf": [], "mesh": []}
+    for s in sel:
+        c[s["side"]].append(int(s["candidates"]))
+    parts = [f"{side} {int(np.median(v))} (median over inputs)" for side, v in c.items() if v]
+    return "Configurations each side chose from per input: " + ", ".join(parts) + "."
+
+
+def caveats(rows, sel, ratios) -> list[str]:
+    sizes = sorted({(r.get("width"), r.get("height")) for r in rows if r.get("width")})
+    threads = sorted({r.get("threads") for r in rows if r.get("threads")})
+    few = sorted({v for v in data.inputs(rows)})
+    per_class: dict[str, set] = {}
+    for r in rows:
+        per_class.setdefault(data.class_of(r), set()).add(r.get("input"))
+    small = [f"{c} ({len(v)})" for c, v in per_class.items() if len(v) < duel.MIN_INPUTS]
+    builds = [num(r, "build_ms") for r in rows if num(r, "build_ms") is not None]
+    return [
+        f"One CPU machine, {', '.join(threads) or '?'} render thread(s), no GPU: a GPU changes both sides.",
+        "Image size: " + ", ".join(f"{w}×{h}" for w, h in sizes) + "; pixel-relative error makes a "
+        "mesh's needed resolution grow with the image.",
+        "Polygons are ray traced (BVH, packets); a z-buffer rasterizer baseline is measured in "
+        "reports/bench/raster.txt, not in this verdict." ,
+        f"Frame time excludes build time (build times here span {min(builds):.3g}–{max(builds):.3g} ms)."
+        if builds else "Frame time excludes build time.",
+        "Classes with fewer than 5 inputs get no interval: " + (", ".join(small) if small else "none") + ".",
+        f"{len(few)} inputs; intervals are 95% t-intervals over inputs, descriptive (not corrected for "
+        "the number of classes and levels).",
+    ]
