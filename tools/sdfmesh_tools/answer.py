@@ -181,3 +181,69 @@ def caveats(rows, sel, ratios) -> list[str]:
         f"{len(few)} inputs; intervals are 95% t-intervals over inputs, descriptive (not corrected for "
         "the number of classes and levels).",
     ]
+
+
+def bytes_points(rows, level: float = HEADLINE_LEVEL) -> dict:
+    """{(class, input): geometric mean over replicates of smallest-SDF / smallest-mesh bytes}."""
+    logs: dict[tuple, list[float]] = {}
+    cls = {r.get("input"): data.class_of(r) for r in rows}
+    for (inp, _rep), b in analysis.best_per_run(rows, level, "total_bytes").items():
+        s, m = b["sdf"], b["mesh"]
+        if s is not None and m is not None and num(s, "total_bytes") and num(m, "total_bytes"):
+            logs.setdefault((cls[inp], inp), []).append(
+                float(np.log(num(s, "total_bytes") / num(m, "total_bytes"))))
+    return {k: float(np.exp(np.mean(v))) for k, v in logs.items()}
+
+
+# Frame counts the amortised table reports the winner at.
+FRAME_COUNTS = (1, 100, 10_000)
+
+
+def amortised(rows, sel, ratios, level: float = HEADLINE_LEVEL) -> list[dict]:
+    """Per class at `level`: build + N frames of each side's chosen configuration (build time
+    the median over the sweep's replicates, frame time the duel median), how many inputs each
+    side wins at each of FRAME_COUNTS, and the median break-even frame count where the side
+    that builds slower but renders faster catches up."""
+    build: dict[tuple, list[float]] = {}
+    for r in rows:
+        b = num(r, "build_ms")
+        if b is not None and data.side(r):
+            build.setdefault((r.get("input"), duel.run_label(r)), []).append(b)
+    per_class: dict[str, dict] = {}
+    for r in ratios:
+        if r["level"] != level:
+            continue
+        bs = build.get((r["input"], r["sdf_run"]))
+        bm = build.get((r["input"], r["mesh_run"]))
+        if not bs or not bm:
+            continue
+        bs, bm = float(np.median(bs)), float(np.median(bm))
+        fs, fm = r["sdf_ms"], r["mesh_ms"]
+        c = per_class.setdefault(r["class"], {"class": r["class"], "inputs": 0, "first_sdf": [],
+                                              "first_mesh": [], "wins": {n: 0 for n in FRAME_COUNTS},
+                                              "break_even": []})
+        c["inputs"] += 1
+        c["first_sdf"].append(bs + fs)
+        c["first_mesh"].append(bm + fm)
+        for n in FRAME_COUNTS:
+            c["wins"][n] += bs + n * fs < bm + n * fm
+        if (bs - bm) * (fs - fm) < 0 and fs != fm:
+            c["break_even"].append(abs((bs - bm) / (fm - fs)))
+    return list(per_class.values())
+
+
+def amortised_table(rows, sel, ratios, level: float = HEADLINE_LEVEL) -> str:
+    from .report import md_table
+
+    t = amortised(rows, sel, ratios, level)
+    if not t:
+        return "No duelled input has build times for both sides.\n"
+    out = []
+    for c in t:
+        be = (f"{np.median(c['break_even']):.3g} ({len(c['break_even'])} inputs)"
+              if c["break_even"] else "– (one side is ahead at every N)")
+        out.append((c["class"], c["inputs"], f"{np.median(c['first_sdf']):.3g}",
+                    f"{np.median(c['first_mesh']):.3g}",
+                    *(f"{c['wins'][n]}/{c['inputs']}" for n in FRAME_COUNTS), be))
+    return md_table(["class", "inputs", "first frame SDF ms (median)", "first frame mesh ms (median)",
+                     *(f"SDF cheaper, N = {n}" for n in FRAME_COUNTS), "break-even N (median)"], out)

@@ -489,9 +489,25 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
         time_v, ratios = [], []
         L.append("No duels were given (--selection, --duels): the answer below is the selection pass's "
                  "best-of, which is biased towards the side with more configurations.\n")
+    forest = plots.forest_plot(time_v, ratios, bytes_v, answer.bytes_points(all_rows), out) if time_v else []
+    for p in forest:
+        L.append(f"\n{_img(p, out)}\n")
     L.append("\n> **Caveats.**\n")
     for c in answer.caveats(all_rows, sel or [], ratios):
         L.append(f"> - {c}\n")
+    if ratios:
+        L.append(f"\n## Build time: one-shot, edited and static scenes\n\n")
+        L.append(f"Build plus N frames of each side's chosen configuration at {answer.HEADLINE_LEVEL:g} px (build "
+                 "time: the median over the sweep's replicates; frame time: the duel median). A one-shot "
+                 "render is N = 1, an edited scene rebuilds every few frames, a static one renders "
+                 "thousands of frames per build.\n\n")
+        L.append(answer.amortised_table(all_rows, sel, ratios))
+    pareto = plots.pareto_plot(all_rows, out)
+    if pareto:
+        L.append("\n## Frontiers\n\nEach side's Pareto frontier of frame time against p95 pixel error "
+                 "(median over replicates) on the first input of each class; the verdict above compares the "
+                 "frontiers at three points (0.5, 1, 2 px).\n\n")
+        L.append(f"{_img(pareto[0], out)}\n")
     L.append("\n## The selection pass, for comparison\n\n")
     L.append("Best-of over each side's configurations in every replicate, the measurement the "
              "configurations were chosen on (not the verdict: the minimum of noisy timings favours the "
