@@ -178,3 +178,19 @@ def test_merge_refuses_torn_parts(tmp_path, bad):
     out = tmp_path / "m.csv"
     assert duel.main(["merge", "--out", str(out), str(a), str(b)]) == 2
     assert not out.exists()
+
+
+def test_build_time_decides_the_one_shot_render():
+    # SDF builds in 1 ms and renders 2x slower; meshes build in 100 ms: SDF is cheaper for a
+    # one-shot frame, the mesh from about (100 - 1) / (4 - 2) = 49.5 frames on.
+    rows = sweep("smooth", 6)
+    for r in rows:
+        r["build_ms"] = 100 if r["repr"] == "mesh" else 1
+    sel = duel.select(rows)
+    ratios = duel.duel_ratios(sel, duels_for(sel, 2.0, noise=0.0))
+    t = answer.amortised(rows, sel, ratios)
+    [c] = t
+    assert c["inputs"] == 6
+    assert c["wins"][1] == 6 and c["wins"][100] == 0 and c["wins"][10_000] == 0
+    # the duel's process-to-process drift scales both sides alike: break-even near 49.5 / speed
+    assert all(20 < n < 120 for n in c["break_even"]), c["break_even"]
