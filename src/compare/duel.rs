@@ -119,8 +119,8 @@ pub fn duel_command(opts: &CompareOptions, duel: &DuelOptions) -> Result<String>
     let planned = plan(&scene, opts);
     let mut chosen: Vec<(String, Run)> = Vec::new();
     for label in &duel.runs {
-        let run = planned.iter().skip(1).find(|r| names(label, r)).ok_or_else(|| {
-            let known: Vec<String> = planned.iter().skip(1).map(run_label).collect();
+        let run = planned.iter().find(|r| names(label, r)).ok_or_else(|| {
+            let known: Vec<String> = planned.iter().map(run_label).collect();
             Error::Usage(format!(
                 "{}: --duel run `{label}` is not planned with these flags (planned: {})",
                 path.display(),

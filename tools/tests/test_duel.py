@@ -167,6 +167,15 @@ def test_duel_end_to_end(toolkit, tmp_path):
     again = subprocess.run(args + ["--duel", "mesh/extracted/16", "--csv", str(out)],
                            capture_output=True, text=True)
     assert again.returncode == 2 and "exists" in again.stderr
+    # a mesh input's original (its reference) is a mesh-side candidate too
+    knight = REPO.parent / "shared" / "meshes" / "decimated-knight.obj"
+    if knight.is_file():
+        r = subprocess.run([str(toolkit), "compare", str(knight), "--width", "24", "--height", "24", "--res", "8",
+                            "--duel", "mesh/original,grid/sample/8", "--rounds", "2", "--csv",
+                            str(tmp_path / "k.csv")], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        with open(tmp_path / "k.csv", newline="") as f:
+            assert {g["run"] for g in csv.DictReader(f)} == {"mesh/original", "grid/sample/8"}
 
 
 @pytest.mark.parametrize("bad", ["header", "width"])
