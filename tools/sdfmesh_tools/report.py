@@ -508,6 +508,9 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
                  "(median over replicates) on the first input of each class; the verdict above compares the "
                  "frontiers at three points (0.5, 1, 2 px).\n\n")
         L.append(f"{_img(pareto[0], out)}\n")
+    if sel:
+        L.append("\n## What the quality levels are, and which gate binds\n\n")
+        L.append(answer.gates_section(all_rows, sel))
     L.append("\n## The selection pass, for comparison\n\n")
     L.append("Best-of over each side's configurations in every replicate, the measurement the "
              "configurations were chosen on (not the verdict: the minimum of noisy timings favours the "

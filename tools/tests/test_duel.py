@@ -203,3 +203,19 @@ def test_build_time_decides_the_one_shot_render():
     assert c["wins"][1] == 6 and c["wins"][100] == 0 and c["wins"][10_000] == 0
     # the duel's process-to-process drift scales both sides alike: break-even near 49.5 / speed
     assert all(20 < n < 120 for n in c["break_even"]), c["break_even"]
+
+
+def test_the_gates_match_the_toolkits():
+    import re
+    from conftest import REPO
+
+    src = (REPO / "src" / "metrics.rs").read_text()
+    found = re.findall(r"QualityLevel \{ px: ([\d.]+), max_silhouette_pct: ([\d.]+), max_flip_mean: ([\d.]+) \}", src)
+    assert {float(a): (float(a), float(b), float(c)) for a, b, c in found} == answer.GATES
+
+
+def test_binding_gate_is_the_one_closest_to_its_bound():
+    r = {"px_err_p95": "0.1", "silhouette_mismatch_pct": "0.2", "flip_mean": "0.07"}
+    assert answer.binding_gate(r, 1.0) == "mean FLIP"
+    r["px_err_p95"] = "0.95"
+    assert answer.binding_gate(r, 1.0) == "p95 pixel error"
