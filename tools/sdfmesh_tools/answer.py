@@ -171,8 +171,9 @@ def caveats(rows, sel, ratios) -> list[str]:
     builds = [num(r, "build_ms") for r in rows if num(r, "build_ms") is not None]
     return [
         f"One CPU machine, {', '.join(threads) or '?'} render thread(s), no GPU: a GPU changes both sides.",
-        "Image size: " + ", ".join(f"{w}×{h}" for w, h in sizes) + "; pixel-relative error makes a "
-        "mesh's needed resolution grow with the image.",
+        "Image size: the verdict at " + ", ".join(f"{w}×{h}" for w, h in sizes) + "; pixel-relative "
+        "error makes a mesh's needed resolution grow with the image (see Image size for the sizes "
+        "covered, on one input per class).",
         "Polygons are ray traced (BVH, packets); a z-buffer rasterizer baseline is measured in "
         "reports/bench/raster.txt, not in this verdict." ,
         f"Frame time excludes build time (build times here span {min(builds):.3g}–{max(builds):.3g} ms)."
@@ -290,3 +291,46 @@ def gates_section(rows, sel) -> str:
             "recalibration, which makes the silhouette gate stricter at smaller images):\n\n" + defs
             + "\nWhich gate bound the chosen runs (the gate closest to failing: the largest value / bound), "
             "counted over inputs:\n\n" + table)
+
+
+def size_table(size_rows, size_duel_rows, level: float = HEADLINE_LEVEL) -> str:
+    """The image-size experiment: per input (the first of each class) and square image size,
+    the SDF/mesh frame-time ratio of that size's own selection, re-timed in one duel process,
+    and the bytes ratio, at `level`; where the frame-time winner changes along the sizes."""
+    from .report import md_table
+
+    def width(r):
+        return str(r.get("width", "")).strip()
+
+    out, notes = [], []
+    for inp in data.inputs(size_rows):
+        sub = [r for r in size_rows if r.get("input") == inp]
+        sizes = sorted({int(width(r)) for r in sub if width(r)})
+        winners = []
+        for px in sizes:
+            rows = [r for r in sub if width(r) == str(px)]
+            sel = [s for s in duel.select(rows) if s["level"] == level]
+            d = [r for r in size_duel_rows if r.get("input") == inp and width(r) == str(px)]
+            ratios = duel.duel_ratios(sel, d)
+            b = bytes_points(rows, level).get((data.class_of(rows[0]), inp))
+            if ratios:
+                t = float(np.exp(np.mean(ratios[0]["logs"])))
+                winners.append("SDF" if t < 1 else "mesh")
+                cell = f"{t:.3g} (`{ratios[0]['sdf_run']}` vs `{ratios[0]['mesh_run']}`)"
+            else:
+                sides = {s["side"] for s in sel}
+                winners.append(None)
+                cell = "only SDF meets it" if sides == {"sdf"} else "only mesh meets it" if sides == {
+                    "mesh"} else "neither meets it"
+            out.append((f"`{inp}`" if px == sizes[0] else "", data.class_of(rows[0]) if px == sizes[0] else "",
+                        f"{px}×{px}", cell, f"{b:.3g}" if b else "–"))
+        seen = [(px, w) for px, w in zip(sizes, winners) if w]
+        changes = [f"{a[1]} → {b[1]} between {a[0]} and {b[0]}" for a, b in zip(seen, seen[1:]) if a[1] != b[1]]
+        if changes:
+            notes.append(f"`{inp}`: " + "; ".join(changes))
+    if not out:
+        return "No image-size runs.\n"
+    return (md_table(["input", "class", "image", f"SDF/mesh frame time at {level:g} px (duel)",
+                      "SDF/mesh bytes"], out)
+            + "\n" + ("Frame-time winner changes with image size: " + "; ".join(notes) + ".\n" if notes else
+                      "The frame-time winner does not change with image size on these inputs.\n"))

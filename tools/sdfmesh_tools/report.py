@@ -429,7 +429,8 @@ def write_duel_appendix(path: Path, ratios) -> None:
 
 
 def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, commands=None,
-                 invocation=None, hard=None, shards=None, selection=None, duels=None) -> Path:
+                 invocation=None, hard=None, shards=None, selection=None, duels=None, sizes=None,
+                 sizes_duels=None) -> Path:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     all_rows = data.read_csv(csv_path)
@@ -467,12 +468,12 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
              "`python -m sdfmesh_tools.report`; every number below comes from the CSVs of this run.\n")
     sel = duel_mod.read_selection(Path(selection)) if selection and Path(selection).is_file() else None
     duel_rows = duel_mod.read_duels(Path(duels)) if duels and Path(duels).is_file() else []
-    sizes = ", ".join(sorted({f"{r.get('width')}×{r.get('height')}" for r in all_rows if r.get("width")}))
+    size_text = ", ".join(sorted({f"{r.get('width')}×{r.get('height')}" for r in all_rows if r.get("width")}))
     L.append("\n## The answer\n\n")
     bytes_v = answer.bytes_verdicts(all_rows)
     if sel is not None and duel_rows:
         time_v, ratios = answer.time_verdicts(all_rows, sel, duel_rows)
-        for sentence in answer.sentences(time_v, bytes_v, len(data.inputs(all_rows)), n_classes, sizes):
+        for sentence in answer.sentences(time_v, bytes_v, len(data.inputs(all_rows)), n_classes, size_text):
             L.append(sentence + " ")
         L.append("\n\n")
         L.append(answer.table(time_v, bytes_v))
@@ -502,6 +503,13 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
                  "render is N = 1, an edited scene rebuilds every few frames, a static one renders "
                  "thousands of frames per build.\n\n")
         L.append(answer.amortised_table(all_rows, sel, ratios))
+    size_rows = data.read_csv(sizes) if sizes else []
+    if size_rows:
+        L.append("\n## Image size\n\nPixel-relative error makes a mesh's needed resolution grow with the image. "
+                 "On the first input of each class, the sweep at each image size, its own selection and one "
+                 "duel process (SDF/mesh below 1: SDF faster):\n\n")
+        L.append(answer.size_table(size_rows, duel_mod.read_duels(Path(sizes_duels)) if sizes_duels and
+                                   Path(sizes_duels).is_file() else []))
     pareto = plots.pareto_plot(all_rows, out)
     if pareto:
         L.append("\n## Frontiers\n\nEach side's Pareto frontier of frame time against p95 pixel error "
@@ -695,11 +703,14 @@ def main(argv=None) -> int:
     ap.add_argument("--shards", help="shards.csv of the workflow (host and CPU of every input and replicate)")
     ap.add_argument("--selection", help="selection.csv of the workflow (sdfmesh_tools.duel select)")
     ap.add_argument("--duels", help="duels.csv of the workflow (toolkit compare --duel, every process)")
+    ap.add_argument("--sizes", help="sizes.csv of the workflow (the image-size experiment's sweeps)")
+    ap.add_argument("--sizes-duels", help="sizes_duels.csv of the workflow (its duels)")
     a = ap.parse_args(argv)
     argv = sys.argv[1:] if argv is None else list(argv)
     write_report(a.csv, a.out, a.scaling, a.summary, a.artifacts, a.commands,
                  invocation="python -m sdfmesh_tools.report " + shlex.join(argv), hard=a.hard,
-                 shards=a.shards, selection=a.selection, duels=a.duels)
+                 shards=a.shards, selection=a.selection, duels=a.duels, sizes=a.sizes,
+                 sizes_duels=a.sizes_duels)
     return 0
 
 
