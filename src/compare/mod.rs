@@ -14,6 +14,7 @@
 
 pub mod duel;
 pub mod hard;
+pub mod refcheck;
 pub mod scaling;
 pub mod summary;
 

@@ -183,6 +183,10 @@ pub enum Command {
         /// Rounds of a --duel.
         #[arg(long, default_value_t = 15, requires = "duel")]
         rounds: u32,
+        /// Check the one input's reference instead: its primary hits against f64 root finding
+        /// on the object trees (no tape, no SIMD, no pruning), one row to --csv.
+        #[arg(long, conflicts_with_all = ["scaling", "resume", "duel"])]
+        check_reference: bool,
         /// Overrides of the scene's settings.
         #[command(flatten)]
         settings: SettingArgs,

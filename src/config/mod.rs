@@ -425,6 +425,8 @@ pub enum Task {
         /// The runs and rounds.
         duel: DuelOptions,
     },
+    /// `toolkit compare --check-reference`: the compare flags plan the reference checked.
+    CheckReference(CompareOptions),
     /// `toolkit compare --scaling`.
     Scaling {
         /// The experiment's options.
@@ -547,6 +549,7 @@ impl Task {
                 quiet,
                 duel,
                 rounds,
+                check_reference,
                 settings,
                 march,
             } => {
@@ -602,7 +605,15 @@ impl Task {
                     progress: !quiet,
                     budget,
                 };
-                if duel.is_empty() {
+                if check_reference {
+                    if options.inputs.len() != 1 {
+                        return Err(Error::Usage(format!(
+                            "--check-reference checks one input, got {} inputs",
+                            options.inputs.len()
+                        )));
+                    }
+                    Task::CheckReference(options)
+                } else if duel.is_empty() {
                     Task::Compare(options)
                 } else {
                     if options.inputs.len() != 1 {

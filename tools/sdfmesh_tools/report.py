@@ -430,7 +430,7 @@ def write_duel_appendix(path: Path, ratios) -> None:
 
 def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, commands=None,
                  invocation=None, hard=None, shards=None, selection=None, duels=None, sizes=None,
-                 sizes_duels=None) -> Path:
+                 sizes_duels=None, refcheck=None) -> Path:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     all_rows = data.read_csv(csv_path)
@@ -516,6 +516,10 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
                  "(median over replicates) on the first input of each class; the verdict above compares the "
                  "frontiers at three points (0.5, 1, 2 px).\n\n")
         L.append(f"{_img(pareto[0], out)}\n")
+    ref_rows = data.read_csv(refcheck) if refcheck else []
+    if ref_rows:
+        L.append("\n## The references, checked independently\n\n")
+        L.append(answer.refcheck_section(ref_rows))
     if sel:
         L.append("\n## What the quality levels are, and which gate binds\n\n")
         L.append(answer.gates_section(all_rows, sel))
@@ -704,13 +708,14 @@ def main(argv=None) -> int:
     ap.add_argument("--selection", help="selection.csv of the workflow (sdfmesh_tools.duel select)")
     ap.add_argument("--duels", help="duels.csv of the workflow (toolkit compare --duel, every process)")
     ap.add_argument("--sizes", help="sizes.csv of the workflow (the image-size experiment's sweeps)")
+    ap.add_argument("--refcheck", help="refcheck.csv of the workflow (toolkit compare --check-reference)")
     ap.add_argument("--sizes-duels", help="sizes_duels.csv of the workflow (its duels)")
     a = ap.parse_args(argv)
     argv = sys.argv[1:] if argv is None else list(argv)
     write_report(a.csv, a.out, a.scaling, a.summary, a.artifacts, a.commands,
                  invocation="python -m sdfmesh_tools.report " + shlex.join(argv), hard=a.hard,
                  shards=a.shards, selection=a.selection, duels=a.duels, sizes=a.sizes,
-                 sizes_duels=a.sizes_duels)
+                 sizes_duels=a.sizes_duels, refcheck=a.refcheck)
     return 0
 
 

@@ -219,3 +219,30 @@ def test_binding_gate_is_the_one_closest_to_its_bound():
     assert answer.binding_gate(r, 1.0) == "mean FLIP"
     r["px_err_p95"] = "0.95"
     assert answer.binding_gate(r, 1.0) == "p95 pixel error"
+
+
+def test_check_reference_end_to_end(toolkit, tmp_path):
+    """toolkit compare --check-reference: a scene's closed-form reference agrees with the f64
+    root finder to a tiny fraction of a pixel; a mesh input is its own reference, not checked."""
+    import subprocess
+    from conftest import REPO
+
+    out = tmp_path / "r.csv"
+    scene = REPO / "data" / "scenes" / "thesis_sdf_csg.toml"
+    r = subprocess.run([str(toolkit), "compare", str(scene), "--width", "32", "--height", "24",
+                        "--check-reference", "--csv", str(out)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    with open(out, newline="") as f:
+        [row] = list(csv.DictReader(f))
+    assert row["skipped"] == "" and int(row["pixels"]) == 32 * 24
+    assert int(row["reference_hits"]) > 50
+    assert abs(int(row["reference_hits"]) - int(row["independent_hits"])) <= 3
+    assert float(row["p95_px"]) < 0.05
+    knight = REPO.parent / "shared" / "meshes" / "decimated-knight.obj"
+    if knight.is_file():
+        r = subprocess.run([str(toolkit), "compare", str(knight), "--width", "16", "--height", "16",
+                            "--check-reference", "--csv", str(tmp_path / "k.csv")], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        with open(tmp_path / "k.csv", newline="") as f:
+            [row] = list(csv.DictReader(f))
+        assert "no distance tree" in row["skipped"]
