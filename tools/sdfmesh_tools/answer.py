@@ -36,8 +36,9 @@ def _list(items: list[str]) -> str:
 
 
 def sentences(time_v: list[dict], bytes_v: list[dict], n_inputs: int, n_classes: int, size: str,
-              level: float = HEADLINE_LEVEL) -> list[str]:
-    """Three sentences: who is faster, who is smaller, and what the verdict does not cover."""
+              level: float = HEADLINE_LEVEL, raster_v: list[dict] | None = None) -> list[str]:
+    """Three sentences: who is faster than ray-traced meshes, who is smaller, and against
+    rasterized meshes and what the verdict does not cover."""
     def by(verdicts, key):
         out: dict[str, list[str]] = {}
         for v in verdicts:
@@ -84,16 +85,29 @@ def sentences(time_v: list[dict], bytes_v: list[dict], n_inputs: int, n_classes:
     bfew = f"{_list(b['few'])}: too few inputs for an interval" if b.get("few") else ""
     s2 = ("In bytes at the same level " + ("; ".join(bp) if bp else "no class has a verdict")
           + (f" ({bfew})" if bfew else "") + ".")
-    s3 = (f"This holds for {n_inputs} inputs in {n_classes} classes, {size} images, frame time without "
-          "build time, on one CPU machine without a GPU, against ray-traced (not rasterized) polygons; "
-          "the caveats below say what else it does not cover.")
+    r = by(raster_v or [], "time")
+    raster = ""
+    if raster_v:
+        rp = []
+        if r.get("sdf"):
+            rp.append(f"SDFs are still faster in {_list(r['sdf'])}")
+        if r.get("mesh"):
+            rp.append(f"rasterized meshes are faster in {_list(r['mesh'])}")
+        if r.get("tie"):
+            rp.append(f"they tie in {_list(r['tie'])}")
+        raster = ("Against meshes whose primary visibility is rasterized (z-buffer, same shading) "
+                  + ("; ".join(rp) if rp else "no class has a verdict with an interval") + "; ")
+    s3 = (raster + f"all of this holds for {n_inputs} inputs in {n_classes} classes, {size} images, frame "
+          "time without build time, on one CPU machine without a GPU (the caveats below say what else it "
+          "does not cover).")
+    s3 = s3[0].upper() + s3[1:]
     return [s1, s2, s3]
 
 
-def time_verdicts(rows, sel, duel_rows) -> tuple[list[dict], list[dict]]:
-    """(per class and level duel verdicts, the per-input duel ratios)."""
-    ratios = duel.duel_ratios(sel, duel_rows)
-    return duel.duel_verdicts(sel, ratios, analysis.classes(rows)), ratios
+def time_verdicts(rows, sel, duel_rows, opponent: str = "mesh") -> tuple[list[dict], list[dict]]:
+    """(per class and level duel verdicts against `opponent`, the per-input duel ratios)."""
+    ratios = duel.duel_ratios(sel, duel_rows, opponent)
+    return duel.duel_verdicts(sel, ratios, analysis.classes(rows), opponent), ratios
 
 
 def bytes_verdicts(rows) -> list[dict]:
@@ -122,19 +136,23 @@ def _bytes_cell(c: dict) -> str:
     return analysis.verdict_text(c, "bytes")
 
 
-def table(time_v, bytes_v) -> str:
+def table(time_v, bytes_v, raster_v=None) -> str:
     from .report import md_table
 
     bmap = {(v["class"], v["level"]): v["bytes"] for v in bytes_v}
+    rmap = {(v["class"], v["level"]): v["time"] for v in raster_v or []}
     rows, last = [], None
     for v in time_v:
         t = v["time"]
         b = bmap.get((v["class"], v["level"]))
         cls = v["class"] if v["class"] != last else ""
         last = v["class"]
+        rt = rmap.get((v["class"], v["level"]))
         rows.append((cls, f"≤ {v['level']:g} px", t["n_inputs"], duel.verdict_cell(t),
-                     _bytes_cell(b) if b else "–"))
-    return md_table(["class", "quality", "inputs duelled", "frame time (paired duels)", "bytes"], rows)
+                     _bytes_cell(b) if b else "–",
+                     duel.verdict_cell(rt).replace("mesh", "raster") if rt else "–"))
+    return md_table(["class", "quality", "inputs duelled", "frame time vs ray-traced meshes (paired duels)",
+                     "bytes", "frame time vs rasterized meshes"], rows)
 
 
 def optimism_text(ratios) -> str:
@@ -153,7 +171,7 @@ def optimism_text(ratios) -> str:
 
 
 def candidates_text(sel) -> str:
-    c = {"sdf": [], "mesh": []}
+    c = {"sdf": [], "mesh": [], "raster": []}
     for s in sel:
         c[s["side"]].append(int(s["candidates"]))
     parts = [f"{side} {int(np.median(v))} (median over inputs)" for side, v in c.items() if v]
@@ -174,8 +192,8 @@ def caveats(rows, sel, ratios) -> list[str]:
         "Image size: the verdict at " + ", ".join(f"{w}×{h}" for w, h in sizes) + "; pixel-relative "
         "error makes a mesh's needed resolution grow with the image (see Image size for the sizes "
         "covered, on one input per class).",
-        "Polygons are ray traced (BVH, packets); a z-buffer rasterizer baseline is measured in "
-        "reports/bench/raster.txt, not in this verdict." ,
+        "Rasterization is a software z-buffer on the CPU for primary visibility only (shadows, "
+        "reflections and refractions are traced); a GPU rasterizer is another machine class.",
         f"Frame time excludes build time (build times here span {min(builds):.3g}–{max(builds):.3g} ms)."
         if builds else "Frame time excludes build time.",
         "Classes with fewer than 5 inputs get no interval: " + (", ".join(small) if small else "none") + ".",

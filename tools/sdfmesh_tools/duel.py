@@ -64,16 +64,32 @@ def run_label(row: dict) -> str:
     return s
 
 
+# The sides of the selection: SDF (`sdf` and `grid` runs), meshes ray traced, and meshes whose
+# primary visibility is rasterized (`raster` twins of mesh runs, issue #36), each chosen on its own.
+SIDES = ("sdf", "mesh", "raster")
+
+
+def is_raster(row: dict) -> bool:
+    m = str(row.get("method") or "").strip()
+    return m == "raster" or m.endswith("-raster")
+
+
+def side_of(row: dict) -> str | None:
+    """data.side, with the mesh runs whose primary visibility is rasterized apart (`raster`)."""
+    s = data.side(row)
+    return "raster" if s == "mesh" and is_raster(row) else s
+
+
 def select(rows, levels=LEVELS) -> list[dict]:
     """The selection: one dict (SELECTION_COLUMNS) per (input, level, side) that has a
     configuration meeting the level in every replicate it ran in."""
     out = []
     for (inp,), grp in data.group(rows, "input").items():
         cls = data.class_of(grp[0])
-        for side in ("sdf", "mesh"):
+        for side in SIDES:
             by_run: OrderedDict[str, list[dict]] = OrderedDict()
             for r in grp:
-                if data.side(r) == side and num(r, "frame_ms_median") is not None:
+                if side_of(r) == side and num(r, "frame_ms_median") is not None:
                     by_run.setdefault(run_label(r), []).append(r)
             for level in levels:
                 ok = {k: v for k, v in by_run.items() if all(data.meets(r, level) for r in v)}
@@ -116,7 +132,7 @@ def read_selection(path: Path) -> list[dict]:
 def runs_of(sel: list[dict], inp: str) -> list[str]:
     """The distinct runs chosen for `inp`, SDF side first (the duel's --duel list)."""
     seen: list[str] = []
-    for side in ("sdf", "mesh"):
+    for side in SIDES:
         for s in sel:
             if s["input"] == inp and s["side"] == side and s["run"] not in seen:
                 seen.append(s["run"])
@@ -128,10 +144,11 @@ def read_duels(path: Path) -> list[dict]:
         return list(csv.DictReader(f))
 
 
-def duel_ratios(sel: list[dict], duel_rows: list[dict]) -> list[dict]:
-    """Per (input, level) with both sides chosen and duelled: the SDF and mesh runs, the
-    per-process log ratios (median over rounds of the within-round log(sdf/mesh)) and each
-    run's duel median, ms."""
+def duel_ratios(sel: list[dict], duel_rows: list[dict], opponent: str = "mesh") -> list[dict]:
+    """Per (input, level) with the SDF side and `opponent` (`mesh`: ray traced, `raster`)
+    chosen and duelled: the two runs (`sdf_run`, `mesh_run`: the opponent's), the
+    per-process log ratios (median over rounds of the within-round log(sdf/opponent)) and
+    each run's duel median, ms."""
     frames: dict = {}
     for r in duel_rows:
         t = num(r, "frame_ms")
@@ -143,9 +160,9 @@ def duel_ratios(sel: list[dict], duel_rows: list[dict]) -> list[dict]:
     for s in sel:
         chosen.setdefault((s["input"], s["level"]), {})[s["side"]] = s
     for (inp, level), sides in chosen.items():
-        if "sdf" not in sides or "mesh" not in sides:
+        if "sdf" not in sides or opponent not in sides:
             continue
-        a, b = sides["sdf"]["run"], sides["mesh"]["run"]
+        a, b = sides["sdf"]["run"], sides[opponent]["run"]
         per_proc: dict[str, list[float]] = {}
         ta, tb = [], []
         for (i, proc, _rnd), runs in frames.items():
@@ -162,12 +179,12 @@ def duel_ratios(sel: list[dict], duel_rows: list[dict]) -> list[dict]:
             "rounds": sum(len(v) for v in per_proc.values()),
             "sdf_ms": float(np.median(ta)), "mesh_ms": float(np.median(tb)),
             "sdf_selected_ms": sides["sdf"]["selected_ms_min"],
-            "mesh_selected_ms": sides["mesh"]["selected_ms_min"],
+            "mesh_selected_ms": sides[opponent]["selected_ms_min"],
         })
     return out
 
 
-def duel_verdicts(sel: list[dict], ratios: list[dict], classes: list[str]) -> list[dict]:
+def duel_verdicts(sel: list[dict], ratios: list[dict], classes: list[str], opponent: str = "mesh") -> list[dict]:
     """One dict per (class, level): stats.ratio_ci over the class's duelled inputs (None
     interval below MIN_INPUTS: `too_few`), and the inputs only one side meets the level on."""
     out = []
@@ -181,8 +198,8 @@ def duel_verdicts(sel: list[dict], ratios: list[dict], classes: list[str]) -> li
                 c["lo"] = c["hi"] = c["within_noise"] = None
             sides: dict[str, set] = {}
             for s in sel:
-                if s["class"] == cls and s["level"] == level:
-                    sides.setdefault(s["input"], set()).add(s["side"])
+                if s["class"] == cls and s["level"] == level and s["side"] in ("sdf", opponent):
+                    sides.setdefault(s["input"], set()).add(s["side"].replace(opponent, "mesh"))
             ins = {s["input"] for s in sel if s["class"] == cls}
             c["only_sdf"] = sorted(i for i, v in sides.items() if v == {"sdf"})
             c["only_mesh"] = sorted(i for i, v in sides.items() if v == {"mesh"})

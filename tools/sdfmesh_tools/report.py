@@ -473,10 +473,14 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
     bytes_v = answer.bytes_verdicts(all_rows)
     if sel is not None and duel_rows:
         time_v, ratios = answer.time_verdicts(all_rows, sel, duel_rows)
-        for sentence in answer.sentences(time_v, bytes_v, len(data.inputs(all_rows)), n_classes, size_text):
+        raster_v, raster_ratios = answer.time_verdicts(all_rows, sel, duel_rows, "raster")
+        if not raster_ratios and not any(s["side"] == "raster" for s in sel):
+            raster_v = None
+        for sentence in answer.sentences(time_v, bytes_v, len(data.inputs(all_rows)), n_classes, size_text,
+                                         raster_v=raster_v):
             L.append(sentence + " ")
         L.append("\n\n")
-        L.append(answer.table(time_v, bytes_v))
+        L.append(answer.table(time_v, bytes_v, raster_v))
         procs = sorted({r.get("process") for r in duel_rows})
         rounds = sorted({int(r.get("round", 0)) for r in duel_rows})
         L.append(f"\nFrame time: each input's configuration of each side is chosen on the sweep (the fastest "
