@@ -375,7 +375,7 @@ pub struct CompareOptions {
     pub budget: MemoryBudget,
 }
 
-/// Options of `toolkit compare --duel` ([`crate::compare::duel`]).
+/// Options of `toolkit compare --duel` (the study's paired, interleaved re-timing).
 #[derive(Clone, Debug)]
 pub struct DuelOptions {
     /// Labels of the planned runs to re-time (at least one, none empty).
