@@ -44,18 +44,14 @@ fn is_vm(path: &Path) -> bool {
 }
 
 /// `toolkit render MODEL.vm`: a model without `var-z` as the Prospero challenge's image
-/// (white where negative), default 1024 x 1024; a 3D model is refused (not yet supported).
+/// (white where negative), default 1024 x 1024; a 3D model as a scene ([`render_vm_3d`]).
 fn render_vm(opts: &RenderOptions) -> Result<RenderReport> {
     use crate::geometry::RayStats;
     use crate::implicit::image2d::render_2d;
     use crate::render::Frame;
     let ssa = crate::implicit::load_vm(&opts.scene)?;
     if ssa.uses_z() {
-        return Err(Error::input(
-            &opts.scene,
-            None,
-            "a 3D model (it reads var-z): only the 2D image of a model without var-z is rendered so far",
-        ));
+        return render_vm_3d(opts, ssa);
     }
     let width = opts.overrides.width().unwrap_or(1024) as usize;
     let height = opts.overrides.height().unwrap_or(1024) as usize;
@@ -84,6 +80,34 @@ fn render_vm(opts: &RenderOptions) -> Result<RenderReport> {
         geometry_bytes: 0,
         text,
     })
+}
+
+/// `toolkit render MODEL.vm` of a 3D model: the preview scene framing the cube [-1, 1]^3
+/// ([`crate::scene::implicit_preview_scene`]) rendered as any scene, with the work of the
+/// safe marcher per ray.
+fn render_vm_3d(opts: &RenderOptions, ssa: crate::implicit::Ssa) -> Result<RenderReport> {
+    use crate::implicit::field3d::{CELLS, Field3};
+    let start = Instant::now();
+    let field = std::sync::Arc::new(Field3::new(ssa, CELLS));
+    let prepared = start.elapsed();
+    let mut scene = crate::scene::implicit_preview_scene(field, opts.scene.clone());
+    opts.overrides.apply(&mut scene);
+    check_budget(&opts.budget, &scene, opts.repr, &opts.scene)?;
+    let mut report = render_scene_with(&scene, opts.repr, opts.primary);
+    write_png(&report.frame.image, &opts.output)?;
+    let s = &report.frame.stats;
+    if s.marched_rays > 0 {
+        let _ = writeln!(
+            report.text,
+            "implicit model: cells prepared in {:.1} ms; {:.2} point evaluations and {:.2} interval \
+             evaluations per marched ray ({} marched rays)",
+            prepared.as_secs_f64() * 1e3,
+            s.march_steps as f64 / s.marched_rays as f64,
+            s.interval_evals as f64 / s.marched_rays as f64,
+            s.marched_rays
+        );
+    }
+    Ok(report)
 }
 
 /// Fails when `scene` in `repr` would need more memory than `budget` allows.
