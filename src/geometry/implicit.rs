@@ -66,7 +66,9 @@ impl ImplicitObject {
         stats.marched_rays += 1;
         stats.march_steps += w.point_evals;
         stats.interval_evals += w.interval_evals;
-        for (a, v) in self.work.iter().zip([w.interval_evals, w.point_evals, w.lipschitz_steps, w.ambiguous_leaves]) {
+        for (a, v) in
+            self.work.iter().zip([w.interval_evals, w.point_evals, w.lipschitz_steps, w.ambiguous_leaves])
+        {
             if v > 0 {
                 a.fetch_add(v, Ordering::Relaxed);
             }

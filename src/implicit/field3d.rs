@@ -124,12 +124,7 @@ impl FieldSummary {
         format!(
             "{} clauses; {}^3 cells: {} outside, {} inside, {} surface ({:.0} clauses each after \
              shortening); {class}",
-            self.clauses,
-            self.cells,
-            self.outside,
-            self.inside,
-            self.surface,
-            self.mean_region_clauses
+            self.clauses, self.cells, self.outside, self.inside, self.surface, self.mean_region_clauses
         )
     }
 }
@@ -205,7 +200,9 @@ impl Field3 {
                 || (Vec::new(), Vec::new(), Vec::new(), Vec::new()),
                 |(iv, alias, live, duals): &mut (Vec<Interval>, Vec<u32>, Vec<bool>, Vec<Dual>), c| {
                     let (i, j, k) = (c % n, (c / n) % n, c / (n * n));
-                    let b = |a: usize| Interval::new(-EXTENT + a as f64 * h - PAD, -EXTENT + (a + 1) as f64 * h + PAD);
+                    let b = |a: usize| {
+                        Interval::new(-EXTENT + a as f64 * h - PAD, -EXTENT + (a + 1) as f64 * h + PAD)
+                    };
                     let (x, y, z) = (b(i), b(j), b(k));
                     let v = ssa.eval_interval(x, y, z, iv);
                     if !v.nan && v.lo > 0.0 {
@@ -268,7 +265,11 @@ impl Field3 {
         std::mem::size_of::<Self>()
             + self.ssa.clauses.capacity() * clause
             + self.cells.capacity() * 4
-            + self.regions.iter().map(|r| std::mem::size_of::<Region>() + r.ssa.clauses.capacity() * clause).sum::<usize>()
+            + self
+                .regions
+                .iter()
+                .map(|r| std::mem::size_of::<Region>() + r.ssa.clauses.capacity() * clause)
+                .sum::<usize>()
     }
 
     /// The surface cells' programs.
@@ -439,12 +440,26 @@ impl Field3 {
             t_next[a] += t_delta[a];
         }
         // Inside the solid up to where the ray leaves the cube: the cut face.
-        (sign < 0.0 && tout <= t_max).then_some(RootHit { t: tout, error: 0.0, face: Some(out_face), region: None })
+        (sign < 0.0 && tout <= t_max).then_some(RootHit {
+            t: tout,
+            error: 0.0,
+            face: Some(out_face),
+            region: None,
+        })
     }
 
     /// `sign * f` on the region's program at `o + t d`.
     #[inline]
-    fn eval(&self, r: &Region, o: DVec3, d: DVec3, t: f64, sign: f64, s: &mut Scratch, w: &mut RayWork) -> f64 {
+    fn eval(
+        &self,
+        r: &Region,
+        o: DVec3,
+        d: DVec3,
+        t: f64,
+        sign: f64,
+        s: &mut Scratch,
+        w: &mut RayWork,
+    ) -> f64 {
         w.point_evals += 1;
         let p = o + d * t;
         sign * r.ssa.eval_f64_into(p.to_array(), &mut s.v)
@@ -632,7 +647,8 @@ mod tests {
         let f = Field3::new(parse_vm("x var-x\nk const -1\no add x k\n", "c.vm".as_ref()).unwrap(), 4);
         let mut s = Scratch::default();
         let mut w = RayWork::default();
-        let h = f.first_root(DVec3::new(0.0, 0.0, 5.0), -DVec3::Z, 0.0, 10.0, 1e-6, 0.0, &mut s, &mut w).unwrap();
+        let h =
+            f.first_root(DVec3::new(0.0, 0.0, 5.0), -DVec3::Z, 0.0, 10.0, 1e-6, 0.0, &mut s, &mut w).unwrap();
         assert_eq!(h.t, 4.0);
         assert_eq!(h.face, Some(DVec3::Z));
     }

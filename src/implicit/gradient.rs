@@ -231,7 +231,13 @@ fn derivative(op: Opcode, a: Dual, b: Dual, v: Interval) -> [Interval; 3] {
 /// A proven Lipschitz bound of `ssa` over the box `x`, `y`, `z` (Euclidean norm of the
 /// largest gradient magnitudes per axis, rounded up), or `None` where the model may be
 /// discontinuous, its gradient unbounded, or NaN in the box. `scratch` is reused.
-pub fn lipschitz_bound(ssa: &Ssa, x: Interval, y: Interval, z: Interval, scratch: &mut Vec<Dual>) -> Option<f64> {
+pub fn lipschitz_bound(
+    ssa: &Ssa,
+    x: Interval,
+    y: Interval,
+    z: Interval,
+    scratch: &mut Vec<Dual>,
+) -> Option<f64> {
     let d = eval_dual(ssa, x, y, z, scratch);
     if d.v.nan {
         return None;
@@ -261,10 +267,9 @@ mod tests {
     /// smooth, min/max and transcendental clauses.
     #[test]
     fn the_bound_holds_between_sampled_points() {
-        let m = ssa(
-            "x var-x\ny var-y\nz var-z\na square x\nb mul y z\nc sin b\nd add a c\ne exp y\nf min d e\n\
-             g abs z\nh max f g\nk const 0.3\nl sub h k\nq atan2 y x\nr mul q k\no add l r\n",
-        );
+        let m =
+            ssa("x var-x\ny var-y\nz var-z\na square x\nb mul y z\nc sin b\nd add a c\ne exp y\nf min d e\n\
+             g abs z\nh max f g\nk const 0.3\nl sub h k\nq atan2 y x\nr mul q k\no add l r\n");
         let mut s = 0x9e37_79b9_7f4a_7c15u64;
         let mut rnd = || {
             s ^= s << 13;
@@ -293,8 +298,9 @@ mod tests {
 
     #[test]
     fn a_sphere_is_one_lipschitz_and_jumps_have_no_bound() {
-        let sphere =
-            ssa("x var-x\ny var-y\nz var-z\na square x\nb square y\nc square z\nd add a b\ne add d c\nf sqrt e\n");
+        let sphere = ssa(
+            "x var-x\ny var-y\nz var-z\na square x\nb square y\nc square z\nd add a b\ne add d c\nf sqrt e\n",
+        );
         let iv = Interval::new(0.5, 0.6);
         let l = lipschitz_bound(&sphere, iv, iv, iv, &mut Vec::new()).unwrap();
         assert!((1.0..1.1).contains(&l), "{l}");

@@ -24,10 +24,10 @@ use crate::convert::tessellate::{plane_view_mesh, tessellate};
 use crate::error::Result;
 use crate::geometry::analytic::AnalyticObject;
 use crate::geometry::grid::SdfGrid;
-use crate::geometry::implicit::ImplicitObject;
 use crate::geometry::grid::band::BandGrid;
 use crate::geometry::grid::object::{ClippedGrid, GridObject, GridStore};
 use crate::geometry::grid::scene::{SceneGrid, SceneGridObject};
+use crate::geometry::implicit::ImplicitObject;
 use crate::geometry::march::MarchParams;
 use crate::geometry::mesh::MeshGeometry;
 use crate::geometry::mesh::instance::{InstancedMesh, compose, repeat_offsets};
@@ -415,6 +415,13 @@ pub fn implicit_surface(o: &Object, resolution: u32, method: ExtractMethod) -> O
     (!mesh.triangles.is_empty()).then_some(mesh)
 }
 
+/// [`implicit_surface`] placed in world space by the object's transform.
+pub fn implicit_world_mesh(o: &Object, resolution: u32, method: ExtractMethod) -> Option<TriangleMesh> {
+    let mut m = implicit_surface(o, resolution, method)?;
+    m.transform(&o.compiled_transform().to_world);
+    Some(m)
+}
+
 thread_local! {
     static IMPLICIT_SCRATCH: std::cell::RefCell<crate::implicit::field3d::Scratch> =
         std::cell::RefCell::new(Default::default());
@@ -726,6 +733,12 @@ pub fn scene_mesh(scene: &Scene, repr: Representation) -> Option<TriangleMesh> {
             build @ (Build::Tessellated { .. } | Build::PlaneDisc { .. } | Build::Extracted { .. }) => {
                 match mesh_geometry(scene, o, build) {
                     Some((g, _)) => g.world_mesh(),
+                    None => continue,
+                }
+            }
+            Build::ImplicitExtracted { method, resolution } => {
+                match implicit_world_mesh(o, resolution, method) {
+                    Some(m) => m,
                     None => continue,
                 }
             }

@@ -52,7 +52,8 @@ use glam::Vec3;
 
 pub use crate::geometry::mesh::instance::MAX_INSTANCES;
 pub use build::{
-    build_objects, build_scene, build_scene_with_plans, grid_file_mesh, reextract_mesh, scene_mesh,
+    build_objects, build_scene, build_scene_with_plans, grid_file_mesh, implicit_surface,
+    implicit_world_mesh, reextract_mesh, scene_mesh,
 };
 
 use crate::convert::extract::ExtractMethod;
@@ -697,10 +698,12 @@ pub fn plan_object(scene: &Scene, o: &Object, repr: Representation) -> ObjectPla
             Representation::Analytic { .. } => {
                 ObjectPlan::fallback(safe, Fallback::NoClosedForm { kind: o.kind_name() })
             }
-            Representation::Mesh { resolution, method, .. } => ObjectPlan::as_asked(Build::ImplicitExtracted {
-                method: method.extract_method(),
-                resolution: extract_resolution(resolution),
-            }),
+            Representation::Mesh { resolution, method, .. } => {
+                ObjectPlan::as_asked(Build::ImplicitExtracted {
+                    method: method.extract_method(),
+                    resolution: extract_resolution(resolution),
+                })
+            }
             Representation::Grid { .. } => ObjectPlan::fallback(safe, Fallback::ImplicitNotGridded),
         };
     }

@@ -960,7 +960,9 @@ impl Cx<'_> {
             if at.contains(".child") {
                 return Err(self.err(
                     o.kind.span(),
-                    format!("{at}: an implicit model can only be a top-level object (it takes no part in CSG)"),
+                    format!(
+                        "{at}: an implicit model can only be a top-level object (it takes no part in CSG)"
+                    ),
                 ));
             }
             // Relative to the scene file's folder.
