@@ -371,11 +371,9 @@ impl Field3 {
         w.point_evals += 1;
         let f_start = self.value(start, s);
         let entering = tin >= t_min;
-        if f_start < 0.0 {
-            if entering {
-                // The solid reaches the cube's face: the cut face is the surface here.
-                return Some(RootHit { t: t0, error: 0.0, face: Some(in_face), region: None });
-            }
+        if f_start < 0.0 && entering {
+            // The solid reaches the cube's face: the cut face is the surface here.
+            return Some(RootHit { t: t0, error: 0.0, face: Some(in_face), region: None });
         }
         let sign = if f_start < 0.0 { -1.0 } else { 1.0 };
         // 3D DDA over the cells.
@@ -450,6 +448,7 @@ impl Field3 {
 
     /// `sign * f` on the region's program at `o + t d`.
     #[inline]
+    #[allow(clippy::too_many_arguments)]
     fn eval(
         &self,
         r: &Region,

@@ -303,7 +303,8 @@ mod tests {
         );
         let iv = Interval::new(0.5, 0.6);
         let l = lipschitz_bound(&sphere, iv, iv, iv, &mut Vec::new()).unwrap();
-        assert!((1.0..1.1).contains(&l), "{l}");
+        // Per-axis maxima: within sqrt(3) of the true largest gradient (1 here).
+        assert!((1.0..1.25).contains(&l), "{l}");
         // Across the origin sqrt's derivative is unbounded: no bound.
         let around = Interval::new(-0.1, 0.1);
         assert_eq!(lipschitz_bound(&sphere, around, around, around, &mut Vec::new()), None);

@@ -294,7 +294,7 @@ fn three_d_models_render_convert_and_sit_in_scenes() {
         &scene,
         "[camera]\nposition = [0, 0, 6]\nlook_at = [0, 0, 0]\nwidth = 40\nheight = 40\n\
          [[lights]]\ntype = \"ambient\"\nintensity = 1.0\n\
-         [[materials]]\nname = \"red\"\ncolor = [1, 0, 0]\n\
+         [materials.red]\ncolor = [1, 0, 0]\n\
          [[objects]]\ntype = \"implicit\"\npath = \"ball.vm\"\nmaterial = \"red\"\ntranslate = [0.5, 0, 0]\n",
     )
     .unwrap();
