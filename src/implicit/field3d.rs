@@ -32,7 +32,7 @@ use super::interval::Interval;
 use super::tape::Ssa;
 
 /// Default cells per axis of the cube.
-pub const CELLS: usize = 16;
+pub const CELLS: usize = 32;
 
 /// Lipschitz steps in one cell before its remaining piece is isolated by intervals.
 pub const MAX_CELL_STEPS: u32 = 48;
@@ -109,6 +109,12 @@ impl FieldSummary {
             format!(
                 "not a distance (L from {:.3} to {:.3}, median {:.3}): marched by value / L",
                 self.lipschitz_min, self.lipschitz_max, self.lipschitz_median
+            )
+        } else if self.bounded == 0 {
+            format!(
+                "not a distance: none of its {} surface cells has a useful Lipschitz bound (jumps, unbounded \
+                 or huge derivatives): every one is isolated by interval subdivision along the ray",
+                self.surface
             )
         } else {
             format!(

@@ -395,6 +395,7 @@ fn implicit_marched(o: &Object, march: MarchParams, fallback: Option<Fallback>) 
     let ObjectKind::Implicit { field, .. } = &o.kind else { unreachable!("called for implicit models only") };
     let label = match fallback {
         None => o.label.clone(),
+        Some(Fallback::NoClosedForm { .. }) => format!("{} (no closed form: traced safely)", o.label),
         Some(f) => format!("{} ({f})", o.label),
     };
     Box::new(ImplicitObject::new(field.clone(), o.compiled_transform(), o.material, march, label))
