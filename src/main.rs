@@ -75,6 +75,12 @@ fn main() -> ExitCode {
             sdfmesh::compare::scaling::scaling_command(&options, &csv).map(|t| print!("{t}"))
         }
         Task::Compare(opts) => sdfmesh::compare::compare_command(&opts).map(|t| print!("{t}")),
+        Task::CheckReference(options) => {
+            sdfmesh::compare::refcheck::check_reference_command(&options).map(|t| print!("{t}"))
+        }
+        Task::Duel { options, duel } => {
+            sdfmesh::compare::duel::duel_command(&options, &duel).map(|t| print!("{t}"))
+        }
         Task::Hard { manifest, table } => {
             match sdfmesh::compare::hard::hard_command(&manifest, table.as_deref(), &budget) {
                 Ok((text, as_expected)) => {

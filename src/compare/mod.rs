@@ -12,7 +12,9 @@
 //! input and quality level, which representation is fastest and which is smallest;
 //! [`scaling`] is the coursework's frame time against primitive count experiment.
 
+pub mod duel;
 pub mod hard;
+pub mod refcheck;
 pub mod scaling;
 pub mod summary;
 

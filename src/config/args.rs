@@ -32,6 +32,8 @@ pub struct Cli {
 }
 
 /// A subcommand and its raw arguments (each variant's doc comment is its `--help`).
+// Parsed once per process and moved, never stored in bulk: the size of `Compare` costs nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 pub enum Command {
     /// Render a scene file, or a mesh file (OBJ, glTF, GLB, PLY, STL) or a signed distance
@@ -172,6 +174,19 @@ pub enum Command {
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
+        /// Re-time these planned runs of the one input instead, paired and interleaved
+        /// (comma-separated labels `repr/method[/resolution][@tolerance:relaxation]`, e.g.
+        /// `sdf/sphere-trace@1:1.6,mesh/extracted/32`), --rounds rounds, one frame of each
+        /// per round, and write one row per frame to --csv (the duel schema in the README).
+        #[arg(long, value_delimiter = ',', value_name = "RUNS", conflicts_with_all = ["scaling", "resume"])]
+        duel: Vec<String>,
+        /// Rounds of a --duel.
+        #[arg(long, default_value_t = 15, requires = "duel")]
+        rounds: u32,
+        /// Check the one input's reference instead: its primary hits against f64 root finding
+        /// on the object trees (no tape, no SIMD, no pruning), one row to --csv.
+        #[arg(long, conflicts_with_all = ["scaling", "resume", "duel"])]
+        check_reference: bool,
         /// Overrides of the scene's settings.
         #[command(flatten)]
         settings: SettingArgs,

@@ -375,6 +375,18 @@ pub struct CompareOptions {
     pub budget: MemoryBudget,
 }
 
+/// Options of `toolkit compare --duel` ([`crate::compare::duel`]).
+#[derive(Clone, Debug)]
+pub struct DuelOptions {
+    /// Labels of the planned runs to re-time (at least one, none empty).
+    pub runs: Vec<String>,
+    /// Rounds, in [`ROUNDS`].
+    pub rounds: u32,
+}
+
+/// `--rounds` of a duel.
+pub const ROUNDS: FlagRange = FlagRange { min: 1, max: 1000, of: "" };
+
 /// Options of `toolkit compare --scaling`.
 #[derive(Clone, Debug)]
 pub struct ScalingOptions {
@@ -406,6 +418,15 @@ pub enum Task {
     },
     /// `toolkit compare`.
     Compare(CompareOptions),
+    /// `toolkit compare --duel`: the compare flags plan the runs the duel picks from.
+    Duel {
+        /// The compare options (one input).
+        options: CompareOptions,
+        /// The runs and rounds.
+        duel: DuelOptions,
+    },
+    /// `toolkit compare --check-reference`: the compare flags plan the reference checked.
+    CheckReference(CompareOptions),
     /// `toolkit compare --scaling`.
     Scaling {
         /// The experiment's options.
@@ -526,6 +547,9 @@ impl Task {
                 counts: _,
                 scaling_res: _,
                 quiet,
+                duel,
+                rounds,
+                check_reference,
                 settings,
                 march,
             } => {
@@ -550,7 +574,7 @@ impl Task {
                             .map_err(|e| Error::Usage(format!("--sdf-tolerance-px/--sdf-relax: {e}")))?;
                     }
                 }
-                Task::Compare(CompareOptions {
+                let options = CompareOptions {
                     inputs,
                     csv,
                     resolutions: res,
@@ -580,7 +604,30 @@ impl Task {
                     surface_samples,
                     progress: !quiet,
                     budget,
-                })
+                };
+                if check_reference {
+                    if options.inputs.len() != 1 {
+                        return Err(Error::Usage(format!(
+                            "--check-reference checks one input, got {} inputs",
+                            options.inputs.len()
+                        )));
+                    }
+                    Task::CheckReference(options)
+                } else if duel.is_empty() {
+                    Task::Compare(options)
+                } else {
+                    if options.inputs.len() != 1 {
+                        return Err(Error::Usage(format!(
+                            "--duel re-times runs of one input, got {} inputs",
+                            options.inputs.len()
+                        )));
+                    }
+                    if let Some(bad) = duel.iter().find(|l| l.trim().is_empty()) {
+                        return Err(Error::Usage(format!("--duel has an empty run label `{bad}`")));
+                    }
+                    ROUNDS.check("--rounds", rounds)?;
+                    Task::Duel { options, duel: DuelOptions { runs: duel, rounds } }
+                }
             }
             Command::Hard { manifest, table } => Task::Hard { manifest, table },
             Command::Gallery { scenes, output, mesh, settings, march } => {

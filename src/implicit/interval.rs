@@ -20,10 +20,12 @@ pub struct Interval {
 /// Everything (and possibly NaN).
 const ANY: Interval = Interval { lo: f64::NEG_INFINITY, hi: f64::INFINITY, nan: true };
 
+#[inline(always)]
 fn down(x: f64) -> f64 {
     if x.is_finite() { x - x.abs() * 8.0 * f64::EPSILON - f64::MIN_POSITIVE } else { x }
 }
 
+#[inline(always)]
 fn up(x: f64) -> f64 {
     if x.is_finite() { x + x.abs() * 8.0 * f64::EPSILON + f64::MIN_POSITIVE } else { x }
 }
@@ -53,6 +55,7 @@ impl Interval {
         !(self.lo <= self.hi)
     }
 
+    #[inline(always)]
     fn widened(lo: f64, hi: f64, nan: bool) -> Interval {
         let (lo, hi) =
             if lo.is_nan() || hi.is_nan() { (f64::NEG_INFINITY, f64::INFINITY) } else { (down(lo), up(hi)) };
@@ -74,16 +77,8 @@ impl Interval {
         let w = |lo: f64, hi: f64, extra: bool| Interval::widened(lo, hi, nan || extra);
         match op {
             VarX | VarY | VarZ | Const | Copy => a,
-            Neg => Interval { lo: -a.hi, hi: -a.lo, nan },
-            Abs => {
-                if a.lo >= 0.0 {
-                    a
-                } else if a.hi <= 0.0 {
-                    Interval { lo: -a.hi, hi: -a.lo, nan }
-                } else {
-                    Interval { lo: 0.0, hi: a.hi.max(-a.lo), nan }
-                }
-            }
+            Neg => neg(a, nan),
+            Abs => abs(a, nan),
             Recip => {
                 if a.lo > 0.0 || a.hi < 0.0 {
                     w(1.0 / a.hi, 1.0 / a.lo, false)
@@ -91,21 +86,8 @@ impl Interval {
                     ANY
                 }
             }
-            Sqrt => {
-                if a.hi < 0.0 {
-                    Interval::point(f64::NAN)
-                } else {
-                    w(a.lo.max(0.0).sqrt(), a.hi.sqrt(), a.lo < 0.0)
-                }
-            }
-            Square => {
-                let (l, h) = (a.lo * a.lo, a.hi * a.hi);
-                if a.lo <= 0.0 && a.hi >= 0.0 {
-                    w(0.0, l.max(h), false)
-                } else {
-                    w(l.min(h), l.max(h), false)
-                }
-            }
+            Sqrt => sqrt(a, nan),
+            Square => square(a, nan),
             Floor => Interval { lo: a.lo.floor(), hi: a.hi.floor(), nan },
             Ceil => Interval { lo: a.lo.ceil(), hi: a.hi.ceil(), nan },
             Round => Interval { lo: a.lo.round(), hi: a.hi.round(), nan },
@@ -148,17 +130,9 @@ impl Interval {
                     Interval { lo: 0.0, hi: 1.0, nan }
                 }
             }
-            Add => w(a.lo + b.lo, a.hi + b.hi, inf_minus_inf(a.lo, b.lo) || inf_minus_inf(a.hi, b.hi)),
-            Sub => w(a.lo - b.hi, a.hi - b.lo, inf_minus_inf(a.lo, -b.hi) || inf_minus_inf(a.hi, -b.lo)),
-            Mul => {
-                let p = [a.lo * b.lo, a.lo * b.hi, a.hi * b.lo, a.hi * b.hi];
-                if p.iter().any(|v| v.is_nan()) {
-                    return ANY;
-                }
-                let lo = p.iter().copied().fold(f64::INFINITY, f64::min);
-                let hi = p.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-                w(lo, hi, false)
-            }
+            Add => add(a, b, nan),
+            Sub => sub(a, b, nan),
+            Mul => mul(a, b, nan),
             Div => {
                 if b.lo > 0.0 || b.hi < 0.0 {
                     let r = Interval::apply(Recip, b, b);
@@ -229,6 +203,94 @@ impl Interval {
     }
 }
 
+impl Interval {
+    /// [`Interval::apply`], the same result bit for bit, with the opcodes of distance-like
+    /// models (arithmetic, `min`, `max`, `sqrt`, `square`, `neg`, `abs`) inlined into the
+    /// caller's loop; the others call [`Interval::apply`].
+    #[inline(always)]
+    pub fn apply_inline(op: Opcode, a: Interval, b: Interval) -> Interval {
+        use Opcode::*;
+        // Empty arguments (NaN only) take the general path.
+        let full_a = a.lo <= a.hi;
+        let full_b = b.lo <= b.hi;
+        match op {
+            Add if full_a && full_b => add(a, b, a.nan || b.nan),
+            Sub if full_a && full_b => sub(a, b, a.nan || b.nan),
+            Mul if full_a && full_b => mul(a, b, a.nan || b.nan),
+            Min if full_a && full_b => {
+                Interval { lo: a.lo.min(b.lo), hi: a.hi.min(b.hi), nan: a.nan || b.nan }
+            }
+            Max if full_a && full_b => {
+                Interval { lo: a.lo.max(b.lo), hi: a.hi.max(b.hi), nan: a.nan || b.nan }
+            }
+            Neg if full_a => neg(a, a.nan),
+            Abs if full_a => abs(a, a.nan),
+            Sqrt if full_a => sqrt(a, a.nan),
+            Square if full_a => square(a, a.nan),
+            _ => Interval::apply(op, a, b),
+        }
+    }
+}
+
+#[inline(always)]
+fn neg(a: Interval, nan: bool) -> Interval {
+    Interval { lo: -a.hi, hi: -a.lo, nan }
+}
+
+#[inline(always)]
+fn abs(a: Interval, nan: bool) -> Interval {
+    if a.lo >= 0.0 {
+        a
+    } else if a.hi <= 0.0 {
+        Interval { lo: -a.hi, hi: -a.lo, nan }
+    } else {
+        Interval { lo: 0.0, hi: a.hi.max(-a.lo), nan }
+    }
+}
+
+#[inline(always)]
+fn sqrt(a: Interval, nan: bool) -> Interval {
+    if a.hi < 0.0 {
+        Interval::point(f64::NAN)
+    } else {
+        Interval::widened(a.lo.max(0.0).sqrt(), a.hi.sqrt(), nan || a.lo < 0.0)
+    }
+}
+
+#[inline(always)]
+fn square(a: Interval, nan: bool) -> Interval {
+    let (l, h) = (a.lo * a.lo, a.hi * a.hi);
+    if a.lo <= 0.0 && a.hi >= 0.0 {
+        Interval::widened(0.0, l.max(h), nan)
+    } else {
+        Interval::widened(l.min(h), l.max(h), nan)
+    }
+}
+
+#[inline(always)]
+fn add(a: Interval, b: Interval, nan: bool) -> Interval {
+    let extra = inf_minus_inf(a.lo, b.lo) || inf_minus_inf(a.hi, b.hi);
+    Interval::widened(a.lo + b.lo, a.hi + b.hi, nan || extra)
+}
+
+#[inline(always)]
+fn sub(a: Interval, b: Interval, nan: bool) -> Interval {
+    let extra = inf_minus_inf(a.lo, -b.hi) || inf_minus_inf(a.hi, -b.lo);
+    Interval::widened(a.lo - b.hi, a.hi - b.lo, nan || extra)
+}
+
+#[inline(always)]
+fn mul(a: Interval, b: Interval, nan: bool) -> Interval {
+    let p = [a.lo * b.lo, a.lo * b.hi, a.hi * b.lo, a.hi * b.hi];
+    if p.iter().any(|v| v.is_nan()) {
+        return ANY;
+    }
+    let lo = p[0].min(p[1]).min(p[2].min(p[3]));
+    let hi = p[0].max(p[1]).max(p[2].max(p[3]));
+    Interval::widened(lo, hi, nan)
+}
+
+#[inline(always)]
 fn inf_minus_inf(x: f64, y: f64) -> bool {
     x.is_infinite() && y.is_infinite() && x.signum() != y.signum()
 }
@@ -264,6 +326,46 @@ fn periodic(a: Interval, shift: f64, nan: bool) -> Interval {
 mod tests {
     use super::*;
     use crate::implicit::ops::apply_f64;
+
+    /// The inlined path gives `apply`'s result bit for bit, NaN flags and empty
+    /// (NaN-only) arguments included.
+    #[test]
+    fn inline_path_equals_apply() {
+        use Opcode::*;
+        let mut s = 0x0bad_cafe_1234_5678u64;
+        let mut rnd = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut pick = || -> Interval {
+            let k = rnd();
+            if k < 0.05 {
+                return Interval::point(f64::NAN);
+            }
+            if k < 0.1 {
+                return Interval::new(f64::NEG_INFINITY, (rnd() - 0.5) * 4.0);
+            }
+            if k < 0.15 {
+                return Interval::new((rnd() - 0.5) * 4.0, f64::INFINITY);
+            }
+            let c = (rnd() - 0.5) * 10.0;
+            let r = if rnd() < 0.2 { 0.0 } else { rnd() * 3.0 };
+            Interval { lo: c - r, hi: c + r, nan: rnd() < 0.1 }
+        };
+        for op in [Add, Sub, Mul, Min, Max, Neg, Abs, Sqrt, Square, Div, Sin] {
+            for _ in 0..2000 {
+                let (a, b) = (pick(), pick());
+                let (f, g) = (Interval::apply_inline(op, a, b), Interval::apply(op, a, b));
+                let same = |x: f64, y: f64| x.to_bits() == y.to_bits() || (x == 0.0 && y == 0.0);
+                assert!(
+                    same(f.lo, g.lo) && same(f.hi, g.hi) && f.nan == g.nan,
+                    "{op:?} {a:?} {b:?}: {f:?} vs {g:?}"
+                );
+            }
+        }
+    }
 
     /// Every opcode, over many random intervals: values at sample points lie inside.
     #[test]

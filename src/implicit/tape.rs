@@ -80,35 +80,213 @@ impl Ssa {
     /// [`Ssa::eval_interval`]): equal to it at every point of the region, into `out`.
     /// `alias` and `live` are scratch.
     pub fn shorten(&self, iv: &[Interval], out: &mut Ssa, alias: &mut Vec<u32>, live: &mut Vec<bool>) {
+        let mut index = Vec::new();
+        self.shorten_with(|j| iv[j], out, alias, live, &mut index, false);
+    }
+
+    /// [`Ssa::eval_interval`], the same intervals, with the common opcodes inlined
+    /// ([`Interval::apply_inline`]) and `out` written in place (no allocation once it has
+    /// grown to the program's length).
+    pub fn eval_interval_fast(
+        &self,
+        x: Interval,
+        y: Interval,
+        z: Interval,
+        out: &mut Vec<Interval>,
+    ) -> Interval {
+        let n = self.clauses.len();
+        if n == 0 {
+            out.clear();
+            return Interval::point(f64::NAN);
+        }
+        out.resize(n, Interval::new(0.0, 0.0));
+        for (i, c) in self.clauses.iter().enumerate() {
+            let r = match c.op {
+                Opcode::VarX => x,
+                Opcode::VarY => y,
+                Opcode::VarZ => z,
+                Opcode::Const => Interval::point(c.value),
+                op => Interval::apply_inline(op, out[c.a as usize], out[c.b as usize]),
+            };
+            out[i] = r;
+        }
+        out[n - 1]
+    }
+
+    /// [`Ssa::shorten`] when the intervals decide some clause: then the shortened program
+    /// goes to `out` and the answer is true. When they decide none, `out` is left alone and
+    /// the answer is false: a program without dead clauses (as every shortened one) is then
+    /// already what shortening would give.
+    pub fn shorten_decided(&self, iv: &[Interval], out: &mut Ssa, s: &mut ShortenScratch) -> bool {
+        self.shorten_with(|j| iv[j], out, &mut s.alias, &mut s.live, &mut s.index, true)
+    }
+
+    /// The intervals of every clause over `L` boxes at once (box `k`: `x[k]`, `y[k]`,
+    /// `z[k]`), into `out`: `out[i * L + k]` is clause `i` over box `k`, the interval
+    /// [`Ssa::eval_interval`] gives for that box alone. One pass over the program for `L`
+    /// boxes (the sub-tiles of a tile): each opcode is dispatched once for all of them.
+    pub fn eval_interval_lanes<const L: usize>(
+        &self,
+        x: &[Interval; L],
+        y: &[Interval; L],
+        z: &[Interval; L],
+        out: &mut Vec<Interval>,
+    ) {
+        self.eval_interval_lanes_inner::<L, false>(x, y, z, out, &mut Vec::new());
+    }
+
+    /// [`Ssa::eval_interval_lanes`] that also records, per clause and box, what shortening
+    /// decides there (`choices[i * L + k]`: 0 nothing, 1 the clause is its first argument,
+    /// 2 its second; written for `copy`, `min`, `max`, `and` and `or` clauses only), for
+    /// [`Ssa::shorten_chosen`]. Returns, per box, how many clauses are decided there.
+    pub fn eval_interval_choices<const L: usize>(
+        &self,
+        x: &[Interval; L],
+        y: &[Interval; L],
+        z: &[Interval; L],
+        out: &mut Vec<Interval>,
+        choices: &mut Vec<u8>,
+    ) -> [u32; L] {
+        self.eval_interval_lanes_inner::<L, true>(x, y, z, out, choices)
+    }
+
+    #[inline(always)]
+    fn eval_interval_lanes_inner<const L: usize, const CHOICES: bool>(
+        &self,
+        x: &[Interval; L],
+        y: &[Interval; L],
+        z: &[Interval; L],
+        out: &mut Vec<Interval>,
+        choices: &mut Vec<u8>,
+    ) -> [u32; L] {
+        let n = self.clauses.len();
+        out.resize(n * L, Interval::new(0.0, 0.0));
+        if CHOICES {
+            choices.resize(n * L, 0);
+        }
+        let mut counts = [0u32; L];
+        for (i, c) in self.clauses.iter().enumerate() {
+            let (done, rest) = out.split_at_mut(i * L);
+            let dst: &mut [Interval; L] = (&mut rest[..L]).try_into().expect("L lanes");
+            match c.op {
+                Opcode::VarX => *dst = *x,
+                Opcode::VarY => *dst = *y,
+                Opcode::VarZ => *dst = *z,
+                Opcode::Const => *dst = [Interval::point(c.value); L],
+                op => {
+                    let (a, b) = (c.a as usize * L, c.b as usize * L);
+                    let a: &[Interval; L] = done[a..a + L].try_into().expect("L lanes");
+                    // A unary clause's `b` is 0, a clause before it.
+                    let b: &[Interval; L] = done[b..b + L].try_into().expect("L lanes");
+                    interval_lanes(op, a, b, dst);
+                    if CHOICES && is_choice(op) {
+                        let ch: &mut [u8; L] = (&mut choices[i * L..i * L + L]).try_into().expect("L lanes");
+                        for k in 0..L {
+                            ch[k] = choose(op, a[k], b[k]);
+                            counts[k] += (ch[k] != 0) as u32;
+                        }
+                    }
+                }
+            }
+        }
+        counts
+    }
+
+    /// This program shortened for box `lane` of the choices recorded by
+    /// [`Ssa::eval_interval_choices`] with `L` boxes, into `out`: what [`Ssa::shorten`] gives
+    /// for that box's intervals, in two passes (needed clauses backward, then the kept ones
+    /// renumbered forward). Call it only for a box where some clause is decided.
+    pub fn shorten_chosen<const L: usize>(
+        &self,
+        choices: &[u8],
+        lane: usize,
+        out: &mut Ssa,
+        s: &mut ShortenScratch,
+    ) {
+        let n = self.clauses.len();
+        out.clauses.clear();
+        if n == 0 {
+            return;
+        }
+        // state: 0 not needed, 1 kept, 2 replaced by its first argument, 3 by its second.
+        // Both passes are branch-free: whether a clause is needed is as good as random.
+        let state = &mut s.index;
+        state.clear();
+        state.resize(n, 0);
+        state[n - 1] = 1;
+        for i in (0..n).rev() {
+            let c = &self.clauses[i];
+            let live = state[i] != 0;
+            let ch = if is_choice(c.op) { choices[i * L + lane] } else { CHOSE_NONE };
+            let k = c.op.arity();
+            // A clause without arguments has a = b = 0 and marks nothing.
+            let mark_a = live && ch != CHOSE_B && k >= 1;
+            let mark_b = live && ch != CHOSE_A && k == 2;
+            state[c.a as usize] |= mark_a as u32;
+            state[c.b as usize] |= mark_b as u32;
+            state[i] = live as u32 * (1 + ch as u32);
+        }
+        // Forward: `alias` holds each needed clause's new index (that of the clause it equals).
+        let new_index = &mut s.alias;
+        new_index.clear();
+        new_index.resize(n, 0);
+        out.clauses.resize(n, Clause { op: Opcode::Const, a: 0, b: 0, value: 0.0 });
+        let mut len = 0usize;
+        for i in 0..n {
+            let c = self.clauses[i];
+            let k = c.op.arity();
+            let (na, nb) = (new_index[c.a as usize], new_index[c.b as usize]);
+            let st = state[i];
+            new_index[i] = match st {
+                2 => na,
+                3 => nb,
+                _ => len as u32,
+            };
+            out.clauses[len] = Clause { a: if k >= 1 { na } else { 0 }, b: if k == 2 { nb } else { 0 }, ..c };
+            len += (st == 1) as usize;
+        }
+        out.clauses.truncate(len);
+    }
+
+    #[inline(always)]
+    fn shorten_with(
+        &self,
+        iv: impl Fn(usize) -> Interval,
+        out: &mut Ssa,
+        alias: &mut Vec<u32>,
+        live: &mut Vec<bool>,
+        new_index: &mut Vec<u32>,
+        only_if_decided: bool,
+    ) -> bool {
         let n = self.clauses.len();
         alias.clear();
         alias.extend(0..n as u32);
         // Forward: a decided clause becomes the clause it equals.
+        let mut decided = false;
         for (i, c) in self.clauses.iter().enumerate() {
             let (a, b) = (alias[c.a as usize], alias[c.b as usize]);
-            let (ia, ib) = (iv[c.a as usize], iv[c.b as usize]);
-            let pick = match c.op {
-                _ if ia.nan || (c.op.arity() == 2 && ib.nan) => None,
-                Opcode::Copy => Some(a),
-                Opcode::Min if ia.hi < ib.lo => Some(a),
-                Opcode::Min if ib.hi < ia.lo => Some(b),
-                Opcode::Max if ia.lo > ib.hi => Some(a),
-                Opcode::Max if ib.lo > ia.hi => Some(b),
-                Opcode::And if !ia.contains(0.0) => Some(b),
-                Opcode::Or if !ia.contains(0.0) => Some(a),
-                Opcode::Or if ia.lo == 0.0 && ia.hi == 0.0 => Some(b),
+            if !is_choice(c.op) {
+                continue;
+            }
+            let pick = match choose(c.op, iv(c.a as usize), iv(c.b as usize)) {
+                CHOSE_A => Some(a),
+                CHOSE_B => Some(b),
                 _ => None,
             };
             if let Some(p) = pick {
                 alias[i] = p;
+                decided = true;
             }
+        }
+        if only_if_decided && !decided {
+            return false;
         }
         // Backward: which clauses the output needs.
         live.clear();
         live.resize(n, false);
+        out.clauses.clear();
         if n == 0 {
-            out.clauses.clear();
-            return;
+            return true;
         }
         live[alias[n - 1] as usize] = true;
         for i in (0..n).rev() {
@@ -123,16 +301,15 @@ impl Ssa {
                 }
             }
         }
-        // Emit the live clauses, renumbered; `alias` now maps old to new indices.
-        out.clauses.clear();
-        let mut new_index = std::mem::take(alias);
-        let old_alias = new_index.clone();
+        // Emit the live clauses, renumbered through `new_index` (old to new indices).
+        new_index.clear();
+        new_index.resize(n, 0);
         for i in 0..n {
-            if live[i] && old_alias[i] == i as u32 {
+            if live[i] && alias[i] == i as u32 {
                 let mut c = self.clauses[i];
                 let k = c.op.arity();
-                c.a = if k >= 1 { new_index[old_alias[c.a as usize] as usize] } else { 0 };
-                c.b = if k == 2 { new_index[old_alias[c.b as usize] as usize] } else { 0 };
+                c.a = if k >= 1 { new_index[alias[c.a as usize] as usize] } else { 0 };
+                c.b = if k == 2 { new_index[alias[c.b as usize] as usize] } else { 0 };
                 new_index[i] = out.clauses.len() as u32;
                 out.clauses.push(c);
             }
@@ -140,8 +317,76 @@ impl Ssa {
         // The output is the last emitted clause: the alias of the old output is live and
         // emitted last among the live ones only if nothing after it is live, which holds
         // since every live clause is needed by it and so comes before it.
-        *alias = new_index;
+        true
     }
+}
+
+/// What [`Ssa::shorten`] decides for a clause: nothing.
+const CHOSE_NONE: u8 = 0;
+/// The clause equals its first argument over the region.
+const CHOSE_A: u8 = 1;
+/// The clause equals its second argument over the region.
+const CHOSE_B: u8 = 2;
+
+/// Whether shortening may replace a clause of `op` by one of its arguments.
+#[inline(always)]
+fn is_choice(op: Opcode) -> bool {
+    matches!(op, Opcode::Copy | Opcode::Min | Opcode::Max | Opcode::And | Opcode::Or)
+}
+
+/// Which argument a clause of `op` (a choice, [`is_choice`]) equals over a region where its
+/// arguments have the intervals `ia` and `ib`.
+#[inline(always)]
+fn choose(op: Opcode, ia: Interval, ib: Interval) -> u8 {
+    match op {
+        _ if ia.nan || (op.arity() == 2 && ib.nan) => CHOSE_NONE,
+        Opcode::Copy => CHOSE_A,
+        Opcode::Min if ia.hi < ib.lo => CHOSE_A,
+        Opcode::Min if ib.hi < ia.lo => CHOSE_B,
+        Opcode::Max if ia.lo > ib.hi => CHOSE_A,
+        Opcode::Max if ib.lo > ia.hi => CHOSE_B,
+        Opcode::And if !ia.contains(0.0) => CHOSE_B,
+        Opcode::Or if !ia.contains(0.0) => CHOSE_A,
+        Opcode::Or if ia.lo == 0.0 && ia.hi == 0.0 => CHOSE_B,
+        _ => CHOSE_NONE,
+    }
+}
+
+/// `op` over `L` lanes of intervals, each as [`Interval::apply`]; the opcode dispatched
+/// once, the common ones inlined.
+#[inline(always)]
+fn interval_lanes<const L: usize>(op: Opcode, a: &[Interval; L], b: &[Interval; L], d: &mut [Interval; L]) {
+    macro_rules! each {
+        ($op:expr) => {
+            for k in 0..L {
+                d[k] = Interval::apply_inline($op, a[k], b[k]);
+            }
+        };
+    }
+    match op {
+        Opcode::Add => each!(Opcode::Add),
+        Opcode::Sub => each!(Opcode::Sub),
+        Opcode::Mul => each!(Opcode::Mul),
+        Opcode::Min => each!(Opcode::Min),
+        Opcode::Max => each!(Opcode::Max),
+        Opcode::Neg => each!(Opcode::Neg),
+        Opcode::Square => each!(Opcode::Square),
+        Opcode::Sqrt => each!(Opcode::Sqrt),
+        Opcode::Abs => each!(Opcode::Abs),
+        op => {
+            for k in 0..L {
+                d[k] = Interval::apply(op, a[k], b[k]);
+            }
+        }
+    }
+}
+
+/// Scratch of [`Ssa::shorten_decided`], kept per thread so that shortening does not allocate.
+#[derive(Clone, Debug, Default)]
+pub struct ShortenScratch {
+    alias: Vec<u32>,
+    live: Vec<bool>,
+    index: Vec<u32>,
 }
 
 /// One instruction of a [`Tape`]: registers instead of clause indices.
@@ -310,6 +555,59 @@ mod tests {
 
     const MODEL: &str = "x var-x\ny var-y\nz var-z\nr const 0.5\nxx square x\nyy square y\nd add xx yy\n\
         s sqrt d\nc sub s r\nk const 0.2\nzz sub z k\nm max c zz\nw sin x\nv mul w y\nq min m v\no copy q\n";
+
+    /// Boxes of the plane, some deciding `min`/`max` clauses of [`MODEL`] and some not.
+    fn boxes() -> [(Interval, Interval, Interval); 4] {
+        [
+            (Interval::new(0.6, 0.8), Interval::new(0.6, 0.8), Interval::new(-0.1, 0.1)),
+            (Interval::new(-2.0, 2.0), Interval::new(-2.0, 2.0), Interval::new(-2.0, 2.0)),
+            (Interval::new(-0.1, 0.05), Interval::new(0.3, 0.31), Interval::new(0.5, 0.6)),
+            (Interval::new(1.5, 1.6), Interval::new(-1.0, -0.9), Interval::new(0.0, 0.0)),
+        ]
+    }
+
+    #[test]
+    fn lanes_give_each_box_its_own_intervals_and_shortening() {
+        let ssa = parse_vm(MODEL, "t.vm".as_ref()).unwrap();
+        let b = boxes();
+        let (x, y, z) = (b.map(|v| v.0), b.map(|v| v.1), b.map(|v| v.2));
+        let (mut lanes, mut choices) = (Vec::new(), Vec::new());
+        let counts = ssa.eval_interval_choices::<4>(&x, &y, &z, &mut lanes, &mut choices);
+        let mut plain = Vec::new();
+        ssa.eval_interval_lanes::<4>(&x, &y, &z, &mut plain);
+        assert_eq!(lanes, plain);
+        let mut scratch = ShortenScratch::default();
+        let mut decided_somewhere = false;
+        for k in 0..4 {
+            let mut one = Vec::new();
+            let v = ssa.eval_interval(x[k], y[k], z[k], &mut one);
+            assert_eq!(v, lanes[(ssa.clauses.len() - 1) * 4 + k]);
+            for (i, iv) in one.iter().enumerate() {
+                assert_eq!(*iv, lanes[i * 4 + k], "clause {i}, box {k}");
+            }
+            let mut want = Ssa::default();
+            ssa.shorten(&one, &mut want, &mut Vec::new(), &mut Vec::new());
+            let mut got = Ssa::default();
+            ssa.shorten_chosen::<4>(&choices, k, &mut got, &mut scratch);
+            assert_eq!(got, want, "box {k}");
+            let mut fast = Vec::new();
+            assert_eq!(ssa.eval_interval_fast(x[k], y[k], z[k], &mut fast), v);
+            assert_eq!(fast, one);
+            let mut again = Ssa::default();
+            // The whole program has no dead clause: when nothing is decided it is `want`.
+            if ssa.shorten_decided(&one, &mut again, &mut scratch) {
+                assert_eq!(again, want);
+            } else {
+                assert_eq!(ssa, want);
+            }
+            // The shortened program decides nothing more over its own box.
+            let mut iv2 = Vec::new();
+            want.eval_interval_fast(x[k], y[k], z[k], &mut iv2);
+            assert!(!want.shorten_decided(&iv2, &mut again, &mut scratch), "box {k}");
+            decided_somewhere |= counts[k] > 1;
+        }
+        assert!(decided_somewhere);
+    }
 
     #[test]
     fn shortened_tape_agrees_inside_its_region_and_is_shorter() {

@@ -72,8 +72,8 @@ def read_csv(path: str | Path | None) -> list[dict[str, str]]:
     for r in rows:
         normalize(r)
     version = {r.get("schema_version", "") for r in rows} - {"", None}
-    if version - {"1", "2", "3"}:
-        print(f"note: {p} has schema_version {sorted(version)}; this reader knows versions 1 to 4")
+    if version - {"1", "2", "3", "4", "5"}:
+        print(f"note: {p} has schema_version {sorted(version)}; this reader knows versions 1 to 5")
     return rows
 
 

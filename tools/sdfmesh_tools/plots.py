@@ -568,3 +568,88 @@ def main(argv=None) -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+def forest_plot(time_v, ratios, bytes_v, bytes_points, out: Path, level: float = 1.0) -> list[Path]:
+    """The verdict at `level` as one figure: per class, log SDF/mesh with its 95% interval
+    (none below duel.MIN_INPUTS inputs) and one dot per input; frame time from the duels
+    (left), bytes from the sweep (right). Left of 1: SDF better."""
+    panels = [("frame time (paired duels)", [v for v in time_v if v["level"] == level], "time",
+               {(r["class"], r["input"]): math.exp(float(np.mean(r["logs"]))) for r in ratios
+                if r["level"] == level}),
+              ("bytes (smallest meeting the level)", [v for v in bytes_v if v["level"] == level], "bytes",
+               {k: v for k, v in bytes_points.items()})]
+    classes = [v["class"] for v in panels[0][1]]
+    if not classes:
+        return []
+    fig, axes = plt.subplots(1, 2, figsize=(11, 0.45 * len(classes) + 1.6), squeeze=False)
+    for ax, (title, vs, key, points) in zip(axes[0], panels):
+        for y, v in enumerate(vs):
+            c = v[key]
+            dots = [x for (cls, _i), x in points.items() if cls == v["class"] and x > 0]
+            if dots:
+                jitter = np.linspace(-0.15, 0.15, len(dots)) if len(dots) > 1 else [0.0]
+                ax.scatter(dots, y + np.asarray(jitter), s=12, color="tab:gray", alpha=0.7, zorder=2)
+            if c.get("ratio"):
+                ax.plot([c["ratio"]], [y], "D", color="tab:blue" if c["ratio"] < 1 else "tab:orange",
+                        ms=7, zorder=3)
+                if c.get("lo") is not None and c.get("hi") is not None:
+                    ax.plot([c["lo"], c["hi"]], [y, y], "-", color="k", lw=2, zorder=3)
+        ax.axvline(1.0, color="k", ls="--", lw=1)
+        ax.set_xscale("log")
+        _log_axis(ax.xaxis)
+        ax.set_yticks(range(len(vs)))
+        ax.set_yticklabels([f"{v['class']} ({v[key]['n_inputs']})" for v in vs])
+        ax.invert_yaxis()
+        ax.grid(True, axis="x", which="both", alpha=0.3)
+        ax.set_xlabel(f"SDF / mesh at {level:g} px (left of 1: SDF better)")
+        ax.set_title(title, fontsize=10)
+    fig.suptitle("verdict per class: geometric mean (diamond), 95% interval over inputs (bar, ≥ 5 inputs), "
+                 "inputs (dots)", fontsize=9)
+    return [_save(fig, Path(out) / "forest.png")]
+
+
+def pareto_plot(rows, out: Path, max_inputs: int = 6) -> list[Path]:
+    """Per input (the first of each class, at most `max_inputs`), every run's frame time
+    (median over replicates) against its p95 pixel error, and each side's Pareto frontier
+    (the runs no other run of that side beats in both)."""
+    by_input: dict[str, list[dict]] = {}
+    for r in rows:
+        if data.side(r) and num(r, "frame_ms_median") and num(r, "px_err_p95") is not None:
+            by_input.setdefault(r.get("input", ""), []).append(r)
+    first: dict[str, str] = {}
+    for inp, rs in by_input.items():
+        first.setdefault(data.class_of(rs[0]), inp)
+    names = list(first.values())[:max_inputs]
+    if not names:
+        return []
+    fig, axes = _panels(len(names), 4.6, 3.8)
+    for ax, inp in zip(axes, names):
+        for side in ("sdf", "mesh"):
+            runs: dict[str, list[dict]] = {}
+            for r in by_input[inp]:
+                if data.side(r) == side:
+                    runs.setdefault(data.label(r), []).append(r)
+            pts = sorted((float(np.median([num(r, "px_err_p95") for r in v])) + 1e-4,
+                          float(np.median([num(r, "frame_ms_median") for r in v]))) for v in runs.values())
+            if not pts:
+                continue
+            st = SIDE_STYLE[side]
+            ax.scatter(*zip(*pts), s=10, color=st["color"], alpha=0.35)
+            front, best = [], math.inf
+            for e, t in pts:
+                if t < best:
+                    front.append((e, t))
+                    best = t
+            ax.step(*zip(*front), where="post", color=st["color"], marker=st["marker"], ms=4,
+                    label=f"{st['label']} frontier")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        _log_axis(ax.yaxis)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.set_xlabel("p95 pixel error (px)")
+        ax.set_ylabel("frame time (ms)")
+        ax.set_title(f"{inp} ({data.class_of(by_input[inp][0])})", fontsize=9)
+        ax.legend(fontsize=7)
+    fig.suptitle("Pareto frontiers: frame time against error, each side")
+    return [_save(fig, Path(out) / "pareto.png")]

@@ -22,10 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-from . import analysis, data, plots, shards as shard_info, stats
+from . import analysis, answer, data, plots, shards as shard_info, stats
+from . import duel as duel_mod
 from .data import num
 
 THRESHOLDS = (1e-2, 3e-3, 1e-3)
+APPENDIX = "appendix-inputs.md"
+DUEL_APPENDIX = "appendix-duels.md"
 
 HYPOTHESIS = (
     "- **H1:** for scenes made of few smooth analytic primitives, sphere tracing the analytic "
@@ -413,8 +416,21 @@ def _blank_lines_around_headings(text: str) -> str:
     return "\n".join(out)
 
 
+def write_duel_appendix(path: Path, ratios) -> None:
+    """Every duelled (input, level): the two runs, their duel medians and the ratio per process."""
+    rows = [(f"`{r['input']}`", r["class"], f"≤ {r['level']:g} px", f"`{r['sdf_run']}`", f"`{r['mesh_run']}`",
+             fmt_ms(r["sdf_ms"]), fmt_ms(r["mesh_ms"]), f"{math.exp(float(np.mean(r['logs']))):.3g}",
+             " ".join(f"{math.exp(x):.3g}" for x in r["logs"]), r["rounds"]) for r in ratios]
+    path.write_text("# Appendix: the duels\n\n[Back to the report](REPORT.md).\n\n"
+                    "SDF/mesh frame-time ratio of each input's chosen pair, per separate process (the median "
+                    "of the within-round ratios) and their geometric mean.\n\n"
+                    + md_table(["input", "class", "quality", "SDF run", "mesh run", "SDF ms", "mesh ms",
+                                "SDF/mesh", "per process", "rounds"], rows))
+
+
 def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, commands=None,
-                 invocation=None, hard=None, shards=None) -> Path:
+                 invocation=None, hard=None, shards=None, selection=None, duels=None, sizes=None,
+                 sizes_duels=None, refcheck=None) -> Path:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     all_rows = data.read_csv(csv_path)
@@ -450,9 +466,67 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
              f"{', '.join(f'`{c}`' for c in uniq('commit')) or '–'}. Report written "
              f"{datetime.now(timezone.utc).strftime('%Y-%m-%dT%H:%M:%SZ')} by "
              "`python -m sdfmesh_tools.report`; every number below comes from the CSVs of this run.\n")
+    sel = duel_mod.read_selection(Path(selection)) if selection and Path(selection).is_file() else None
+    duel_rows = duel_mod.read_duels(Path(duels)) if duels and Path(duels).is_file() else []
+    size_text = ", ".join(sorted({f"{r.get('width')}×{r.get('height')}" for r in all_rows if r.get("width")}))
     L.append("\n## The answer\n\n")
-    L.append("Which representation wins, per class of input and quality level (`quality_px`: the "
-             "largest geometric error in pixels a run is allowed), in frame time and in bytes:\n\n")
+    bytes_v = answer.bytes_verdicts(all_rows)
+    if sel is not None and duel_rows:
+        time_v, ratios = answer.time_verdicts(all_rows, sel, duel_rows)
+        for sentence in answer.sentences(time_v, bytes_v, len(data.inputs(all_rows)), n_classes, size_text):
+            L.append(sentence + " ")
+        L.append("\n\n")
+        L.append(answer.table(time_v, bytes_v))
+        procs = sorted({r.get("process") for r in duel_rows})
+        rounds = sorted({int(r.get("round", 0)) for r in duel_rows})
+        L.append(f"\nFrame time: each input's configuration of each side is chosen on the sweep (the fastest "
+                 f"median over its replicates among the configurations meeting the level in every replicate), "
+                 f"then the chosen pair is re-timed in {len(procs)} separate process(es) of {len(rounds)} "
+                 "rounds, one frame of each per round in alternating order; an input's ratio is the mean over "
+                 "processes of the median within-round log ratio, a class's the geometric mean over inputs "
+                 "with a 95% t-interval over inputs. Bytes: the smallest run of each side meeting the level. "
+                 + answer.candidates_text(sel) + " " + answer.optimism_text(ratios) + "\n")
+    else:
+        time_v, ratios = [], []
+        L.append("No duels were given (--selection, --duels): the answer below is the selection pass's "
+                 "best-of, which is biased towards the side with more configurations.\n")
+    forest = plots.forest_plot(time_v, ratios, bytes_v, answer.bytes_points(all_rows), out) if time_v else []
+    for p in forest:
+        L.append(f"\n{_img(p, out)}\n")
+    L.append("\n> **Caveats.**\n")
+    for c in answer.caveats(all_rows, sel or [], ratios):
+        L.append(f"> - {c}\n")
+    if ratios:
+        L.append(f"\n## Build time: one-shot, edited and static scenes\n\n")
+        L.append(f"Build plus N frames of each side's chosen configuration at {answer.HEADLINE_LEVEL:g} px (build "
+                 "time: the median over the sweep's replicates; frame time: the duel median). A one-shot "
+                 "render is N = 1, an edited scene rebuilds every few frames, a static one renders "
+                 "thousands of frames per build.\n\n")
+        L.append(answer.amortised_table(all_rows, sel, ratios))
+    size_rows = data.read_csv(sizes) if sizes else []
+    if size_rows:
+        L.append("\n## Image size\n\nPixel-relative error makes a mesh's needed resolution grow with the image. "
+                 "On the first input of each class, the sweep at each image size, its own selection and one "
+                 "duel process (SDF/mesh below 1: SDF faster):\n\n")
+        L.append(answer.size_table(size_rows, duel_mod.read_duels(Path(sizes_duels)) if sizes_duels and
+                                   Path(sizes_duels).is_file() else []))
+    pareto = plots.pareto_plot(all_rows, out)
+    if pareto:
+        L.append("\n## Frontiers\n\nEach side's Pareto frontier of frame time against p95 pixel error "
+                 "(median over replicates) on the first input of each class; the verdict above compares the "
+                 "frontiers at three points (0.5, 1, 2 px).\n\n")
+        L.append(f"{_img(pareto[0], out)}\n")
+    ref_rows = data.read_csv(refcheck) if refcheck else []
+    if ref_rows:
+        L.append("\n## The references, checked independently\n\n")
+        L.append(answer.refcheck_section(ref_rows))
+    if sel:
+        L.append("\n## What the quality levels are, and which gate binds\n\n")
+        L.append(answer.gates_section(all_rows, sel))
+    L.append("\n## The selection pass, for comparison\n\n")
+    L.append("Best-of over each side's configurations in every replicate, the measurement the "
+             "configurations were chosen on (not the verdict: the minimum of noisy timings favours the "
+             "side with more candidates):\n\n")
     L.append(answer_table(verdicts))
     L.append("\n" + answer_legend(all_rows, verdicts))
     L.append("\n## Crossovers along the families\n\n")
@@ -501,7 +575,9 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
         "`px_err_*` is the geometric error of the visible surface in pixels at its distance and "
         "`quality_px` the smallest of 0.5, 1 and 2 px the run meets (empty: none); `chamfer_rel` "
         "is the chamfer distance divided by the reference's bounding-box diagonal. The answer "
-        "compares the best runs of each side meeting a quality level (see its legend). The "
+        "chooses each side's configuration per input and level on this sweep (the selection pass) and "
+        "decides frame time on paired, interleaved re-timing of the chosen pair in separate processes "
+        "(the duels); bytes come from the sweep. The "
         "per-input appendix keeps the earlier per-frame test: per input, the fastest SDF-marching "
         "row against the fastest mesh row meeting a `chamfer_rel` threshold, ratio of median frame "
         "times with a percentile bootstrap 95% confidence interval (4000 resamples of each row's "
@@ -521,6 +597,12 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
     L.append("\n## Many primitives: the scaling experiment\n\n")
     L.append(_answer_many(scaling_rows, []) + "\n")
 
+    L.append(f"\n## Appendices\n\n- [{APPENDIX}]({APPENDIX}): the results of every input (replicate "
+             f"{reps[0] if reps else '–'}), the per-input frame-time test and the per-input plots.\n")
+    if duel_rows:
+        L.append(f"- [{DUEL_APPENDIX}]({DUEL_APPENDIX}): every input's duelled pair and ratio.\n")
+        write_duel_appendix(out / DUEL_APPENDIX, ratios)
+    front, L = L, ["# Appendix: every input\n\n[Back to the report](REPORT.md).\n"]
     L.append(f"\n## Results per input (replicate {reps[0] if reps else '–'})\n")
     if not rows:
         L.append("No compare rows were read.\n")
@@ -607,8 +689,9 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
             L.append(f"{_img(p, out)}\n\n")
     else:
         L.append("No plots were written.\n")
+    (out / APPENDIX).write_text(_blank_lines_around_headings("".join(L)))
     report = out / "REPORT.md"
-    report.write_text(_blank_lines_around_headings("".join(L)))
+    report.write_text(_blank_lines_around_headings("".join(front)))
     print(f"wrote {report} and {len(images)} PNG(s)")
     return report
 
@@ -624,11 +707,17 @@ def main(argv=None) -> int:
     ap.add_argument("--commands", help="the exact commands that produced the CSVs, quoted into the report")
     ap.add_argument("--hard", help="hard-case table (toolkit hard --table) to include")
     ap.add_argument("--shards", help="shards.csv of the workflow (host and CPU of every input and replicate)")
+    ap.add_argument("--selection", help="selection.csv of the workflow (sdfmesh_tools.duel select)")
+    ap.add_argument("--duels", help="duels.csv of the workflow (toolkit compare --duel, every process)")
+    ap.add_argument("--sizes", help="sizes.csv of the workflow (the image-size experiment's sweeps)")
+    ap.add_argument("--refcheck", help="refcheck.csv of the workflow (toolkit compare --check-reference)")
+    ap.add_argument("--sizes-duels", help="sizes_duels.csv of the workflow (its duels)")
     a = ap.parse_args(argv)
     argv = sys.argv[1:] if argv is None else list(argv)
     write_report(a.csv, a.out, a.scaling, a.summary, a.artifacts, a.commands,
                  invocation="python -m sdfmesh_tools.report " + shlex.join(argv), hard=a.hard,
-                 shards=a.shards)
+                 shards=a.shards, selection=a.selection, duels=a.duels, sizes=a.sizes,
+                 sizes_duels=a.sizes_duels, refcheck=a.refcheck)
     return 0
 
 

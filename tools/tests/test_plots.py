@@ -167,8 +167,12 @@ def test_png_written_and_not_blank(run, name):
 def test_report_contents(run):
     out, _ = run
     text = (out / "REPORT.md").read_text()
+    # the per-input sections and plots are in the appendix file the report links
+    appendix = (out / "appendix-inputs.md").read_text()
+    assert "](appendix-inputs.md)" in text
     for name in ("thesis_sdf_spheres", "bunny"):
-        assert f"`{name}`" in text
+        assert f"`{name}`" in appendix
+    text += appendix
     assert "95% confidence interval [" in text
     assert "Mann-Whitney" in text
     assert "## The answer" in text
@@ -196,7 +200,7 @@ def test_missing_columns_and_rows_do_not_crash(tmp_path):
     write_csv(path, rows, ["input", "repr", "method", "frame_ms_median"])
     out = tmp_path / "out"
     report.write_report(path, out, scaling=tmp_path / "absent.csv", artifacts=tmp_path / "none")
-    text = (out / "REPORT.md").read_text()
+    text = (out / "REPORT.md").read_text() + (out / "appendix-inputs.md").read_text()
     assert "thesis_sdf_csg" in text
     assert "not measured in this run" in text
     # an empty CSV (header only) too

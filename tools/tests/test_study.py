@@ -232,8 +232,10 @@ def test_report_puts_the_answer_first(tmp_path):
     assert "a: per distance evaluation" in text and "check half" in text
     assert "H1 (class `smooth`, time): ≤ 0.5 px: supports" in text
     assert COMMIT in text
-    # the per-input appendix uses one replicate: each row label once per input
-    appendix = text[text.index("## Results per input (replicate 0)"):]
+    # the per-input appendix is its own file and uses one replicate
+    assert "(appendix-inputs.md)" in text and "## Results per input" not in text
+    appendix = (out / "appendix-inputs.md").read_text()
+    appendix = appendix[appendix.index("## Results per input (replicate 0)"):]
     assert "### `smooth_in0` (smooth)" in appendix
 
 

@@ -19,6 +19,10 @@
 //! rayon pool of that many threads). Prints one line of `key=value` fields; writes the
 //! depth image of the last run (0 = no hit, 1..255 = far..near) as a binary PGM. `bench-fidget compare MASK.pgm
 //! OURS.png` counts the pixels where that mask and our render's hits differ.
+//!
+//! The Prospero challenge's 2D image (`prospero`, `reference`, `differ`): see [`prospero`].
+
+mod prospero;
 
 use std::io::Write;
 use std::time::Instant;
@@ -185,7 +189,7 @@ fn world_to_model(v: &View, n: u32) -> Matrix4<f32> {
     ])
 }
 
-fn median(v: &mut [f64]) -> f64 {
+pub(crate) fn median(v: &mut [f64]) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
     let n = v.len();
     if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
@@ -297,8 +301,30 @@ fn run() -> Result<(), String> {
     if args.len() == 4 && args[1] == "compare" {
         return compare(&args[2], &args[3]);
     }
+    if args.len() == 4 && args[1] == "differ" {
+        return prospero::differ(&args[2], &args[3]);
+    }
+    let positive = |s: &str, what: &str| match s.parse::<usize>() {
+        Ok(v) if v > 0 => Ok(v),
+        _ => Err(format!("{what} must be a positive integer, not {s:?}")),
+    };
+    if args.len() == 5 && args[1] == "reference" {
+        return prospero::reference(&args[2], positive(&args[3], "SIZE")?, &args[4]);
+    }
+    if args.len() == 8 && args[1] == "prospero" {
+        let (n, t, r) =
+            (positive(&args[3], "SIZE")?, positive(&args[4], "THREADS")?, positive(&args[5], "RUNS")?);
+        return match args[6].as_str() {
+            "jit" => prospero::bench::<fidget::jit::JitFunction>("jit", &args[2], n, t, r, &args[7]),
+            "vm" => prospero::bench::<fidget::vm::VmFunction>("vm", &args[2], n, t, r, &args[7]),
+            other => Err(format!("unknown evaluator {other:?} (jit or vm)")),
+        };
+    }
     if args.len() != 7 {
-        return Err("usage: bench-fidget metaballs|menger SIZE THREADS RUNS jit|vm MASK.pgm".into());
+        return Err("usage: bench-fidget metaballs|menger SIZE THREADS RUNS jit|vm MASK.pgm | \
+                    prospero MODEL.vm SIZE THREADS RUNS jit|vm OUT.pgm | reference MODEL.vm SIZE OUT.pgm | \
+                    differ REF.pgm IMAGE | compare MASK.pgm OURS.png"
+            .into());
     }
     let (tree, v) = view(&args[1]).ok_or_else(|| format!("unknown scene {:?}", args[1]))?;
     let n: u32 = args[2].parse().map_err(|_| "SIZE must be a positive integer")?;

@@ -1,0 +1,365 @@
+"""The first screen of REPORT.md: the verdict in three sentences, the table they come from
+and the caveats (issue #37, item 8). Frame time comes from the paired duels (duel.py),
+bytes from the selection pass (bytes do not vary between processes). Pure functions of the
+rows; every number is computed here from the study's CSVs."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import analysis, data, duel
+from .data import num
+
+# The level the three sentences speak of (the table shows every level).
+HEADLINE_LEVEL = 1.0
+
+
+def _winner(c: dict) -> str | None:
+    """sdf, mesh, tie, few (a ratio without an interval), only-sdf, only-mesh or None."""
+    if c.get("ratio") is None:
+        if c["only_sdf"] and not c["only_mesh"]:
+            return "only-sdf"
+        if c["only_mesh"] and not c["only_sdf"]:
+            return "only-mesh"
+        return None
+    if c.get("too_few") or c.get("lo") is None:
+        return "few"
+    if c["within_noise"]:
+        return "tie"
+    return "sdf" if c["ratio"] < 1 else "mesh"
+
+
+def _list(items: list[str]) -> str:
+    if not items:
+        return "no class"
+    return ", ".join(items[:-1]) + (" and " if len(items) > 1 else "") + items[-1]
+
+
+def sentences(time_v: list[dict], bytes_v: list[dict], n_inputs: int, n_classes: int, size: str,
+              level: float = HEADLINE_LEVEL) -> list[str]:
+    """Three sentences: who is faster, who is smaller, and what the verdict does not cover."""
+    def by(verdicts, key):
+        out: dict[str, list[str]] = {}
+        for v in verdicts:
+            if v["level"] != level:
+                continue
+            c = v[key]
+            w = _winner(c)
+            if w is None:
+                continue
+            if w in ("sdf", "mesh"):
+                r = c["ratio"]
+                label = f"{v['class']} ({max(r, 1 / r):.2g}×)"
+            else:
+                label = v["class"]
+            out.setdefault(w, []).append(label)
+        return out
+
+    t = by(time_v, "time")
+    b = by(bytes_v, "bytes")
+    parts = []
+    if t.get("sdf"):
+        parts.append(f"faster than ray tracing triangle meshes in {_list(t['sdf'])}")
+    if t.get("mesh"):
+        parts.append(f"slower in {_list(t['mesh'])}")
+    if t.get("tie"):
+        parts.append(f"tied within the noise of paired re-timing in {_list(t['tie'])}")
+    if t.get("only-sdf"):
+        parts.append(f"the only side to meet the level in {_list(t['only-sdf'])}")
+    if t.get("only-mesh"):
+        parts.append(f"unable to meet the level where meshes do in {_list(t['only-mesh'])}")
+    few = (f"{_list(t['few'])} {'has' if len(t['few']) == 1 else 'have'} too few inputs for a verdict "
+           "with an interval") if t.get("few") else ""
+    if parts:
+        s1 = f"At {level:g} px of error, ray marching SDFs is " + "; ".join(parts) + (f"; {few}" if few else "") + "."
+    else:
+        s1 = f"At {level:g} px of error no class has a frame-time verdict" + (f": {few}" if few else "") + "."
+    bp = []
+    if b.get("sdf"):
+        bp.append(f"the SDF side is smaller in {_list(b['sdf'])}")
+    if b.get("mesh"):
+        bp.append(f"the mesh side in {_list(b['mesh'])}")
+    if b.get("tie"):
+        bp.append(f"neither clearly in {_list(b['tie'])}")
+    bfew = f"{_list(b['few'])}: too few inputs for an interval" if b.get("few") else ""
+    s2 = ("In bytes at the same level " + ("; ".join(bp) if bp else "no class has a verdict")
+          + (f" ({bfew})" if bfew else "") + ".")
+    s3 = (f"This holds for {n_inputs} inputs in {n_classes} classes, {size} images, frame time without "
+          "build time, on one CPU machine without a GPU, against ray-traced (not rasterized) polygons; "
+          "the caveats below say what else it does not cover.")
+    return [s1, s2, s3]
+
+
+def time_verdicts(rows, sel, duel_rows) -> tuple[list[dict], list[dict]]:
+    """(per class and level duel verdicts, the per-input duel ratios)."""
+    ratios = duel.duel_ratios(sel, duel_rows)
+    return duel.duel_verdicts(sel, ratios, analysis.classes(rows)), ratios
+
+
+def bytes_verdicts(rows) -> list[dict]:
+    """Per class and level: the bytes of the smallest run of each side meeting the level,
+    per input (stats.ratio_ci over inputs; fewer than duel.MIN_INPUTS inputs: no interval)."""
+    out = []
+    for cls in analysis.classes(rows):
+        sub = [r for r in rows if data.class_of(r) == cls]
+        for level in analysis.LEVELS:
+            c = analysis.compare_sides(sub, level, "total_bytes")
+            c["too_few"] = 0 < c["n_inputs"] < duel.MIN_INPUTS
+            if c["too_few"]:
+                c["lo"] = c["hi"] = c["within_noise"] = None
+            out.append({"class": cls, "level": level, "bytes": c})
+    return out
+
+
+def _bytes_cell(c: dict) -> str:
+    if c["ratio"] is None:
+        return analysis.verdict_text(c, "bytes")
+    r = c["ratio"]
+    who = "SDF" if r < 1 else "mesh"
+    fac = max(r, 1 / r)
+    if c["too_few"]:
+        return f"{who} {fac:.3g}× smaller, too few inputs ({c['n_inputs']})"
+    return analysis.verdict_text(c, "bytes")
+
+
+def table(time_v, bytes_v) -> str:
+    from .report import md_table
+
+    bmap = {(v["class"], v["level"]): v["bytes"] for v in bytes_v}
+    rows, last = [], None
+    for v in time_v:
+        t = v["time"]
+        b = bmap.get((v["class"], v["level"]))
+        cls = v["class"] if v["class"] != last else ""
+        last = v["class"]
+        rows.append((cls, f"≤ {v['level']:g} px", t["n_inputs"], duel.verdict_cell(t),
+                     _bytes_cell(b) if b else "–"))
+    return md_table(["class", "quality", "inputs duelled", "frame time (paired duels)", "bytes"], rows)
+
+
+def optimism_text(ratios) -> str:
+    o = duel.optimism(ratios)
+
+    def one(side):
+        d = o[side]
+        if d["median"] is None:
+            return f"{side}: no duel"
+        return f"{side} {d['median']:.3g} (p10 {d['p10']:.3g}, p90 {d['p90']:.3g}, {d['n']} input-levels)"
+
+    return ("Selection optimism, selected time / re-measured time (the selected configuration's best "
+            "frame-time median over the sweep's replicates against its median in the duels; below 1: "
+            "the sweep made that side look faster than it re-measures): " + one("sdf") + "; "
+            + one("mesh") + ".")
+
+
+def candidates_text(sel) -> str:
+    c = {"sdf": [], "mesh": []}
+    for s in sel:
+        c[s["side"]].append(int(s["candidates"]))
+    parts = [f"{side} {int(np.median(v))} (median over inputs)" for side, v in c.items() if v]
+    return "Configurations each side chose from per input: " + ", ".join(parts) + "."
+
+
+def caveats(rows, sel, ratios) -> list[str]:
+    sizes = sorted({(r.get("width"), r.get("height")) for r in rows if r.get("width")})
+    threads = sorted({r.get("threads") for r in rows if r.get("threads")})
+    few = sorted({v for v in data.inputs(rows)})
+    per_class: dict[str, set] = {}
+    for r in rows:
+        per_class.setdefault(data.class_of(r), set()).add(r.get("input"))
+    small = [f"{c} ({len(v)})" for c, v in per_class.items() if len(v) < duel.MIN_INPUTS]
+    builds = [num(r, "build_ms") for r in rows if num(r, "build_ms") is not None]
+    return [
+        f"One CPU machine, {', '.join(threads) or '?'} render thread(s), no GPU: a GPU changes both sides.",
+        "Image size: the verdict at " + ", ".join(f"{w}×{h}" for w, h in sizes) + "; pixel-relative "
+        "error makes a mesh's needed resolution grow with the image (see Image size for the sizes "
+        "covered, on one input per class).",
+        "Polygons are ray traced (BVH, packets); a z-buffer rasterizer baseline is measured in "
+        "reports/bench/raster.txt, not in this verdict." ,
+        f"Frame time excludes build time (build times here span {min(builds):.3g}–{max(builds):.3g} ms)."
+        if builds else "Frame time excludes build time.",
+        "Classes with fewer than 5 inputs get no interval: " + (", ".join(small) if small else "none") + ".",
+        f"{len(few)} inputs; intervals are 95% t-intervals over inputs, descriptive (not corrected for "
+        "the number of classes and levels).",
+    ]
+
+
+def bytes_points(rows, level: float = HEADLINE_LEVEL) -> dict:
+    """{(class, input): geometric mean over replicates of smallest-SDF / smallest-mesh bytes}."""
+    logs: dict[tuple, list[float]] = {}
+    cls = {r.get("input"): data.class_of(r) for r in rows}
+    for (inp, _rep), b in analysis.best_per_run(rows, level, "total_bytes").items():
+        s, m = b["sdf"], b["mesh"]
+        if s is not None and m is not None and num(s, "total_bytes") and num(m, "total_bytes"):
+            logs.setdefault((cls[inp], inp), []).append(
+                float(np.log(num(s, "total_bytes") / num(m, "total_bytes"))))
+    return {k: float(np.exp(np.mean(v))) for k, v in logs.items()}
+
+
+# Frame counts the amortised table reports the winner at.
+FRAME_COUNTS = (1, 100, 10_000)
+
+
+def amortised(rows, sel, ratios, level: float = HEADLINE_LEVEL) -> list[dict]:
+    """Per class at `level`: build + N frames of each side's chosen configuration (build time
+    the median over the sweep's replicates, frame time the duel median), how many inputs each
+    side wins at each of FRAME_COUNTS, and the median break-even frame count where the side
+    that builds slower but renders faster catches up."""
+    build: dict[tuple, list[float]] = {}
+    for r in rows:
+        b = num(r, "build_ms")
+        if b is not None and data.side(r):
+            build.setdefault((r.get("input"), duel.run_label(r)), []).append(b)
+    per_class: dict[str, dict] = {}
+    for r in ratios:
+        if r["level"] != level:
+            continue
+        bs = build.get((r["input"], r["sdf_run"]))
+        bm = build.get((r["input"], r["mesh_run"]))
+        if not bs or not bm:
+            continue
+        bs, bm = float(np.median(bs)), float(np.median(bm))
+        fs, fm = r["sdf_ms"], r["mesh_ms"]
+        c = per_class.setdefault(r["class"], {"class": r["class"], "inputs": 0, "first_sdf": [],
+                                              "first_mesh": [], "wins": {n: 0 for n in FRAME_COUNTS},
+                                              "break_even": []})
+        c["inputs"] += 1
+        c["first_sdf"].append(bs + fs)
+        c["first_mesh"].append(bm + fm)
+        for n in FRAME_COUNTS:
+            c["wins"][n] += bs + n * fs < bm + n * fm
+        if (bs - bm) * (fs - fm) < 0 and fs != fm:
+            c["break_even"].append(abs((bs - bm) / (fm - fs)))
+    return list(per_class.values())
+
+
+def amortised_table(rows, sel, ratios, level: float = HEADLINE_LEVEL) -> str:
+    from .report import md_table
+
+    t = amortised(rows, sel, ratios, level)
+    if not t:
+        return "No duelled input has build times for both sides.\n"
+    out = []
+    for c in t:
+        be = (f"{np.median(c['break_even']):.3g} ({len(c['break_even'])} inputs)"
+              if c["break_even"] else "– (one side is ahead at every N)")
+        out.append((c["class"], c["inputs"], f"{np.median(c['first_sdf']):.3g}",
+                    f"{np.median(c['first_mesh']):.3g}",
+                    *(f"{c['wins'][n]}/{c['inputs']}" for n in FRAME_COUNTS), be))
+    return md_table(["class", "inputs", "first frame SDF ms (median)", "first frame mesh ms (median)",
+                     *(f"SDF cheaper, N = {n}" for n in FRAME_COUNTS), "break-even N (median)"], out)
+
+
+# The gates of `quality_px` (src/metrics.rs QUALITY_LEVELS; tools/tests/test_duel.py checks
+# that the two agree): level px -> (largest px_err_p95, largest silhouette %, largest FLIP).
+GATES = {0.5: (0.5, 0.5, 0.05), 1.0: (1.0, 1.5, 0.08), 2.0: (2.0, 4.0, 0.1)}
+GATE_NAMES = ("p95 pixel error", "silhouette mismatch", "mean FLIP")
+
+
+def binding_gate(row, level: float) -> str | None:
+    """The gate a run meeting `level` is closest to failing: the largest of value / bound."""
+    bounds = GATES.get(level)
+    vals = (num(row, "px_err_p95"), num(row, "silhouette_mismatch_pct"), num(row, "flip_mean"))
+    if bounds is None or any(v is None for v in vals):
+        return None
+    return GATE_NAMES[max(range(3), key=lambda i: vals[i] / bounds[i])]
+
+
+def gates_section(rows, sel) -> str:
+    from .report import md_table
+
+    defs = md_table(["level", "p95 pixel error ≤", "silhouette mismatch ≤ (% of pixels)", "mean FLIP ≤"],
+                    [(f"{lv:g} px", f"{g[0]:g} px", f"{g[1]:g}%", f"{g[2]:g}") for lv, g in GATES.items()])
+    by_key = {}
+    for r in rows:
+        if data.side(r):
+            by_key.setdefault((r.get("input"), duel.run_label(r)), r)
+    counts: dict[tuple, dict[str, int]] = {}
+    for s in sel:
+        r = by_key.get((s["input"], s["run"]))
+        g = binding_gate(r, s["level"]) if r else None
+        if g:
+            c = counts.setdefault((s["side"], s["level"]), {n: 0 for n in GATE_NAMES})
+            c[g] += 1
+    table = md_table(["side", "level", *GATE_NAMES],
+                     [(side, f"{lv:g} px", *(c[n] for n in GATE_NAMES)) for (side, lv), c in sorted(counts.items())])
+    return ("`quality_px` is the finest level whose three gates a run passes, all measured against the "
+            "input's reference image and hit points: the 95th percentile of the geometric error in "
+            "pixels of the surface both hit, the share of pixels where exactly one of the two hits a "
+            "surface, and the mean FLIP of the shaded images. The gates (src/metrics.rs; calibrated at "
+            "256×256 on the bundled scenes, applied here at the study's image size without "
+            "recalibration, which makes the silhouette gate stricter at smaller images):\n\n" + defs
+            + "\nWhich gate bound the chosen runs (the gate closest to failing: the largest value / bound), "
+            "counted over inputs:\n\n" + table)
+
+
+def size_table(size_rows, size_duel_rows, level: float = HEADLINE_LEVEL) -> str:
+    """The image-size experiment: per input (the first of each class) and square image size,
+    the SDF/mesh frame-time ratio of that size's own selection, re-timed in one duel process,
+    and the bytes ratio, at `level`; where the frame-time winner changes along the sizes."""
+    from .report import md_table
+
+    def width(r):
+        return str(r.get("width", "")).strip()
+
+    out, notes = [], []
+    for inp in data.inputs(size_rows):
+        sub = [r for r in size_rows if r.get("input") == inp]
+        sizes = sorted({int(width(r)) for r in sub if width(r)})
+        winners = []
+        for px in sizes:
+            rows = [r for r in sub if width(r) == str(px)]
+            sel = [s for s in duel.select(rows) if s["level"] == level]
+            d = [r for r in size_duel_rows if r.get("input") == inp and width(r) == str(px)]
+            ratios = duel.duel_ratios(sel, d)
+            b = bytes_points(rows, level).get((data.class_of(rows[0]), inp))
+            if ratios:
+                t = float(np.exp(np.mean(ratios[0]["logs"])))
+                winners.append("SDF" if t < 1 else "mesh")
+                cell = f"{t:.3g} (`{ratios[0]['sdf_run']}` vs `{ratios[0]['mesh_run']}`)"
+            else:
+                sides = {s["side"] for s in sel}
+                winners.append(None)
+                cell = "only SDF meets it" if sides == {"sdf"} else "only mesh meets it" if sides == {
+                    "mesh"} else "neither meets it"
+            out.append((f"`{inp}`" if px == sizes[0] else "", data.class_of(rows[0]) if px == sizes[0] else "",
+                        f"{px}×{px}", cell, f"{b:.3g}" if b else "–"))
+        seen = [(px, w) for px, w in zip(sizes, winners) if w]
+        changes = [f"{a[1]} → {b[1]} between {a[0]} and {b[0]}" for a, b in zip(seen, seen[1:]) if a[1] != b[1]]
+        if changes:
+            notes.append(f"`{inp}`: " + "; ".join(changes))
+    if not out:
+        return "No image-size runs.\n"
+    return (md_table(["input", "class", "image", f"SDF/mesh frame time at {level:g} px (duel)",
+                      "SDF/mesh bytes"], out)
+            + "\n" + ("Frame-time winner changes with image size: " + "; ".join(notes) + ".\n" if notes else
+                      "The frame-time winner does not change with image size on these inputs.\n"))
+
+
+def refcheck_section(ref_rows) -> str:
+    """The reference check (toolkit compare --check-reference) summarised, worst inputs named."""
+    from .report import md_table
+
+    checked = [r for r in ref_rows if not (r.get("skipped") or "").strip()]
+    skipped = [r for r in ref_rows if (r.get("skipped") or "").strip()]
+    head = ("Each scene input's reference (closed form where the scene has one, else the tape marcher at "
+            "the finest tolerance: the same code the `sdf` runs use) is checked against a method that "
+            "shares none of that code: every primary ray's first root found on the object trees in f64, "
+            "one point at a time, stepped by the distance bound (at least 0.001 px) and bisected 60 times. "
+            f"{len(checked)} inputs checked")
+    if not checked:
+        return head + ".\n"
+    mism = [num(r, "mismatch_pct") or 0.0 for r in checked]
+    p95 = [num(r, "p95_px") for r in checked if num(r, "p95_px") is not None]
+    head += (f": hit/miss differs on a median {np.median(mism):.3g}% of pixels (largest "
+             f"{max(mism):.3g}%), and where both hit the distance differs by a median p95 of "
+             f"{np.median(p95):.3g} px (largest p95 {max(p95):.3g} px)" if p95 else "") + ". "
+    head += (f"{len(skipped)} mesh or grid inputs are their own reference and are not checked. " if skipped else "")
+    worst = sorted(checked, key=lambda r: -(num(r, "mismatch_pct") or 0.0))[:5]
+    return head + "The inputs that differ most:\n\n" + md_table(
+        ["input", "class", "reference", "hit/miss differs", "p95 px", "max px", "evaluations per ray"],
+        [(f"`{r['input']}`", r.get("class", ""), f"`{r.get('reference', '')}`",
+          f"{num(r, 'mismatch_pct') or 0:.3g}%",
+          f"{num(r, 'p95_px'):.3g}" if num(r, "p95_px") is not None else "–",
+          f"{num(r, 'max_px'):.3g}" if num(r, "max_px") is not None else "–",
+          f"{num(r, 'steps_per_ray') or 0:.0f}") for r in worst])
