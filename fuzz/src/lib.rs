@@ -103,3 +103,34 @@ pub fn fuzz_grid(data: &[u8], ext: &str) {
     let result = sdfmesh::geometry::grid::io::load_grid(&path);
     check_grid_result(&path, &result);
 }
+
+/// Parses `data` (UTF-8 only) as a `.vm` implicit model with [`sdfmesh::implicit::parse_vm`]:
+/// an error must be one line naming the file; a model must be in SSA order (every argument
+/// names an earlier clause), and a small one is also prepared for ray casting (intervals,
+/// shortening, Lipschitz bounds over 2^3 cells) and cast one ray through, which must not
+/// panic and must report a hit inside the ray's range.
+pub fn fuzz_vm(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else { return };
+    let path = Path::new("fuzz.vm");
+    let ssa = match sdfmesh::implicit::parse_vm(text, path) {
+        Ok(s) => s,
+        Err(e) => return check_error(path, &e),
+    };
+    assert!(!ssa.clauses.is_empty(), "a model without clauses was accepted");
+    for (i, c) in ssa.clauses.iter().enumerate() {
+        let k = c.op.arity();
+        assert!(k < 1 || (c.a as usize) < i, "clause {i} reads a later clause");
+        assert!(k < 2 || (c.b as usize) < i, "clause {i} reads a later clause");
+    }
+    let _ = ssa.eval_f64([0.25, -0.5, 0.75]);
+    if ssa.clauses.len() <= 2000 {
+        use sdfmesh::implicit::field3d::{Field3, RayWork, Scratch};
+        let field = Field3::new(ssa, 2);
+        let (mut s, mut w) = (Scratch::default(), RayWork::default());
+        let o = glam::DVec3::new(0.3, 0.2, 4.0);
+        let d = glam::DVec3::new(-0.1, 0.05, -1.0);
+        if let Some(h) = field.first_root(o, d, 0.0, 10.0, 1e-3, 1e-3, &mut s, &mut w) {
+            assert!((0.0..=10.0).contains(&h.t), "hit at {} outside the ray's range", h.t);
+        }
+    }
+}

@@ -20,7 +20,7 @@ use crate::geometry::grid::io::save_grid;
 use crate::mesh::{TriangleMesh, load_mesh, save_mesh};
 use crate::plan::GridFill;
 use crate::plan::budget::{MemoryBudget, check_evaluations, extraction_bytes, mesh_to_grid_bytes};
-use crate::plan::{MeshMethod, Representation, grid_file_mesh};
+use crate::plan::{MeshMethod, Representation, grid_file_mesh, implicit_world_mesh};
 use crate::render::report::{RenderReport, render_scene, render_scene_with};
 use crate::render::write_png;
 use crate::scene::{Scene, load_input, load_scene};
@@ -44,18 +44,14 @@ fn is_vm(path: &Path) -> bool {
 }
 
 /// `toolkit render MODEL.vm`: a model without `var-z` as the Prospero challenge's image
-/// (white where negative), default 1024 x 1024; a 3D model is refused (not yet supported).
+/// (white where negative), default 1024 x 1024; a 3D model as a scene ([`render_vm_3d`]).
 fn render_vm(opts: &RenderOptions) -> Result<RenderReport> {
     use crate::geometry::RayStats;
     use crate::implicit::image2d::render_2d;
     use crate::render::Frame;
     let ssa = crate::implicit::load_vm(&opts.scene)?;
     if ssa.uses_z() {
-        return Err(Error::input(
-            &opts.scene,
-            None,
-            "a 3D model (it reads var-z): only the 2D image of a model without var-z is rendered so far",
-        ));
+        return render_vm_3d(opts, ssa);
     }
     let width = opts.overrides.width().unwrap_or(1024) as usize;
     let height = opts.overrides.height().unwrap_or(1024) as usize;
@@ -84,6 +80,49 @@ fn render_vm(opts: &RenderOptions) -> Result<RenderReport> {
         geometry_bytes: 0,
         text,
     })
+}
+
+/// `toolkit render MODEL.vm` of a 3D model: the preview scene framing the cube [-1, 1]^3
+/// ([`crate::scene::implicit_preview_scene`]) rendered as any scene, with the work of the
+/// safe marcher per ray.
+fn render_vm_3d(opts: &RenderOptions, ssa: crate::implicit::Ssa) -> Result<RenderReport> {
+    use crate::implicit::field3d::{CELLS, Field3};
+    let start = Instant::now();
+    let field = std::sync::Arc::new(Field3::new(ssa, CELLS));
+    let prepared = start.elapsed();
+    let mut scene = crate::scene::implicit_preview_scene(field, opts.scene.clone());
+    opts.overrides.apply(&mut scene);
+    check_budget(&opts.budget, &scene, opts.repr, &opts.scene)?;
+    let mut report = render_scene_with(&scene, opts.repr, opts.primary);
+    write_png(&report.frame.image, &opts.output)?;
+    let s = &report.frame.stats;
+    if s.marched_rays > 0 {
+        let _ = writeln!(
+            report.text,
+            "implicit model: cells prepared in {:.1} ms; {:.2} point evaluations and {:.2} interval \
+             evaluations per marched ray ({} marched rays)",
+            prepared.as_secs_f64() * 1e3,
+            s.march_steps as f64 / s.marched_rays as f64,
+            s.interval_evals as f64 / s.marched_rays as f64,
+            s.marched_rays
+        );
+    }
+    Ok(report)
+}
+
+/// The surface of the implicit model `input` extracted with marching cubes at `res` cells
+/// along the cube [-1, 1]^3 (the grid of `toolkit convert MODEL.vm --to grid` is the
+/// distance to it).
+fn implicit_mesh(input: &Path, res: u32, budget: MemoryBudget) -> Result<TriangleMesh> {
+    use crate::convert::extract::ExtractMethod;
+    budget.check(
+        &format!("extracting {} at {res} cells", input.display()),
+        extraction_bytes(res, ExtractMethod::MarchingCubes),
+    )?;
+    let scene = load_input(input, Default::default())?;
+    let o = &scene.objects[0];
+    crate::plan::implicit_surface(o, res, ExtractMethod::MarchingCubes)
+        .ok_or_else(|| Error::input(input, None, format!("no surface in the cube [-1, 1]^3 at {res} cells")))
 }
 
 /// Fails when `scene` in `repr` would need more memory than `budget` allows.
@@ -164,7 +203,13 @@ pub fn convert_command(
     let start = Instant::now();
     match target {
         ConvertTarget::Grid { res, margin, fill, band } => {
-            let (mesh, report) = load_mesh(input)?;
+            // An implicit model's grid stores the exact signed distance to its surface
+            // extracted at `res` cells (its value is not a distance).
+            let implicit = if is_vm(input) { Some(implicit_mesh(input, res, budget)?) } else { None };
+            let (mesh, report) = match implicit {
+                Some(m) => (m, Default::default()),
+                None => load_mesh(input)?,
+            };
             // Checked before any work: the grid's size against the memory budget.
             let layout = match mesh.bounds() {
                 Some((lo, hi)) => Some(grid_layout(lo, hi, res, margin)?),
@@ -183,6 +228,7 @@ pub fn convert_command(
                 fill == GridFill::Sample,
             );
             let grid = match fill {
+                _ if is_vm(input) => sample_mesh(&mesh, res, margin)?,
                 GridFill::Sample => sample_mesh(&mesh, res, margin)?,
                 // Voxelizing fails on meshes it finds open: name the file.
                 GridFill::Voxelize => voxelize_mesh(&mesh, res, margin).map_err(|e| match e {
@@ -193,6 +239,10 @@ pub fn convert_command(
             drop(stage);
             let sample = start.elapsed() - load;
             let how = match fill {
+                _ if is_vm(input) => {
+                    "sampled as the exact signed distance to the model's surface extracted at the grid's \
+                     resolution (marching cubes; the model's value is not a distance)"
+                }
                 GridFill::Sample => "sampled",
                 GridFill::Voxelize => "voxelized",
             };
@@ -267,7 +317,8 @@ pub fn convert_command(
         }
         ConvertTarget::Mesh { res, method } => {
             budget.check(&format!("extracting at {res} cells"), extraction_bytes(res, method))?;
-            let scene = load_scene(input)?;
+            let scene =
+                if is_vm(input) { load_input(input, Default::default())? } else { load_scene(input)? };
             for (i, o) in scene.objects.iter().enumerate() {
                 let n = crate::geometry::sdf::SdfTree::new(o).map_or(0.0, |t| t.evaluations());
                 check_evaluations(&format!("extracting {}", input.display()), i, o, n)?;
@@ -284,7 +335,8 @@ pub fn convert_command(
             for (done, o) in scene.objects.iter().enumerate() {
                 stage.set(per_object * done as u64);
                 let extracted = extract_object(o, res, method)
-                    .or_else(|| grid_file_mesh(o, res, MeshMethod::Extracted(method)));
+                    .or_else(|| grid_file_mesh(o, res, MeshMethod::Extracted(method)))
+                    .or_else(|| implicit_world_mesh(o, res, method));
                 match extracted {
                     Some(m) => {
                         let _ = writeln!(

@@ -317,9 +317,12 @@ enum RunGeometry {
 
 /// The `class` column of an input: for a scene file under a `data/scenes` folder, its
 /// folder relative to `data/scenes` (`data/scenes/blend/metaballs_16.toml` -> `blend`;
-/// `scenes` for a file directly in `data/scenes`); `scan` for a mesh file (any extension but
-/// `.toml`); otherwise the name of the file's folder (`scenes` when it has none).
+/// `scenes` for a file directly in `data/scenes`); `implicit` for a `.vm` model; `scan` for
+/// a mesh file (any other extension but `.toml`); otherwise the name of the file's folder (`scenes` when it has none).
 pub fn input_class(path: &Path) -> String {
+    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("vm")) {
+        return "implicit".into();
+    }
     if path.extension().is_none_or(|e| e != "toml") {
         return "scan".into();
     }

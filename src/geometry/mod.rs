@@ -6,6 +6,7 @@
 pub mod analytic;
 pub mod bvh2;
 pub mod grid;
+pub mod implicit;
 pub mod march;
 pub mod marched;
 pub mod mesh;
@@ -93,6 +94,9 @@ pub struct RayStats {
     pub bvh_nodes: u64,
     /// Closed-form primitive intersection tests.
     pub prim_tests: u64,
+    /// Interval evaluations of implicit models (a piece of a ray each), beside their point
+    /// evaluations in `march_steps`.
+    pub interval_evals: u64,
 }
 
 impl RayStats {
@@ -105,6 +109,7 @@ impl RayStats {
         self.step_limit_hits += other.step_limit_hits;
         self.bvh_nodes += other.bvh_nodes;
         self.prim_tests += other.prim_tests;
+        self.interval_evals += other.interval_evals;
     }
 }
 

@@ -3,11 +3,15 @@
 //! [`ops`] gives every opcode's scalar meaning, [`interval`] its sound interval extension,
 //! [`tape`] shortens a program over a region (min/max branches decided by intervals, dead
 //! clauses dropped), allocates registers and evaluates 64 points at a time, and [`image2d`]
-//! renders a model without `var-z` as the Prospero challenge defines it.
+//! renders a model without `var-z` as the Prospero challenge defines it. [`gradient`]
+//! bounds a model's gradient over a box (a proven Lipschitz bound), and [`field3d`] finds
+//! the first surface along a ray of a 3D model with steps that cannot cross one.
 //!
 //! The value of such a model is not a distance: negative inside, positive outside, and
 //! nothing more is promised.
 
+pub mod field3d;
+pub mod gradient;
 pub mod image2d;
 pub mod interval;
 pub mod ops;
@@ -16,3 +20,13 @@ pub mod vm;
 
 pub use tape::Ssa;
 pub use vm::{load_vm, parse_vm};
+
+/// Reads the 3D `.vm` model at `path` and prepares it for ray casting
+/// ([`field3d::Field3`], [`field3d::CELLS`] cells per axis).
+///
+/// # Errors
+/// The reader's errors.
+pub fn load_field(path: &std::path::Path) -> crate::error::Result<std::sync::Arc<field3d::Field3>> {
+    let ssa = load_vm(path)?;
+    Ok(std::sync::Arc::new(field3d::Field3::new(ssa, field3d::CELLS)))
+}

@@ -284,6 +284,11 @@ pub fn object_bytes(o: &Object, plan: &ObjectPlan) -> u64 {
             mesh_to_grid_bytes(triangles, UVec3::splat(grid_samples_per_axis(resolution)), fill)
         }
         Build::GridFileMarched { .. } => grid_file,
+        Build::ImplicitMarched { .. } => match &o.kind {
+            ObjectKind::Implicit { field, .. } => field.bytes_used() as u64,
+            _ => 0,
+        },
+        Build::ImplicitExtracted { method, resolution } => extraction_bytes(resolution, method),
         Build::GridFileExtracted { method, resolution } => {
             extraction_bytes(resolution, method).saturating_add(grid_file)
         }

@@ -27,6 +27,7 @@ use crate::geometry::grid::SdfGrid;
 use crate::geometry::grid::band::BandGrid;
 use crate::geometry::grid::object::{ClippedGrid, GridObject, GridStore};
 use crate::geometry::grid::scene::{SceneGrid, SceneGridObject};
+use crate::geometry::implicit::ImplicitObject;
 use crate::geometry::march::MarchParams;
 use crate::geometry::mesh::MeshGeometry;
 use crate::geometry::mesh::instance::{InstancedMesh, compose, repeat_offsets};
@@ -343,6 +344,22 @@ fn build_object(
                 (g, ObjectPlan::fallback(realised.build, Fallback::NoSurfaceInGridFile))
             }
         },
+        Build::ImplicitMarched { march } => (implicit_marched(o, march, plan.fallback), plan),
+        Build::ImplicitExtracted { method, resolution } => match implicit_surface(o, resolution, method) {
+            Some(mesh) => {
+                let label = format!(
+                    "implicit '{}' extracted at {resolution} cells (every sample evaluated: not a distance)",
+                    o.label
+                );
+                let g = MeshGeometry::new(mesh, Shading::Flat, o.compiled_transform(), o.material, label);
+                (Box::new(g), plan)
+            }
+            None => {
+                let build = Build::ImplicitMarched { march };
+                let fallback = Fallback::EmptyExtraction { resolution };
+                (implicit_marched(o, march, Some(fallback)), ObjectPlan::fallback(build, fallback))
+            }
+        },
         Build::GridFileMarched { .. } => {
             let (g, realised) = grid_file_marched(o, plan.build);
             (g, ObjectPlan { fallback: plan.fallback.or(realised.fallback), ..realised })
@@ -370,6 +387,45 @@ fn build_object(
             None => marched(Fallback::GridNotBuilt),
         },
     }
+}
+
+/// An implicit object traced by its safe marcher; the description says why where it is
+/// not the asked representation.
+fn implicit_marched(o: &Object, march: MarchParams, fallback: Option<Fallback>) -> Box<dyn Geometry> {
+    let ObjectKind::Implicit { field, .. } = &o.kind else { unreachable!("called for implicit models only") };
+    let label = match fallback {
+        None => o.label.clone(),
+        Some(Fallback::NoClosedForm { .. }) => format!("{} (no closed form: traced safely)", o.label),
+        Some(f) => format!("{} ({f})", o.label),
+    };
+    Box::new(ImplicitObject::new(field.clone(), o.compiled_transform(), o.material, march, label))
+}
+
+/// The surface of an implicit object extracted at `resolution` cells along the cube
+/// [-1, 1]^3 of its frame, in that frame; `None` when it has no triangles.
+pub fn implicit_surface(o: &Object, resolution: u32, method: ExtractMethod) -> Option<TriangleMesh> {
+    let ObjectKind::Implicit { field, .. } = &o.kind else { return None };
+    let e = crate::implicit::field3d::EXTENT as f32;
+    let cube = aabb(Vec3::splat(-e), Vec3::splat(e));
+    // The solid as the marcher sees it: the model within the cube (cut by its faces).
+    let f = |p: DVec3| {
+        let v = IMPLICIT_SCRATCH.with(|s| field.value(p, &mut s.borrow_mut()));
+        v.max(p.abs().max_element() - crate::implicit::field3d::EXTENT)
+    };
+    let mesh = extract(&f, Field::Arbitrary, &cube, resolution, method);
+    (!mesh.triangles.is_empty()).then_some(mesh)
+}
+
+/// [`implicit_surface`] placed in world space by the object's transform.
+pub fn implicit_world_mesh(o: &Object, resolution: u32, method: ExtractMethod) -> Option<TriangleMesh> {
+    let mut m = implicit_surface(o, resolution, method)?;
+    m.transform(&o.compiled_transform().to_world);
+    Some(m)
+}
+
+thread_local! {
+    static IMPLICIT_SCRATCH: std::cell::RefCell<crate::implicit::field3d::Scratch> =
+        std::cell::RefCell::new(Default::default());
 }
 
 /// `o` sphere traced on its analytic SDF, described by why (from `repr` and `fallback`).
@@ -678,6 +734,12 @@ pub fn scene_mesh(scene: &Scene, repr: Representation) -> Option<TriangleMesh> {
             build @ (Build::Tessellated { .. } | Build::PlaneDisc { .. } | Build::Extracted { .. }) => {
                 match mesh_geometry(scene, o, build) {
                     Some((g, _)) => g.world_mesh(),
+                    None => continue,
+                }
+            }
+            Build::ImplicitExtracted { method, resolution } => {
+                match implicit_world_mesh(o, resolution, method) {
+                    Some(m) => m,
                     None => continue,
                 }
             }

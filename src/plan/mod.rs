@@ -31,6 +31,9 @@
 //!   transform (rigid, uniform scale), as meshes share one mesh.
 //! - [`Build::InstancedGrid`]: a repetition's child gridded once and placed per copy (the
 //!   copies of [`Build::Instanced`]).
+//! - [`Build::ImplicitMarched`], [`Build::ImplicitExtracted`]: an implicit `.vm` model
+//!   traced by its safe marcher (the sdf representation; the analytic and grid ones too,
+//!   saying why), or its surface extracted from its samples (the mesh representation).
 //! - [`Build::GridFileMarched`], [`Build::GridFileExtracted`]: a grid file ray marched,
 //!   or its surface extracted.
 //!
@@ -49,7 +52,8 @@ use glam::Vec3;
 
 pub use crate::geometry::mesh::instance::MAX_INSTANCES;
 pub use build::{
-    build_objects, build_scene, build_scene_with_plans, grid_file_mesh, reextract_mesh, scene_mesh,
+    build_objects, build_scene, build_scene_with_plans, grid_file_mesh, implicit_surface,
+    implicit_world_mesh, reextract_mesh, scene_mesh,
 };
 
 use crate::convert::extract::ExtractMethod;
@@ -424,6 +428,22 @@ pub enum Build {
         /// Ray marching parameters.
         march: MarchParams,
     },
+    /// An implicit `.vm` model traced by steps of value / proven Lipschitz bound and
+    /// interval root isolation along the ray
+    /// ([`crate::geometry::implicit::ImplicitObject`]).
+    ImplicitMarched {
+        /// Hit tolerance (pixel footprint from the camera).
+        march: MarchParams,
+    },
+    /// An implicit model's zero level set extracted from its samples in the cube [-1, 1]^3
+    /// of its frame (every grid point evaluated: the value is not a distance) and traced
+    /// flat in world space.
+    ImplicitExtracted {
+        /// The extraction method.
+        method: ExtractMethod,
+        /// Cells along the cube's edge, at most [`MAX_EXTRACT_RESOLUTION`].
+        resolution: u32,
+    },
     /// A grid file's zero level set extracted and traced flat in world space.
     GridFileExtracted {
         /// The extraction method.
@@ -502,6 +522,9 @@ pub enum Fallback {
     /// Grid with [`GridStorage::Band`]: a grid file's narrow band could not be built; it is
     /// stored dense (known while building).
     DenseInsteadOfBand,
+    /// Grid: an implicit model is not sampled into a grid (its value is not a distance);
+    /// it is traced by its safe marcher.
+    ImplicitNotGridded,
 }
 
 impl fmt::Display for Fallback {
@@ -527,6 +550,9 @@ impl fmt::Display for Fallback {
             Fallback::OwnGrid => f.write_str("the scene grid could not be built: a grid of its own"),
             Fallback::NoSurfaceInGridFile => f.write_str("no surface in the grid: ray marched"),
             Fallback::DenseInsteadOfBand => f.write_str("the narrow band could not be built: dense"),
+            Fallback::ImplicitNotGridded => {
+                f.write_str("an implicit model is not gridded (its value is not a distance): marched safely")
+            }
         }
     }
 }
@@ -558,7 +584,9 @@ impl Build {
         match self {
             Build::ClosedForm => ReprKind::Analytic,
             Build::Marched { .. } => ReprKind::Sdf,
+            Build::ImplicitMarched { .. } => ReprKind::Sdf,
             Build::MeshTriangles
+            | Build::ImplicitExtracted { .. }
             | Build::Tessellated { .. }
             | Build::PlaneDisc { .. }
             | Build::Extracted { .. }
@@ -646,6 +674,7 @@ impl ObjectPlan {
         matches!(
             self.build,
             Build::Marched { .. }
+                | Build::ImplicitMarched { .. }
                 | Build::Grid { .. }
                 | Build::LocalGrid { .. }
                 | Build::SharedGrid { .. }
@@ -662,6 +691,22 @@ impl ObjectPlan {
 pub fn plan_object(scene: &Scene, o: &Object, repr: Representation) -> ObjectPlan {
     let repr = repr.with_pixel_footprint(scene);
     let marched = |fallback| ObjectPlan { build: Build::Marched { march: repr.march() }, fallback };
+    if let ObjectKind::Implicit { .. } = o.kind {
+        let safe = Build::ImplicitMarched { march: repr.march() };
+        return match repr {
+            Representation::Sdf { .. } => ObjectPlan::as_asked(safe),
+            Representation::Analytic { .. } => {
+                ObjectPlan::fallback(safe, Fallback::NoClosedForm { kind: o.kind_name() })
+            }
+            Representation::Mesh { resolution, method, .. } => {
+                ObjectPlan::as_asked(Build::ImplicitExtracted {
+                    method: method.extract_method(),
+                    resolution: extract_resolution(resolution),
+                })
+            }
+            Representation::Grid { .. } => ObjectPlan::fallback(safe, Fallback::ImplicitNotGridded),
+        };
+    }
     if let ObjectKind::Grid { .. } = o.kind {
         let build = match repr {
             Representation::Mesh { resolution, method, .. } => Build::GridFileExtracted {

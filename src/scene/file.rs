@@ -35,7 +35,7 @@ pub const MAX_IMAGE_SIZE: u32 = 16384;
 pub const MAX_RECURSION_DEPTH: u32 = 100;
 
 /// Every value of an object's `type` key.
-pub const OBJECT_TYPES: [&str; 18] = [
+pub const OBJECT_TYPES: [&str; 19] = [
     "sphere",
     "plane",
     "box",
@@ -54,6 +54,7 @@ pub const OBJECT_TYPES: [&str; 18] = [
     "repeat",
     "mesh",
     "grid",
+    "implicit",
 ];
 
 /// Every value of a light's `type` key.
@@ -78,7 +79,7 @@ fn object_type_keys(ty: &str) -> Option<&'static [&'static str]> {
         "smooth_union" | "smooth_subtraction" | "smooth_intersection" => &["children", "blend"],
         "repeat" => &["period", "count", "child"],
         "mesh" => &["path", "shading"],
-        "grid" => &["path"],
+        "grid" | "implicit" => &["path"],
         _ => return None,
     })
 }
@@ -954,6 +955,23 @@ impl Cx<'_> {
             });
         }
 
+        if ty == "implicit" {
+            let file = req_str(&o.path, "path")?;
+            if at.contains(".child") {
+                return Err(self.err(
+                    o.kind.span(),
+                    format!(
+                        "{at}: an implicit model can only be a top-level object (it takes no part in CSG)"
+                    ),
+                ));
+            }
+            // Relative to the scene file's folder.
+            let source = self.path.parent().unwrap_or(Path::new("")).join(file.get_ref());
+            let field = crate::implicit::load_field(&source)?;
+            let material = material.unwrap_or_else(|| materials.default_id());
+            return Ok(Object { kind: ObjectKind::Implicit { field, source }, transform, material, label });
+        }
+
         let kind = if ty == "repeat" {
             let period = req_v3(&o.period, "period")?;
             let pv = period.get_ref().0;
@@ -1032,8 +1050,11 @@ impl Cx<'_> {
         let material = material.unwrap_or(match &kind {
             ObjectKind::Csg { children, .. } => children[0].material,
             ObjectKind::Repeat { child, .. } => child.material,
-            ObjectKind::Primitive(_) | ObjectKind::Mesh { .. } | ObjectKind::Grid { .. } => {
-                unreachable!("primitives, meshes and grids returned above")
+            ObjectKind::Primitive(_)
+            | ObjectKind::Mesh { .. }
+            | ObjectKind::Grid { .. }
+            | ObjectKind::Implicit { .. } => {
+                unreachable!("primitives, meshes, grids and implicit models returned above")
             }
         });
         Ok(Object { kind, transform, material, label })

@@ -12,12 +12,14 @@ use crate::base::transform::TransformDesc;
 use crate::error::Result;
 use crate::grid::SdfGrid;
 use crate::grid::io::load_grid;
+use crate::implicit::field3d::Field3;
 use crate::mesh::{MeshFormat, TriangleMesh, load_mesh};
 use crate::scene::shape::{Object, ObjectKind, Shading};
 use crate::scene::{Camera, Light, Material, Scene, Settings, load_scene};
 
-/// Loads a scene file, or a mesh file or a signed distance grid file (`.sdf`, `.npy`) into
-/// a preview scene ([`mesh_preview_scene`], [`grid_preview_scene`]), by the file's
+/// Loads a scene file, or a mesh file, a signed distance grid file (`.sdf`, `.npy`) or an
+/// implicit model (`.vm`) into a preview scene ([`mesh_preview_scene`],
+/// [`grid_preview_scene`], [`implicit_preview_scene`]), by the file's
 /// extension; `shading` is the preview mesh's. A `.vti` grid goes to the grid loader too,
 /// which says that it cannot read one (rather than the scene parser failing on its bytes).
 /// A mesh's dropped degenerate triangles are reported on stderr.
@@ -29,6 +31,10 @@ pub fn load_input(path: &Path, shading: Shading) -> Result<Scene> {
     if matches!(ext.as_deref(), Some("sdf" | "npy" | "vti")) {
         let grid = load_grid(path)?;
         return Ok(grid_preview_scene(Arc::new(grid), path.to_path_buf()));
+    }
+    if ext.as_deref() == Some("vm") {
+        let field = crate::implicit::load_field(path)?;
+        return Ok(implicit_preview_scene(field, path.to_path_buf()));
     }
     if MeshFormat::from_path(path).is_some() {
         let (mesh, report) = load_mesh(path)?;
@@ -56,6 +62,13 @@ pub fn grid_preview_scene(grid: Arc<SdfGrid>, source: PathBuf) -> Scene {
     preview_scene(ObjectKind::Grid { grid, source }, lo, hi)
 }
 
+/// The preview scene of [`mesh_preview_scene`] for an implicit `.vm` model (`toolkit render
+/// MODEL.vm`), framing the cube [-1, 1]^3 it is seen in, as Fidget frames it.
+pub fn implicit_preview_scene(field: Arc<Field3>, source: PathBuf) -> Scene {
+    let e = crate::implicit::field3d::EXTENT as f32;
+    preview_scene(ObjectKind::Implicit { field, source }, Vec3::splat(-e), Vec3::splat(e))
+}
+
 /// One object of `kind` within `lo..hi`, seen by the preview camera and lights.
 fn preview_scene(kind: ObjectKind, lo: Vec3, hi: Vec3) -> Scene {
     let centre = 0.5 * (lo + hi);
@@ -65,7 +78,9 @@ fn preview_scene(kind: ObjectKind, lo: Vec3, hi: Vec3) -> Scene {
     let view = Vec3::new(0.35, 0.3, 1.0).normalize();
     let position = centre + view * distance;
     let source = match &kind {
-        ObjectKind::Mesh { source, .. } | ObjectKind::Grid { source, .. } => Some(source),
+        ObjectKind::Mesh { source, .. }
+        | ObjectKind::Grid { source, .. }
+        | ObjectKind::Implicit { source, .. } => Some(source),
         _ => None,
     };
     let label = source

@@ -10,6 +10,7 @@ use glam::{UVec3, Vec3};
 use crate::base::transform::{Transform, TransformDesc};
 use crate::base::{Aabb, MaterialId, aabb};
 use crate::grid::SdfGrid;
+use crate::implicit::field3d::Field3;
 use crate::mesh::TriangleMesh;
 
 /// A primitive in its local frame. All lengths are scene units, finite and > 0 unless
@@ -207,6 +208,14 @@ pub enum ObjectKind {
         /// The file it came from.
         source: PathBuf,
     },
+    /// An implicit model read from a `.vm` file (top level only), seen inside the cube
+    /// [-1, 1]^3 of the object's frame: the solid is where its value is negative.
+    Implicit {
+        /// The model prepared for ray casting (shared, never copied per representation).
+        field: Arc<Field3>,
+        /// The file it came from.
+        source: PathBuf,
+    },
 }
 
 /// How a traced mesh stores its BVH and vertices; the command line's `--layout` values.
@@ -271,6 +280,7 @@ impl Object {
             ObjectKind::Repeat { .. } => "repeat",
             ObjectKind::Mesh { .. } => "mesh",
             ObjectKind::Grid { .. } => "grid",
+            ObjectKind::Implicit { .. } => "implicit",
         }
     }
 
@@ -285,6 +295,10 @@ impl Object {
             ObjectKind::Grid { grid, .. } => {
                 let (lo, hi) = grid.bounds();
                 aabb(lo, hi)
+            }
+            ObjectKind::Implicit { .. } => {
+                let e = crate::implicit::field3d::EXTENT as f32;
+                aabb(Vec3::splat(-e), Vec3::splat(e))
             }
             ObjectKind::Csg { op: CsgOp::Intersection | CsgOp::SmoothIntersection { .. }, children } => {
                 // Unbounded children do not constrain an intersection.

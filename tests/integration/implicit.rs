@@ -79,3 +79,228 @@ fn render_writes_the_prospero_image_and_refuses_bad_files() {
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(!png2.exists());
 }
+
+/// The hit/miss image of a 3D model's preview scene (`toolkit render MODEL.vm`'s camera at
+/// `size` x `size`) traced by the safe marcher, against an independent reference: each
+/// primary ray clipped to the cube [-1, 1]^3 by its own slab test and sampled densely in
+/// f64 (a step of 0.002, a twentieth of a pixel at the model) with an evaluator written
+/// here over the clauses; a ray hits where a sample is negative. Returns (pixels that
+/// differ, reference hits, marcher's ms, point and interval evaluations per ray).
+fn three_d_disagreement(name: &str, size: u32) -> Option<(usize, usize, f64, f64, f64)> {
+    use rayon::prelude::*;
+    use sdfmesh::geometry::march::MarchParams;
+    use sdfmesh::geometry::{Geometry, RayStats};
+    use sdfmesh::implicit::ops::{Opcode, apply_f64};
+    use sdfmesh::plan::{Representation, build_scene};
+    use sdfmesh::scene::camera::RayGenerator;
+    use sdfmesh::scene::shape::Shading;
+
+    let path = shared(name)?;
+    let mut scene = sdfmesh::scene::load_input(&path, Shading::Flat).unwrap();
+    scene.camera.width = size;
+    scene.camera.height = size;
+    let rg = RayGenerator::new(&scene.camera);
+    let rays: Vec<_> = (0..size * size).map(|i| rg.ray(i % size, i / size)).collect();
+
+    let start = std::time::Instant::now();
+    let geometry = build_scene(&scene, Representation::Sdf { march: MarchParams::default() });
+    let mut stats = RayStats::default();
+    let ours: Vec<bool> =
+        rays.iter().map(|r| geometry.closest_hit(r, 0.0, f32::INFINITY, &mut stats).is_some()).collect();
+    let ms = start.elapsed().as_secs_f64() * 1e3;
+
+    let ssa = load_vm(&path).unwrap();
+    let eval = |p: [f64; 3], v: &mut Vec<f64>| {
+        v.clear();
+        for c in &ssa.clauses {
+            let r = match c.op {
+                Opcode::VarX => p[0],
+                Opcode::VarY => p[1],
+                Opcode::VarZ => p[2],
+                Opcode::Const => c.value,
+                op => apply_f64(op, v[c.a as usize], v[c.b as usize]),
+            };
+            v.push(r);
+        }
+        *v.last().unwrap()
+    };
+    let step = 0.002;
+    let reference: Vec<bool> = rays
+        .par_iter()
+        .map_init(Vec::new, |v, r| {
+            let o: [f64; 3] = r.origin.as_dvec3().to_array();
+            let d: [f64; 3] = r.dir.as_dvec3().to_array();
+            let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
+            for a in 0..3 {
+                if d[a] == 0.0 {
+                    if o[a].abs() > 1.0 {
+                        return false;
+                    }
+                    continue;
+                }
+                let (p, q): (f64, f64) = ((-1.0 - o[a]) / d[a], (1.0 - o[a]) / d[a]);
+                t0 = t0.max(p.min(q));
+                t1 = t1.min(p.max(q));
+            }
+            let mut t = t0;
+            while t <= t1 {
+                if eval([o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]], v) < 0.0 {
+                    return true;
+                }
+                t += step;
+            }
+            let end = eval([o[0] + t1 * d[0], o[1] + t1 * d[1], o[2] + t1 * d[2]], v);
+            t0 <= t1 && end < 0.0
+        })
+        .collect();
+    let differ = ours.iter().zip(&reference).filter(|(a, b)| a != b).count();
+    let only_ours = ours.iter().zip(&reference).filter(|(a, b)| **a && !**b).count();
+    eprintln!("{name}: {only_ours} hits only in ours, {} only in the reference", differ - only_ours);
+    let hits = reference.iter().filter(|&&h| h).count();
+    let n = rays.len() as f64;
+    Some((differ, hits, ms, stats.march_steps as f64 / n, stats.interval_evals as f64 / n))
+}
+
+#[test]
+fn three_d_models_step_over_no_surface() {
+    let size = 80;
+    for name in ["bear.vm", "colonnade.vm", "alien.vm", "bolt.vm", "geode.vm", "tanglecube.vm"] {
+        let Some((differ, hits, ms, points, intervals)) = three_d_disagreement(name, size) else { continue };
+        eprintln!(
+            "{name}: {differ} of {} pixels differ in hit/miss ({hits} hits); {ms:.0} ms, {points:.1} point \
+             and {intervals:.1} interval evaluations per ray",
+            size * size
+        );
+        let pixels = (size * size) as usize;
+        assert!(hits > pixels / 100, "{name}: only {hits} hits: the model is not in view");
+        assert!(differ * 1000 <= pixels, "{name}: {differ} of {pixels} pixels differ in hit/miss");
+    }
+}
+
+/// Malformed models through `toolkit render`: exit 2, one line naming the file and the line,
+/// no image; a 10^6-clause chain is read (and its 3D render refused by nothing but its size
+/// is not tried here: `convert`'s budget and the reader's limits cover that).
+#[test]
+fn malformed_models_get_one_line_with_the_line_number() {
+    let dir = tempfile::tempdir().unwrap();
+    let exe = env!("CARGO_BIN_EXE_toolkit");
+    let cases = [
+        ("unknown.vm", "x var-x\ny var-y\nz frob x\n", "unknown.vm:3:3: unknown opcode `frob`"),
+        ("missing.vm", "x var-x\ny add x\n", "missing.vm:2:3: `add` takes 2 arguments, found 1"),
+        ("undefined.vm", "x var-x\ny add x q\n", "undefined.vm:2:9: ID `q` is not defined"),
+        ("cycle.vm", "a add b b\nb var-x\n", "cycle.vm:1:7: ID `b` is not defined"),
+        ("nan.vm", "x var-x\nk const nan\no add x k\n", "nan.vm:2:9: constant `nan` is not finite"),
+    ];
+    for (name, text, want) in cases {
+        let model = dir.path().join(name);
+        std::fs::write(&model, text).unwrap();
+        let png = dir.path().join(format!("{name}.png"));
+        let out = Command::new(exe)
+            .args(["render", model.to_str().unwrap(), "-o", png.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "{name}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(want), "{name}: {err}");
+        assert_eq!(err.trim().lines().count(), 1, "{name}: {err}");
+        assert!(!png.exists(), "{name}");
+    }
+    // 10^6 clauses: read, and an error past the end names its line.
+    let mut big = String::from("x var-x\n");
+    for i in 0..1_000_000 {
+        let prev = if i == 0 { "x".to_string() } else { format!("_{}", i - 1) };
+        big.push_str(&format!("_{i} add {prev} x\n"));
+    }
+    big.push_str("bad frob x\n");
+    let model = dir.path().join("big.vm");
+    std::fs::write(&model, &big).unwrap();
+    let out = Command::new(exe)
+        .args(["render", model.to_str().unwrap(), "-o", dir.path().join("big.png").to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("big.vm:1000002:5: unknown opcode `frob`"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+}
+
+/// A 3D model end to end: `toolkit render` draws it in the preview scene, `convert` makes a
+/// closed mesh and a grid of it (saying what the grid stores), and a scene file places it
+/// with a transform and a material.
+#[test]
+fn three_d_models_render_convert_and_sit_in_scenes() {
+    let dir = tempfile::tempdir().unwrap();
+    let exe = env!("CARGO_BIN_EXE_toolkit");
+    // |p|^2 - 0.36: not a distance (a sphere of radius 0.6).
+    let model = dir.path().join("ball.vm");
+    std::fs::write(
+        &model,
+        "x var-x\ny var-y\nz var-z\na square x\nb square y\nc square z\nd add a b\ne add d c\nr const 0.36\n\
+         o sub e r\n",
+    )
+    .unwrap();
+    let run = |args: &[&str]| {
+        let out = Command::new(exe).args(args).output().unwrap();
+        assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let png = dir.path().join("ball.png");
+    let text = run(&[
+        "render",
+        model.to_str().unwrap(),
+        "--width",
+        "48",
+        "--height",
+        "48",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert!(text.contains("not a distance"), "{text}");
+    let img = image::open(&png).unwrap().to_rgb8();
+    assert_ne!(img.get_pixel(24, 24).0, [0; 3], "the ball is in the middle of the view");
+    assert_eq!(img.get_pixel(0, 0).0, [0; 3]);
+
+    let obj = dir.path().join("ball.obj");
+    let text = run(&[
+        "convert",
+        model.to_str().unwrap(),
+        "-o",
+        obj.to_str().unwrap(),
+        "--to",
+        "mesh",
+        "--res",
+        "32",
+    ]);
+    assert!(text.contains("closed: true"), "{text}");
+    let grid = dir.path().join("ball.sdf");
+    let text = run(&[
+        "convert",
+        model.to_str().unwrap(),
+        "-o",
+        grid.to_str().unwrap(),
+        "--to",
+        "grid",
+        "--res",
+        "24",
+    ]);
+    assert!(text.contains("exact signed distance to the model's surface"), "{text}");
+    let g = sdfmesh::grid::io::load_grid(&grid).unwrap();
+    // The grid's centre sample is about -0.6 (inside, 0.6 from the surface).
+    let c = g.trilinear(glam::Vec3::ZERO);
+    assert!((c + 0.6).abs() < 0.05, "{c}");
+
+    let scene = dir.path().join("s.toml");
+    std::fs::write(
+        &scene,
+        "[camera]\nposition = [0, 0, 6]\nlook_at = [0, 0, 0]\nwidth = 40\nheight = 40\n\
+         [[lights]]\ntype = \"ambient\"\nintensity = 1.0\n\
+         [materials.red]\ncolor = [1, 0, 0]\n\
+         [[objects]]\ntype = \"implicit\"\npath = \"ball.vm\"\nmaterial = \"red\"\ntranslate = [0.5, 0, 0]\n",
+    )
+    .unwrap();
+    let png = dir.path().join("s.png");
+    run(&["render", scene.to_str().unwrap(), "-o", png.to_str().unwrap()]);
+    let img = image::open(&png).unwrap().to_rgb8();
+    let p = img.get_pixel(20, 20).0;
+    assert!(p[0] > 100 && p[1] == 0 && p[2] == 0, "{p:?}");
+}

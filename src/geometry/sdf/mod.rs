@@ -271,7 +271,7 @@ fn contains_triangle(object: &Object) -> bool {
         ObjectKind::Csg { children, .. } => children.iter().any(contains_triangle),
         ObjectKind::Repeat { child, .. } => contains_triangle(child),
         ObjectKind::Mesh { .. } => true,
-        ObjectKind::Grid { .. } => false,
+        ObjectKind::Grid { .. } | ObjectKind::Implicit { .. } => false,
     }
 }
 
@@ -284,7 +284,7 @@ fn compile(object: &Object, cell_faces: bool, exact: &mut bool, count: &mut usiz
         *exact = false;
     }
     Some(match &object.kind {
-        ObjectKind::Mesh { .. } | ObjectKind::Grid { .. } => return None,
+        ObjectKind::Mesh { .. } | ObjectKind::Grid { .. } | ObjectKind::Implicit { .. } => return None,
         ObjectKind::Primitive(prim) => {
             if !primitive_is_exact(prim) {
                 *exact = false;
@@ -323,7 +323,10 @@ fn compile(object: &Object, cell_faces: bool, exact: &mut bool, count: &mut usiz
 /// (`2^k` for `k` repeated axes without a [`cell_gaps`] gap).
 fn march_cost(object: &Object) -> f64 {
     match &object.kind {
-        ObjectKind::Primitive(_) | ObjectKind::Mesh { .. } | ObjectKind::Grid { .. } => 1.0,
+        ObjectKind::Primitive(_)
+        | ObjectKind::Mesh { .. }
+        | ObjectKind::Grid { .. }
+        | ObjectKind::Implicit { .. } => 1.0,
         ObjectKind::Csg { children, .. } => children.iter().map(march_cost).sum(),
         ObjectKind::Repeat { period, count, child } => {
             let gaps = cell_gaps(*period, *count, child);
