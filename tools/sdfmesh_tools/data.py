@@ -24,7 +24,7 @@ COMPARE_COLUMNS = (
     "frame_ms_min frame_ms_max frames mrays_per_s steps_per_ray nodes_per_ray image_rmse "
     "image_psnr_db image_ssim flip_mean silhouette_mismatch_pct px_err_mean px_err_p95 "
     "px_err_max quality_px chamfer_rel hausdorff_rel peak_rss_bytes peak_heap_bytes threads width "
-    "height depth commit timestamp frame_ms_samples schema_version note"
+    "height depth commit timestamp frame_ms_samples schema_version note primary_ms shading_ms"
 ).split()
 
 # Schema version 1, for the synthetic CSVs of older tests.
@@ -72,8 +72,8 @@ def read_csv(path: str | Path | None) -> list[dict[str, str]]:
     for r in rows:
         normalize(r)
     version = {r.get("schema_version", "") for r in rows} - {"", None}
-    if version - {"1", "2", "3"}:
-        print(f"note: {p} has schema_version {sorted(version)}; this reader knows versions 1 to 4")
+    if version - {"1", "2", "3", "4", "5"}:
+        print(f"note: {p} has schema_version {sorted(version)}; this reader knows versions 1 to 5")
     return rows
 
 
