@@ -76,7 +76,7 @@ fn render_vm(opts: &RenderOptions) -> Result<RenderReport> {
         census.clauses_evaluated as f64 / census.blocks.max(1) as f64,
     );
     Ok(RenderReport {
-        frame: Frame { image, time, primary: None, stats: RayStats::default() },
+        frame: Frame { image, time, primary: None, raster: None, stats: RayStats::default() },
         geometry_bytes: 0,
         text,
     })

@@ -45,15 +45,15 @@ use crate::plan::{
     Build, Fallback, GridFill, GridStorage, MeshMethod, MeshPlane, ObjectPlan, ReprKind, Representation,
     build_scene_with_plans, reextract_mesh, traced_repr,
 };
-use crate::render::{Frame, render, write_png};
+use crate::render::{Frame, PrimaryVisibility, render_with, write_png};
 use crate::scene::shape::{MeshLayout, ObjectKind, Shading};
 use crate::scene::{Scene, load_input};
 
 /// Version of the CSV schema; bumped whenever a column changes meaning or order.
-pub const SCHEMA_VERSION: u32 = 4;
+pub const SCHEMA_VERSION: u32 = 5;
 
 /// The CSV columns, in order (units in the names; see the README).
-pub const COLUMNS: [&str; 45] = [
+pub const COLUMNS: [&str; 47] = [
     "input",
     "class",
     "replicate",
@@ -99,6 +99,8 @@ pub const COLUMNS: [&str; 45] = [
     "frame_ms_samples",
     "schema_version",
     "note",
+    "primary_ms",
+    "shading_ms",
 ];
 
 /// One CSV row. Field order is [`COLUMNS`]; `None` is an empty cell (not applicable).
@@ -209,6 +211,14 @@ pub struct Row {
     pub schema_version: u32,
     /// What was not represented as asked (e.g. unbounded objects sphere traced), or empty.
     pub note: String,
+    /// Of `frame_ms_median`, primary visibility (every pixel's primary hit: the primary
+    /// rays traced or marched, or for a `raster` run the visibility buffer and the hit
+    /// records made from it; [`crate::render::Frame::primary`]), ms: the median frame split
+    /// in the proportion primary visibility took of all timed frames. Empty in rows of
+    /// schema 4 and older.
+    pub primary_ms: Option<f64>,
+    /// `frame_ms_median - primary_ms`: shading (shadow, reflection and refraction rays), ms.
+    pub shading_ms: Option<f64>,
 }
 
 impl Row {
@@ -366,6 +376,8 @@ pub fn run_order(n: usize, seed: Option<u64>, input: &str) -> Vec<usize> {
 #[derive(Clone, Debug)]
 struct Run {
     repr: ReprKind,
+    /// Primary visibility traced, or rasterized (a `raster` twin of a mesh run).
+    primary: PrimaryVisibility,
     method: &'static str,
     resolution: Option<u32>,
     build: RunGeometry,
@@ -386,11 +398,18 @@ impl Run {
     /// The `method` column: `method`, with the target for a decimated mesh
     /// ([`DecimateTarget::method_name`], `decimated-25%`), and `-compact` after it for the
     /// compact layout (`compact` for the original, `decimated-25%-compact`).
+    /// A raster twin ([`PrimaryVisibility::Raster`]) is `raster` for the original mesh and
+    /// `-raster` after the method otherwise (`decimated-25%-raster`, `parametric-raster`).
     fn method(&self) -> String {
-        match self.build {
+        let method = match self.build {
             RunGeometry::Decimate { target } => target.method_name(),
             RunGeometry::Compact { target: Some(target) } => format!("{}-compact", target.method_name()),
             _ => self.method.to_string(),
+        };
+        match self.primary {
+            PrimaryVisibility::Trace => method,
+            PrimaryVisibility::Raster if method == "original" => "raster".into(),
+            PrimaryVisibility::Raster => format!("{method}-raster"),
         }
     }
 }
@@ -417,6 +436,7 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
     let mut runs = Vec::new();
     if mesh_input(scene).is_some() {
         runs.push(Run {
+            primary: PrimaryVisibility::Trace,
             repr: ReprKind::Mesh,
             method: "original",
             resolution: None,
@@ -425,30 +445,35 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
         for &r in &opts.resolutions {
             let res = Some(r);
             runs.push(Run {
+                primary: PrimaryVisibility::Trace,
                 repr: ReprKind::Grid,
                 method: "sample",
                 resolution: res,
                 build: grid(r, GridFill::Sample, GridStorage::Dense),
             });
             runs.push(Run {
+                primary: PrimaryVisibility::Trace,
                 repr: ReprKind::Grid,
                 method: "voxelize",
                 resolution: res,
                 build: grid(r, GridFill::Voxelize, GridStorage::Dense),
             });
             runs.push(Run {
+                primary: PrimaryVisibility::Trace,
                 repr: ReprKind::Grid,
                 method: "sample-band",
                 resolution: res,
                 build: grid(r, GridFill::Sample, band),
             });
             runs.push(Run {
+                primary: PrimaryVisibility::Trace,
                 repr: ReprKind::Mesh,
                 method: "from-sample",
                 resolution: res,
                 build: RunGeometry::Reextract { fill: GridFill::Sample, resolution: r },
             });
             runs.push(Run {
+                primary: PrimaryVisibility::Trace,
                 repr: ReprKind::Mesh,
                 method: "from-voxelize",
                 resolution: res,
@@ -459,6 +484,7 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
         // mesh-side candidates without a resolution, like the original.
         for &target in &opts.decimate {
             runs.push(Run {
+                primary: PrimaryVisibility::Trace,
                 repr: ReprKind::Mesh,
                 method: "decimated",
                 resolution: None,
@@ -471,6 +497,7 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
             let targets = std::iter::once(None).chain(opts.decimate.iter().copied().map(Some));
             for target in targets {
                 runs.push(Run {
+                    primary: PrimaryVisibility::Trace,
                     repr: ReprKind::Mesh,
                     method: "compact",
                     resolution: None,
@@ -480,6 +507,7 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
         }
     } else {
         runs.push(Run {
+            primary: PrimaryVisibility::Trace,
             repr: ReprKind::Analytic,
             method: "closed-form",
             resolution: None,
@@ -488,6 +516,7 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
         for &tolerance_px in &opts.sdf_tolerances_px {
             for &relaxation in &opts.sdf_relaxations {
                 runs.push(Run {
+                    primary: PrimaryVisibility::Trace,
                     repr: ReprKind::Sdf,
                     method: "sphere-trace",
                     resolution: None,
@@ -509,24 +538,28 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
                 })
             };
             runs.push(Run {
+                primary: PrimaryVisibility::Trace,
                 repr: ReprKind::Mesh,
                 method: "parametric",
                 resolution: res,
                 build: mesh(MeshMethod::Parametric),
             });
             runs.push(Run {
+                primary: PrimaryVisibility::Trace,
                 repr: ReprKind::Mesh,
                 method: "extracted",
                 resolution: res,
                 build: mesh(MeshMethod::Extracted(ExtractMethod::MarchingCubes)),
             });
             runs.push(Run {
+                primary: PrimaryVisibility::Trace,
                 repr: ReprKind::Grid,
                 method: "dense",
                 resolution: res,
                 build: grid(r, GridFill::Sample, GridStorage::Dense),
             });
             runs.push(Run {
+                primary: PrimaryVisibility::Trace,
                 repr: ReprKind::Grid,
                 method: "band",
                 resolution: res,
@@ -534,6 +567,7 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
             });
             if scene.objects.len() > 1 {
                 runs.push(Run {
+                    primary: PrimaryVisibility::Trace,
                     repr: ReprKind::Grid,
                     method: "scene-band",
                     resolution: res,
@@ -542,6 +576,19 @@ fn plan(scene: &Scene, opts: &CompareOptions) -> Vec<Run> {
             }
         }
     }
+    // The raster twins: the original mesh, its decimations and the scene's parametric and
+    // extracted meshes again with their primary visibility rasterized (the re-extracted
+    // meshes of the grid study and the compact layout, which the rasterizer does not read,
+    // have none).
+    let twins: Vec<Run> = runs
+        .iter()
+        .filter(|r| {
+            r.repr == ReprKind::Mesh
+                && matches!(r.method, "original" | "decimated" | "parametric" | "extracted")
+        })
+        .map(|r| Run { primary: PrimaryVisibility::Raster, ..r.clone() })
+        .collect();
+    runs.extend(twins);
     runs
 }
 
@@ -650,20 +697,33 @@ pub(crate) struct Timing {
     pub nodes_per_ray: f64,
     /// Every timed frame, ms, space-separated.
     pub samples: String,
+    /// Of `median`, primary visibility, ms (the compare CSV's `primary_ms`); `None` where
+    /// a frame does not say.
+    pub primary_ms: Option<f64>,
     /// When the frames finished, RFC 3339 UTC.
     pub timestamp: String,
 }
 
 /// Renders one warm-up frame and `frames` timed ones; returns their timing and the last
 /// frame (work counts are the same in every frame).
-pub(crate) fn time_frames(scene: &Scene, geometry: &dyn Geometry, frames: u32) -> (Timing, Frame) {
-    let mut last = render(scene, geometry);
+pub(crate) fn time_frames(
+    scene: &Scene,
+    geometry: &SceneGeometry,
+    primary: PrimaryVisibility,
+    frames: u32,
+) -> (Timing, Frame) {
+    let mut last = render_with(scene, geometry, primary);
     let mut times = Vec::with_capacity(frames as usize);
+    let mut primary_s = Some(0.0);
+    let mut total_s = 0.0;
     for _ in 0..frames {
-        last = render(scene, geometry);
+        last = render_with(scene, geometry, primary);
         times.push(last.time.as_secs_f64() * 1e3);
+        primary_s = primary_s.zip(last.primary).map(|(a, p)| a + p.as_secs_f64());
+        total_s += last.time.as_secs_f64();
     }
     let median = metrics::median(&times);
+    let primary_ms = primary_s.filter(|_| total_s > 0.0).map(|p| median * (p / total_s).min(1.0));
     let timing = Timing {
         median,
         min: times.iter().copied().fold(f64::INFINITY, f64::min),
@@ -672,6 +732,7 @@ pub(crate) fn time_frames(scene: &Scene, geometry: &dyn Geometry, frames: u32) -
         steps_per_ray: last.steps_per_ray(),
         nodes_per_ray: last.nodes_per_ray(),
         samples: times.iter().map(|t| format!("{t:.3}")).collect::<Vec<_>>().join(" "),
+        primary_ms,
         timestamp: humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string(),
     };
     (timing, last)
@@ -728,11 +789,12 @@ pub fn commit_id() -> String {
 
 /// Columns that later schema versions added, and how a row of an older CSV fills them:
 /// `asked_repr` (version 3) from `repr` (version 2 wrote the asked representation there),
-/// `peak_heap_bytes` (version 4) empty.
-const ADDED_COLUMNS: [(&str, Option<&str>); 2] = [("asked_repr", Some("repr")), ("peak_heap_bytes", None)];
+/// `peak_heap_bytes` (version 4), `primary_ms` and `shading_ms` (version 5) empty.
+const ADDED_COLUMNS: [(&str, Option<&str>); 4] =
+    [("asked_repr", Some("repr")), ("peak_heap_bytes", None), ("primary_ms", None), ("shading_ms", None)];
 
 /// Reads the rows of an existing CSV, checking its header against [`COLUMNS`]. A CSV of an
-/// older schema version (2 or 3: [`COLUMNS`] without some of [`ADDED_COLUMNS`]) is read too,
+/// older schema version (2, 3 or 4: [`COLUMNS`] without some of [`ADDED_COLUMNS`]) is read too,
 /// the missing columns filled as that list says.
 ///
 /// # Errors
@@ -1082,7 +1144,7 @@ fn measure(
     reset_peak_rss();
     heap::reset();
     let built = build(scene, run.build, &opts.budget)?;
-    let (timing, frame) = time_frames(scene, &built.geometry, opts.frames);
+    let (timing, frame) = time_frames(scene, &built.geometry, run.primary, opts.frames);
     let peak = peak_rss_bytes();
     let peak_heap = heap::peak();
     let probe = metrics::probe(&scene.camera, &built.geometry, scene.settings.max_distance);
@@ -1173,6 +1235,8 @@ fn measure(
         frame_ms_samples: timing.samples,
         schema_version: SCHEMA_VERSION,
         note: note(scene, &built.plans),
+        primary_ms: timing.primary_ms,
+        shading_ms: timing.primary_ms.map(|p| timing.median - p),
     };
     if let Some(dir) = &opts.artifacts {
         save_artifacts(&dir.join(name), run, scene, &built, &frame.image, is_reference)?;

@@ -252,7 +252,12 @@ pub fn scaling_command(opts: &ScalingOptions, csv_path: &Path) -> Result<String>
                     let start = Instant::now();
                     let geometry = build_scene(&scene, *r);
                     let build_ms = start.elapsed().as_secs_f64() * 1e3;
-                    let (timing, _) = super::time_frames(&scene, &geometry, opts.frames);
+                    let (timing, _) = super::time_frames(
+                        &scene,
+                        &geometry,
+                        crate::render::PrimaryVisibility::Trace,
+                        opts.frames,
+                    );
                     let row = ScalingRow {
                         primitive: kind,
                         repr,

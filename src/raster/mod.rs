@@ -16,8 +16,8 @@
 //!    of eight pixels at once in the lanes of the [`crate::simd`] backend, the top-left
 //!    fill rule, a z-buffer of interpolated `1/w` (perspective-correct depth) and early
 //!    rejection of a triangle whose nearest point lies behind everything the tile holds.
-//! 4. **Visibility buffer**: per pixel the mesh, triangle, perspective-correct
-//!    barycentrics and depth of the winner.
+//! 4. **Visibility buffer**: per pixel the id of the winner; its mesh, triangle,
+//!    perspective-correct barycentrics and depth are computed from the id on demand.
 //!
 //! Shared edges: each edge function is evaluated in one canonical vertex order (the
 //! lexicographically smaller screen vertex first) with the same single-precision
@@ -73,24 +73,23 @@ pub struct Visible {
     pub depth: f32,
 }
 
-/// The visibility buffer: per pixel, the mesh, triangle, barycentrics and depth of the
-/// nearest triangle. Stored tile by tile ([`TILE`] x [`TILE`] pixels, row-major within
-/// the tile; tiles row-major), the order the tiles are rasterized in.
-#[derive(Clone, Debug)]
+/// The visibility buffer: per pixel, the id of the nearest triangle, as visibility-buffer
+/// renderers keep it (one 32-bit id per pixel), with the frame's set-up triangles that the
+/// ids name, from which [`Self::at`] computes the mesh, triangle, perspective-correct
+/// barycentrics and depth of a pixel on demand (the same single-precision operations as
+/// the tiles' depth test). Stored tile by tile ([`TILE`] x [`TILE`] pixels, row-major
+/// within the tile; tiles row-major), the order the tiles are rasterized in.
+#[derive(Debug, Default)]
 pub struct VisBuffer {
     /// Image width, pixels.
     pub width: u32,
     /// Image height, pixels.
     pub height: u32,
     tiles_x: u32,
-    /// Mesh index per pixel, [`NONE`] for background.
-    mesh: Vec<u32>,
-    /// Triangle index per pixel.
-    triangle: Vec<u32>,
-    /// Barycentric weights of vertices 1 and 2 per pixel.
-    bary: Vec<[f32; 2]>,
-    /// View depth per pixel (infinite for background).
-    depth: Vec<f32>,
+    /// Visibility id per pixel ([`setup::pack`]), [`NONE`] for background.
+    id: Vec<u32>,
+    /// The set-up triangles the ids name.
+    frame: setup::Frame,
 }
 
 impl VisBuffer {
@@ -101,26 +100,46 @@ impl VisBuffer {
         tile as usize * TILE_PIXELS + ((y % TILE) * TILE + x % TILE) as usize
     }
 
-    /// What pixel (`x`, `y`) sees, `None` for background.
+    /// The set-up triangle seen at pixel (`x`, `y`), and its chunk.
     #[inline]
-    pub fn at(&self, x: u32, y: u32) -> Option<Visible> {
-        let i = self.index(x, y);
-        (self.mesh[i] != NONE).then(|| {
-            let [b1, b2] = self.bary[i];
-            Visible {
-                mesh: self.mesh[i],
-                triangle: self.triangle[i],
-                bary: [1.0 - b1 - b2, b1, b2],
-                depth: self.depth[i],
-            }
+    fn setup_at(&self, x: u32, y: u32) -> Option<(&setup::Chunk, &setup::SetupTri)> {
+        let id = self.id[self.index(x, y)];
+        (id != NONE).then(|| {
+            let (c, i) = setup::unpack(id);
+            let chunk = &self.frame.chunks[c];
+            (chunk, &chunk.tris[i])
         })
+    }
+
+    /// The mesh and triangle pixel (`x`, `y`) sees, `None` for background.
+    #[inline]
+    pub fn triangle_at(&self, x: u32, y: u32) -> Option<(u32, u32)> {
+        self.setup_at(x, y).map(|(_, t)| (t.mesh, t.tri))
+    }
+
+    /// What pixel (`x`, `y`) sees, `None` for background: the barycentrics (in the
+    /// original triangle for a piece of a clipped one) and view depth computed from the
+    /// set-up triangle at the pixel's centre.
+    pub fn at(&self, x: u32, y: u32) -> Option<Visible> {
+        let (chunk, t) = self.setup_at(x, y)?;
+        let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
+        let f: [f32; 3] = std::array::from_fn(|k| t.edges[k].at(px, py));
+        let iw = (f[0] * t.iw[0] + f[1] * t.iw[1] + f[2] * t.iw[2]) / (f[0] + f[1] + f[2]);
+        let w: [f32; 3] = std::array::from_fn(|k| f[k] * t.iw[k]);
+        let sum = w[0] + w[1] + w[2];
+        let mut b = w.map(|w| w / sum);
+        if t.clip != u32::MAX {
+            let v = &chunk.clip[t.clip as usize];
+            b = std::array::from_fn(|j| b[0] * v[0][j] + b[1] * v[1][j] + b[2] * v[2][j]);
+        }
+        Some(Visible { mesh: t.mesh, triangle: t.tri, bary: b, depth: 1.0 / iw })
     }
 
     /// Pixels covered by some triangle.
     pub fn covered(&self) -> usize {
         (0..self.height)
             .flat_map(|y| (0..self.width).map(move |x| (x, y)))
-            .filter(|&(x, y)| self.at(x, y).is_some())
+            .filter(|&(x, y)| self.id[self.index(x, y)] != NONE)
             .count()
     }
 }
@@ -142,48 +161,47 @@ pub struct RasterStats {
 
 /// Rasterizes `meshes` seen by `cam` into a visibility buffer.
 pub fn rasterize(cam: &Camera, meshes: &[RasterMesh]) -> (VisBuffer, RasterStats) {
-    rasterize_on(cam, meshes, false)
+    let mut vis = VisBuffer::default();
+    let stats = rasterize_on(cam, meshes, &mut vis, false);
+    (vis, stats)
 }
 
-/// [`rasterize`], on the portable backend where `portable` (the tests compare both).
-fn rasterize_on(cam: &Camera, meshes: &[RasterMesh], portable: bool) -> (VisBuffer, RasterStats) {
+/// [`rasterize`] into `vis`, whose arrays are reused (reallocated only when the image size
+/// changes): every pixel of the image is written.
+pub fn rasterize_into(cam: &Camera, meshes: &[RasterMesh], vis: &mut VisBuffer) -> RasterStats {
+    rasterize_on(cam, meshes, vis, false)
+}
+
+/// [`rasterize_into`], on the portable backend where `portable` (the tests compare both).
+fn rasterize_on(cam: &Camera, meshes: &[RasterMesh], vis: &mut VisBuffer, portable: bool) -> RasterStats {
     let proj = Projection::new(cam);
     let frame = setup::setup(&proj, meshes);
     let tiles_x = proj.width.div_ceil(TILE);
     let tiles_y = proj.height.div_ceil(TILE);
     let n = (tiles_x * tiles_y) as usize * TILE_PIXELS;
-    let mut vis = VisBuffer {
-        width: proj.width,
-        height: proj.height,
-        tiles_x,
-        mesh: vec![NONE; n],
-        triangle: vec![0; n],
-        bary: vec![[0.0; 2]; n],
-        depth: vec![f32::INFINITY; n],
-    };
+    if (vis.width, vis.height, vis.id.len()) != (proj.width, proj.height, n) {
+        (vis.width, vis.height, vis.tiles_x) = (proj.width, proj.height, tiles_x);
+        vis.id = vec![NONE; n];
+    }
+    vis.frame = frame;
+    let frame = &vis.frame;
     let rejected: u64 = vis
-        .mesh
+        .id
         .par_chunks_mut(TILE_PIXELS)
-        .zip(vis.triangle.par_chunks_mut(TILE_PIXELS))
-        .zip(vis.bary.par_chunks_mut(TILE_PIXELS))
-        .zip(vis.depth.par_chunks_mut(TILE_PIXELS))
         .enumerate()
-        .map(|(t, (((mesh, triangle), bary), depth))| {
+        .map(|(t, out)| {
             let (tx, ty) = (t as u32 % tiles_x, t as u32 / tiles_x);
-            let out = tile::TileOut { mesh, triangle, bary, depth };
-            let k =
-                tile::TileKernel { frame: &frame, tile: t, x0: tx * TILE, y0: ty * TILE, proj: &proj, out };
+            let k = tile::TileKernel { frame, tile: t, x0: tx * TILE, y0: ty * TILE, proj: &proj, out };
             if portable { k.run(Portable) } else { dispatch(k) }
         })
         .sum();
-    let stats = RasterStats {
+    RasterStats {
         triangles: meshes.iter().map(|m| m.triangles.len() as u64).sum(),
         setup: frame.chunks.iter().map(|c| c.tris.len() as u64).sum(),
         clipped: frame.clipped,
         binned: frame.chunks.iter().map(|c| c.bins.len() as u64).sum(),
         early_rejected: rejected,
-    };
-    (vis, stats)
+    }
 }
 
 #[cfg(test)]
@@ -231,8 +249,10 @@ mod tests {
                 ..Camera::default()
             };
             let want = reference::nearest_triangles(&cam, &meshes);
-            for portable in [false, true] {
-                let (vis, stats) = rasterize_on(&cam, &meshes, portable);
+            // One buffer for every run: a reused buffer must hold no pixel of the last frame.
+            let mut vis = VisBuffer::default();
+            for portable in [false, true, false] {
+                let stats = rasterize_on(&cam, &meshes, &mut vis, portable);
                 assert!(stats.clipped > 0, "some triangles cross the near plane");
                 let mut covered = 0;
                 for y in 0..cam.height {

@@ -3,23 +3,11 @@
 //! lane by lane as the scalar [`super::setup::Edge::at`], so the backends agree bit for
 //! bit), the top-left fill rule, a z-buffer of interpolated `1 / w` (linear in screen
 //! space, so the depth test is perspective-correct) with early rejection of triangles
-//! behind everything the tile holds, and at the end the winners' barycentrics.
+//! behind everything the tile holds, and at the end the winners' visibility ids.
 
-use super::setup::{Frame, pack, unpack};
+use super::setup::{Frame, pack};
 use super::{NONE, Projection, TILE, TILE_PIXELS};
 use crate::simd::{Kernel, Lane, Lane8, Simd};
-
-/// The tile's part of the visibility buffer.
-pub struct TileOut<'a> {
-    /// Mesh per pixel.
-    pub mesh: &'a mut [u32],
-    /// Triangle per pixel.
-    pub triangle: &'a mut [u32],
-    /// Barycentric weights of vertices 1 and 2 per pixel.
-    pub bary: &'a mut [[f32; 2]],
-    /// View depth per pixel.
-    pub depth: &'a mut [f32],
-}
 
 /// Rasterizes one tile; returns how many binned triangles early depth rejection skipped.
 pub struct TileKernel<'a> {
@@ -33,8 +21,8 @@ pub struct TileKernel<'a> {
     pub y0: u32,
     /// The camera.
     pub proj: &'a Projection,
-    /// Where the tile's pixels go.
-    pub out: TileOut<'a>,
+    /// The tile's visibility ids, [`TILE_PIXELS`] of them.
+    pub out: &'a mut [u32],
 }
 
 /// Lanes per pixel group: eight pixels of a row.
@@ -56,6 +44,9 @@ impl Kernel for TileKernel<'_> {
                 z[((y - y0) * TILE + x - x0) as usize] = 0.0;
             }
         }
+        // Image pixels no triangle covers yet: while any is left, the farthest depth is 0
+        // and nothing is rejected, so it is only computed once the tile is full.
+        let mut empty = (x_end - x0) * (y_end - y0);
         let mut id = [NONE; TILE_PIXELS];
         let mut far = 0.0f32;
         let mut rejected = 0u64;
@@ -107,6 +98,7 @@ impl Kernel for TileKernel<'_> {
                         let old = s.load8(zs);
                         let mut won = old.lt_mask(cand);
                         if won != 0 {
+                            empty -= (old.cmp_eq(zero).movemask() & won).count_ones();
                             *zs = old.vmax(cand).store();
                             wrote = true;
                             while won != 0 {
@@ -116,36 +108,13 @@ impl Kernel for TileKernel<'_> {
                         }
                     }
                 }
-                if wrote {
+                if wrote && empty == 0 {
                     far = z.iter().fold(f32::INFINITY, |a, &b| a.min(b));
                 }
             }
         }
-        // The winners' perspective-correct barycentrics (in the original triangle for a
-        // piece of a clipped one) and view depths.
-        for y in y0..y_end {
-            for x in x0..x_end {
-                let p = ((y - y0) * TILE + x - x0) as usize;
-                if id[p] == NONE {
-                    continue;
-                }
-                let (c, i) = unpack(id[p]);
-                let chunk = &frame.chunks[c];
-                let t = &chunk.tris[i];
-                let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
-                let w: [f32; 3] = std::array::from_fn(|k| t.edges[k].at(px, py) * t.iw[k]);
-                let sum = w[0] + w[1] + w[2];
-                let mut b = w.map(|w| w / sum);
-                if t.clip != u32::MAX {
-                    let v = &chunk.clip[t.clip as usize];
-                    b = std::array::from_fn(|j| b[0] * v[0][j] + b[1] * v[1][j] + b[2] * v[2][j]);
-                }
-                out.mesh[p] = t.mesh;
-                out.triangle[p] = t.tri;
-                out.bary[p] = [b[1], b[2]];
-                out.depth[p] = 1.0 / z[p];
-            }
-        }
+        // Every pixel's id (the buffer is reused from frame to frame).
+        out.copy_from_slice(&id);
         rejected
     }
 }

@@ -17,7 +17,8 @@ use image::RgbImage;
 use rayon::prelude::*;
 
 use crate::error::Result;
-use crate::geometry::{Geometry, PACKET, Ray, RayStats};
+use crate::geometry::scene::SceneGeometry;
+use crate::geometry::{Geometry, Hit, PACKET, Ray, RayStats};
 use crate::render::tracer::{BATCH, Tracer};
 use crate::scene::Scene;
 use crate::scene::camera::RayGenerator;
@@ -40,10 +41,24 @@ pub struct Frame {
     pub time: Duration,
     /// Work counters summed over all threads.
     pub stats: RayStats,
-    /// Of `time`, the primary visibility, where it is a pass of its own (a hybrid frame,
-    /// [`hybrid::render_hybrid`]); `None` for a traced frame, whose primary rays are
-    /// shaded as they are traced.
+    /// Of `time`, the primary visibility: finding every pixel's primary hit record. In a
+    /// traced frame, the closest hits of the primary rays; in a hybrid frame
+    /// ([`hybrid::render_hybrid`]), rasterizing (`raster`) and the hit records made from
+    /// the visibility buffer. Where it shares a parallel pass with shading, its part of
+    /// the pass's wall-clock time is its share of the time the tiles spent ([`split_pass`]).
+    /// The rest of `time` is shading. `None` where a frame has no primary rays (a 2D image).
     pub primary: Option<Duration>,
+    /// Of `primary`, the rasterizer's pass (the visibility buffer) of a hybrid frame;
+    /// `None` for a traced frame.
+    pub raster: Option<Duration>,
+}
+
+/// The part of a parallel pass's wall-clock time `wall` spent on the first of two steps
+/// every tile runs one after the other, given the summed time of each step over the tiles
+/// (`parts`): `wall` split in proportion (the tiles' threads run the two steps alike).
+pub fn split_pass(wall: Duration, parts: [Duration; 2]) -> Duration {
+    let total = parts[0] + parts[1];
+    if total.is_zero() { Duration::ZERO } else { wall.mul_f64(parts[0].as_secs_f64() / total.as_secs_f64()) }
 }
 
 /// How a frame finds what each pixel sees first.
@@ -95,6 +110,19 @@ pub fn to_rgb8(c: Vec3) -> [u8; 3] {
     [q(c.x), q(c.y), q(c.z)]
 }
 
+/// A rendered tile: its index, pixels, work counters and the time its two steps took
+/// (primary visibility, shading).
+type TileResult = (u32, Vec<[u8; 3]>, RayStats, [Duration; 2]);
+
+/// Renders `scene` through `geometry`, primary visibility traced or rasterized
+/// ([`hybrid::render_hybrid`]).
+pub fn render_with(scene: &Scene, geometry: &SceneGeometry, primary: PrimaryVisibility) -> Frame {
+    match primary {
+        PrimaryVisibility::Trace => render(scene, geometry),
+        PrimaryVisibility::Raster => hybrid::render_hybrid(scene, geometry),
+    }
+}
+
 /// Renders `scene` through `geometry` at the camera's resolution.
 pub fn render(scene: &Scene, geometry: &dyn Geometry) -> Frame {
     let cam = &scene.camera;
@@ -104,7 +132,8 @@ pub fn render(scene: &Scene, geometry: &dyn Geometry) -> Frame {
     let tiles_x = w.div_ceil(TILE);
     let tiles_y = h.div_ceil(TILE);
     let start = Instant::now();
-    let tiles: Vec<(u32, Vec<[u8; 3]>, RayStats)> = (0..tiles_x * tiles_y)
+    let max_distance = scene.settings.max_distance;
+    let tiles: Vec<TileResult> = (0..tiles_x * tiles_y)
         .into_par_iter()
         .map(|tile| {
             let (tx, ty) = (tile % tiles_x, tile / tiles_x);
@@ -134,19 +163,31 @@ pub fn render(scene: &Scene, geometry: &dyn Geometry) -> Frame {
                     n += k;
                 }
             }
+            // What `Tracer::trace_batch` does, in its two steps, each timed: the primary
+            // rays' closest hits, then their shading.
+            let t0 = Instant::now();
+            let mut t_max = [max_distance; BATCH];
+            let mut hits: [Option<Hit>; BATCH] = [None; BATCH];
+            stats.rays += n as u64;
+            geometry.closest_hits(&batch[..n], 0.0, &mut t_max[..n], &mut hits[..n], &mut stats);
+            let t1 = Instant::now();
             let mut colors = [Vec3::ZERO; BATCH];
-            tracer.trace_batch(&batch[..n], &mut colors[..n], &mut stats);
+            tracer.shade_hits(&batch[..n], &hits[..n], &mut colors[..n], &mut stats);
+            let t2 = Instant::now();
             for (&p, &c) in pixel[..n].iter().zip(&colors[..n]) {
                 px[p as usize] = to_rgb8(c);
             }
-            (tile, px, stats)
+            (tile, px, stats, [t1 - t0, t2 - t1])
         })
         .collect();
     let time = start.elapsed();
     let mut image = RgbImage::new(w, h);
     let mut stats = RayStats::default();
-    for (tile, px, s) in tiles {
+    let mut parts = [Duration::ZERO; 2];
+    for (tile, px, s, d) in tiles {
         stats.add(&s);
+        parts[0] += d[0];
+        parts[1] += d[1];
         let (tx, ty) = (tile % tiles_x, tile / tiles_x);
         let mut i = 0;
         for y in ty * TILE..((ty + 1) * TILE).min(h) {
@@ -156,7 +197,7 @@ pub fn render(scene: &Scene, geometry: &dyn Geometry) -> Frame {
             }
         }
     }
-    Frame { image, time, stats, primary: None }
+    Frame { image, time, stats, primary: Some(split_pass(time, parts)), raster: None }
 }
 
 /// Writes `image` as PNG to `path` through [`crate::files::write_atomic`]: a temporary

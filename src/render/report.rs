@@ -7,8 +7,7 @@ use std::fmt::Write as _;
 
 use crate::geometry::Geometry;
 use crate::plan::{Representation, build_scene};
-use crate::render::hybrid::render_hybrid;
-use crate::render::{Frame, PrimaryVisibility, render};
+use crate::render::{Frame, PrimaryVisibility, render_with};
 use crate::scene::Scene;
 
 /// A rendered scene with a printable summary.
@@ -29,10 +28,7 @@ pub fn render_scene(scene: &Scene, repr: Representation) -> RenderReport {
 /// [`render_scene`] with primary visibility traced or rasterized.
 pub fn render_scene_with(scene: &Scene, repr: Representation, primary: PrimaryVisibility) -> RenderReport {
     let geometry = build_scene(scene, repr);
-    let frame = match primary {
-        PrimaryVisibility::Trace => render(scene, &geometry),
-        PrimaryVisibility::Raster => render_hybrid(scene, &geometry),
-    };
+    let frame = render_with(scene, &geometry, primary);
     let mut text = String::new();
     for o in geometry.objects() {
         let _ = writeln!(text, "  {}", o.describe());
@@ -58,10 +54,20 @@ pub fn render_scene_with(scene: &Scene, repr: Representation, primary: PrimaryVi
         s.step_limit_hits,
         geometry.bytes_used(),
     );
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     if let Some(p) = frame.primary {
-        let total = frame.time.as_secs_f64() * 1e3;
-        let p = p.as_secs_f64() * 1e3;
-        let _ = writeln!(text, "primary visibility rasterized: {p:.1} ms, shading {:.1} ms", total - p);
+        let shading = ms(frame.time) - ms(p);
+        let _ = match frame.raster {
+            Some(r) => writeln!(
+                text,
+                "primary visibility rasterized: {:.1} ms (visibility buffer {:.1} ms, hit records {:.1} ms), \
+                 shading {shading:.1} ms",
+                ms(p),
+                ms(r),
+                ms(p) - ms(r)
+            ),
+            None => writeln!(text, "primary visibility traced: {:.1} ms, shading {shading:.1} ms", ms(p)),
+        };
     }
     RenderReport { geometry_bytes: geometry.bytes_used(), frame, text }
 }

@@ -3,7 +3,8 @@
 //! spheres, an interrupted run keeps its rows and `--resume` completes it without duplicates
 //! (keyed by replicate and march tolerance too), `--order-seed` shuffles the runs after the
 //! reference deterministically, two inputs of one name are refused, and the scaling
-//! experiment writes its rows.
+//! experiment writes its rows; every row splits its frame into primary visibility and
+//! shading, and the meshes' raster twins have their traced runs' errors.
 
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -98,12 +99,42 @@ fn csv_header_is_the_documented_schema() {
     ] {
         assert!(kinds.iter().any(|x| x == k), "{k} missing from {kinds:?}");
     }
-    // The reference, 3 x 2 SDF sweep runs and 5 runs per resolution (4, and the scene grid
-    // of its two objects).
-    assert_eq!(rows.len(), 1 + 6 + 5 * 2);
+    // The reference, 3 x 2 SDF sweep runs and 7 runs per resolution (4, the scene grid of
+    // its two objects and the two meshes' raster twins).
+    assert_eq!(rows.len(), 1 + 6 + 7 * 2);
     assert!(rows.iter().all(|r| r.reference == "analytic/closed-form"));
     let class = dir.file_name().unwrap().to_string_lossy().into_owned();
-    assert!(rows.iter().all(|r| r.class == class && r.replicate == 0 && r.schema_version == 4));
+    assert!(rows.iter().all(|r| r.class == class && r.replicate == 0 && r.schema_version == 5));
+    // Every frame splits into primary visibility and shading.
+    for r in &rows {
+        let (p, s) = (r.primary_ms.unwrap(), r.shading_ms.unwrap());
+        assert!(p > 0.0 && s >= 0.0 && p + s <= r.frame_ms_median * (1.0 + 1e-9), "{r:?}");
+    }
+    // The raster twins: the same mesh as the traced run of their resolution, so the same
+    // triangles and about the same errors.
+    for method in ["parametric", "extracted"] {
+        let twin = format!("{method}-raster");
+        let rasters: Vec<&Row> = rows.iter().filter(|r| r.repr == "mesh" && r.method == twin).collect();
+        assert_eq!(rasters.len(), 2, "{twin}");
+        for r in rasters {
+            let t = rows.iter().find(|t| t.method == method && t.resolution == r.resolution).unwrap();
+            assert_eq!(r.triangles, t.triangles, "{twin}");
+            assert!(
+                (r.image_rmse - t.image_rmse).abs() < 0.01,
+                "{twin}: {} vs {}",
+                r.image_rmse,
+                t.image_rmse
+            );
+            assert!(
+                (r.silhouette_mismatch_pct - t.silhouette_mismatch_pct).abs() < 0.5,
+                "{twin}: {} vs {}",
+                r.silhouette_mismatch_pct,
+                t.silhouette_mismatch_pct
+            );
+            let (a, b) = (r.px_err_p95.unwrap(), t.px_err_p95.unwrap());
+            assert!((a - b).abs() < 0.1, "{twin}: p95 {a} vs {b}");
+        }
+    }
     let reference = &rows[0];
     assert_eq!((reference.image_rmse, reference.chamfer_rel), (0.0, Some(0.0)));
     assert_eq!((reference.flip_mean, reference.silhouette_mismatch_pct), (0.0, 0.0));
@@ -166,6 +197,8 @@ fn without_timings(mut r: Row) -> Row {
     r.peak_heap_bytes = None;
     r.timestamp.clear();
     r.frame_ms_samples.clear();
+    r.primary_ms = None;
+    r.shading_ms = None;
     r
 }
 
@@ -237,11 +270,11 @@ fn interrupted_run_keeps_its_rows_and_resume_completes_it() {
         std::fs::read_to_string(&csv).unwrap().lines().count().saturating_sub(2)
     });
     assert!(kept >= 3, "{kept} rows kept");
-    assert!(!finished_early && kept < 7 + 5 * 4, "the run was not interrupted ({kept} rows)");
+    assert!(!finished_early && kept < 7 + 7 * 4, "the run was not interrupted ({kept} rows)");
     let out = run_compare(&scene, &csv, &["--res", "8,12,16,24", "--resume"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let rows = read_rows(&csv).unwrap();
-    assert_eq!(rows.len(), 7 + 5 * 4, "finished early: {finished_early}");
+    assert_eq!(rows.len(), 7 + 7 * 4, "finished early: {finished_early}");
     let mut keys: Vec<_> = rows.iter().map(Row::key).collect();
     keys.sort();
     keys.dedup();
@@ -263,20 +296,20 @@ fn resume_key_includes_replicate_and_march_knob() {
     let first = sweep("1");
     let out = run_compare(&scene, &csv, &args(&first));
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    assert_eq!(read_rows(&csv).unwrap().len(), 1 + 1 + 5);
+    assert_eq!(read_rows(&csv).unwrap().len(), 1 + 1 + 7);
     let mut more = sweep("1,2").to_vec();
     more.push("--resume".into());
     let out = run_compare(&scene, &csv, &args(&more));
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let rows = read_rows(&csv).unwrap();
-    assert_eq!(rows.len(), 1 + 1 + 5 + 1);
+    assert_eq!(rows.len(), 1 + 1 + 7 + 1);
     assert_eq!(rows.last().unwrap().tolerance_px, Some(2.0));
     more.extend(["--replicate".into(), "1".into()]);
     let out = run_compare(&scene, &csv, &args(&more));
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let rows = read_rows(&csv).unwrap();
-    assert_eq!(rows.len(), 2 * 8);
-    assert_eq!(rows.iter().filter(|r| r.replicate == 1).count(), 8);
+    assert_eq!(rows.len(), 2 * 10);
+    assert_eq!(rows.iter().filter(|r| r.replicate == 1).count(), 10);
     let mut keys: Vec<_> = rows.iter().map(Row::key).collect();
     keys.sort();
     keys.dedup();

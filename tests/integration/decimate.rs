@@ -1,7 +1,8 @@
 //! Decimation with meshoptimizer (`sdfmesh::mesh::simplify`): a decimated sphere stays
 //! within a bound derived from the simplifier's reported error; `convert --decimate` writes
 //! the decimated mesh and refuses bad values in one line; `compare` on a mesh input adds
-//! one `mesh/decimated-T` run per target, traced as triangles and smaller than the original.
+//! one `mesh/decimated-T` run per target, traced as triangles and smaller than the original,
+//! and raster twins (`raster`, `decimated-T-raster`) with the traced runs' errors.
 
 use std::path::Path;
 
@@ -151,7 +152,8 @@ fn compare_runs_each_decimation_as_a_smaller_mesh() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let rows = read_rows(&csv).unwrap();
     let original = rows.iter().find(|r| r.method == "original").expect("the reference");
-    let decimated: Vec<_> = rows.iter().filter(|r| r.method.starts_with("decimated")).collect();
+    let decimated: Vec<_> =
+        rows.iter().filter(|r| r.method.starts_with("decimated") && !r.method.ends_with("-raster")).collect();
     let methods: Vec<&str> = decimated.iter().map(|r| r.method.as_str()).collect();
     assert_eq!(methods, ["decimated-50%", "decimated-25%", "decimated-300tris"], "duplicates dropped");
     for r in &decimated {
@@ -167,6 +169,27 @@ fn compare_runs_each_decimation_as_a_smaller_mesh() {
         assert!(r.resolution.is_none() && r.tolerance_px.is_none());
         assert!(r.build_ms > 0.0 && r.chamfer_rel.is_some_and(|c| c > 0.0));
         assert_eq!(r.reference, "mesh/original");
+    }
+    // The raster twins (primary visibility rasterized): the original's (`raster`) and each
+    // decimation's, the same triangles and about the same errors as their traced runs, the
+    // frame split into primary visibility and shading.
+    for (traced, twin) in std::iter::once((original, "raster".to_string()))
+        .chain(decimated.iter().map(|r| (*r, format!("{}-raster", r.method))))
+    {
+        let r = rows.iter().find(|r| r.method == twin).unwrap_or_else(|| panic!("no {twin} row"));
+        assert_eq!((r.repr.as_str(), r.triangles), ("mesh", traced.triangles), "{twin}");
+        let (p, s) = (r.primary_ms.unwrap(), r.shading_ms.unwrap());
+        assert!(p > 0.0 && s >= 0.0 && p + s <= r.frame_ms_median * (1.0 + 1e-9), "{twin}: {p} + {s}");
+        assert!(
+            (r.image_rmse - traced.image_rmse).abs() < 0.01,
+            "{twin}: {} vs {}",
+            r.image_rmse,
+            traced.image_rmse
+        );
+        let (a, b) = (r.px_err_p95.unwrap(), traced.px_err_p95.unwrap());
+        assert!((a - b).abs() < 0.1, "{twin}: p95 {a} vs {b}");
+        let (a, b) = (r.silhouette_mismatch_pct, traced.silhouette_mismatch_pct);
+        assert!((a - b).abs() < 0.5, "{twin}: silhouette {a} vs {b}");
     }
     let by = |m: &str| decimated.iter().find(|r| r.method == m).unwrap().triangles;
     assert!(by("decimated-25%") < by("decimated-50%"));

@@ -24,7 +24,7 @@ COMPARE_COLUMNS = (
     "frame_ms_min frame_ms_max frames mrays_per_s steps_per_ray nodes_per_ray image_rmse "
     "image_psnr_db image_ssim flip_mean silhouette_mismatch_pct px_err_mean px_err_p95 "
     "px_err_max quality_px chamfer_rel hausdorff_rel peak_rss_bytes peak_heap_bytes threads width "
-    "height depth commit timestamp frame_ms_samples schema_version note"
+    "height depth commit timestamp frame_ms_samples schema_version note primary_ms shading_ms"
 ).split()
 
 # Schema version 1, for the synthetic CSVs of older tests.
