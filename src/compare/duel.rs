@@ -23,7 +23,8 @@ use super::{Built, Run, build, commit_id, input_class, plan, stem};
 use crate::config::{CompareOptions, DuelOptions};
 use crate::error::{Error, Result, catch_panic};
 use crate::plan::ReprKind;
-use crate::render::render;
+use crate::render::PrimaryVisibility;
+use crate::render::render_with;
 use crate::scene::load_input;
 use crate::scene::shape::{MeshLayout, Shading};
 
@@ -131,17 +132,17 @@ pub fn duel_command(opts: &CompareOptions, duel: &DuelOptions) -> Result<String>
             chosen.push((run_label(run), run.clone()));
         }
     }
-    let mut built: Vec<(String, String, Built)> = Vec::with_capacity(chosen.len());
+    let mut built: Vec<(String, String, Built, PrimaryVisibility)> = Vec::with_capacity(chosen.len());
     for (label, run) in &chosen {
         let b = catch_panic(|| build(&scene, run.build, &opts.budget))
             .and_then(|r| r)
             .map_err(|e| Error::Usage(format!("{}: --duel run `{label}`: {e}", path.display())))?;
         let repr = crate::plan::traced_repr(&b.plans, run.repr).name();
-        built.push((label.clone(), repr, b));
+        built.push((label.clone(), repr, b, run.primary));
     }
     // One warm-up frame of each run, then the rounds.
-    for (_, _, b) in &built {
-        render(&scene, &b.geometry);
+    for (_, _, b, primary) in &built {
+        render_with(&scene, &b.geometry, *primary);
     }
     let commit = commit_id();
     let threads = rayon::current_num_threads();
@@ -152,8 +153,8 @@ pub fn duel_command(opts: &CompareOptions, duel: &DuelOptions) -> Result<String>
         for slot in 0..n {
             // Forward in even rounds, backward in odd ones.
             let i = if round % 2 == 0 { slot } else { n - 1 - slot };
-            let (label, repr, b) = &built[i];
-            let frame = render(&scene, &b.geometry);
+            let (label, repr, b, primary) = &built[i];
+            let frame = render_with(&scene, &b.geometry, *primary);
             rows.push(DuelRow {
                 input: name.clone(),
                 class: class.clone(),
@@ -183,7 +184,7 @@ pub fn duel_command(opts: &CompareOptions, duel: &DuelOptions) -> Result<String>
         "{name}: {} runs x {} rounds interleaved in {seconds:.1} s (process {})\n",
         n, duel.rounds, opts.replicate
     );
-    for (label, repr, _) in &built {
+    for (label, repr, _, _) in &built {
         let times: Vec<f64> = rows.iter().filter(|r| r.run == *label).map(|r| r.frame_ms).collect();
         text +=
             &format!("  {label:<32} traced as {repr:<8} median {:.3} ms\n", crate::metrics::median(&times));
