@@ -130,5 +130,5 @@ fn an_empty_extraction_is_recorded_as_sphere_traced_and_never_counts_as_a_mesh()
         toolkit(&["compare", scene.to_str().unwrap(), "--csv", old.to_str().unwrap(), "--resume", "--quiet"]);
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("v2.csv:1:1") && err.contains("schema version 4"), "{err}");
+    assert!(err.contains("v2.csv:1:1") && err.contains("schema version 5"), "{err}");
 }

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import data, stats
+from . import analysis, data, stats
 from .data import num
 
 LEVELS = data.QUALITY_LEVELS
@@ -226,13 +226,7 @@ def verdict_cell(c: dict) -> str:
     extra = "".join(f"; +{len(c[k])} only {w}" for k, w in (("only_sdf", "SDF"), ("only_mesh", "mesh"))
                     if c[k])
     if c["ratio"] is None:
-        if c["only_sdf"] and not c["only_mesh"]:
-            return f"only SDF meets it ({len(c['only_sdf'])} inputs)"
-        if c["only_mesh"] and not c["only_sdf"]:
-            return f"only mesh meets it ({len(c['only_mesh'])} inputs)"
-        if c["only_sdf"] or c["only_mesh"]:
-            return f"only SDF on {len(c['only_sdf'])}, only mesh on {len(c['only_mesh'])} inputs"
-        return "neither meets it"
+        return analysis.verdict_text(c, "time")  # who alone meets the level, or neither
     r = c["ratio"]
     fac = max(r, 1 / r)
     who = "SDF" if r < 1 else "mesh"
