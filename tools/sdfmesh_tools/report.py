@@ -460,7 +460,7 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
         return sorted({r.get(col, "") for r in src} - {"", None})
 
     n_classes = len(analysis.classes(all_rows))
-    L = ["# sdfmesh: ray marching SDFs vs ray tracing meshes\n"]
+    L = ["# sdfmesh: ray marching SDFs vs polygon meshes, ray traced and rasterized\n"]
     L.append(f"{len(data.inputs(all_rows))} inputs in {n_classes} class(es), {len(reps)} replicate(s) "
              f"(separate processes), {len(all_rows)} runs; commit "
              f"{', '.join(f'`{c}`' for c in uniq('commit')) or '–'}. Report written "
