@@ -372,7 +372,11 @@ def refcheck_section(ref_rows) -> str:
     head += (f": hit/miss differs on a median {np.median(mism):.3g}% of pixels (largest "
              f"{max(mism):.3g}%), and where both hit the distance differs by a median p95 of "
              f"{np.median(p95):.3g} px (largest p95 {max(p95):.3g} px)" if p95 else "") + ". "
-    head += (f"{len(skipped)} mesh or grid inputs are their own reference and are not checked. " if skipped else "")
+    implicit = [r for r in skipped if "implicit model" in (r.get("skipped") or "")]
+    own = len(skipped) - len(implicit)
+    head += (f"{own} mesh or grid inputs are their own reference and are not checked. " if own else "")
+    head += (f"{len(implicit)} implicit models are not checked here: their safe marcher is checked against a "
+             "dense f64 reference by the test suite. " if implicit else "")
     worst = sorted(checked, key=lambda r: -(num(r, "mismatch_pct") or 0.0))[:5]
     return head + "The inputs that differ most:\n\n" + md_table(
         ["input", "class", "reference", "hit/miss differs", "p95 px", "max px", "evaluations per ray"],
