@@ -19,14 +19,12 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use super::{Built, Run, build, commit_id, input_class, plan, stem};
+use super::{Built, Run, build, commit_id, load_single, plan, write_csv_whole};
 use crate::config::{CompareOptions, DuelOptions};
 use crate::error::{Error, Result, catch_panic};
 use crate::plan::ReprKind;
 use crate::render::PrimaryVisibility;
 use crate::render::render_with;
-use crate::scene::load_input;
-use crate::scene::shape::{MeshLayout, Shading};
 
 /// Version of the duel CSV's schema.
 pub const DUEL_SCHEMA_VERSION: u32 = 1;
@@ -103,20 +101,7 @@ fn names(label: &str, run: &Run) -> bool {
 /// The input does not load, a label names no planned run (the error lists the planned
 /// ones), a run cannot be built (its memory budget), the CSV cannot be written.
 pub fn duel_command(opts: &CompareOptions, duel: &DuelOptions) -> Result<String> {
-    let [path] = opts.inputs.as_slice() else {
-        return Err(Error::Usage(format!("--duel takes one input, got {}", opts.inputs.len())));
-    };
-    if !opts.overwrite && std::fs::symlink_metadata(&opts.csv).is_ok() {
-        return Err(Error::Usage(format!(
-            "{}: the duel CSV exists; --overwrite replaces it",
-            opts.csv.display()
-        )));
-    }
-    let name = stem(path);
-    let class = input_class(path);
-    let mut scene = load_input(path, Shading::Smooth)?;
-    opts.overrides.apply(&mut scene);
-    scene.settings.mesh_layout = MeshLayout::Full;
+    let (path, name, class, scene) = load_single(opts, "--duel")?;
     let planned = plan(&scene, opts);
     let mut chosen: Vec<(String, Run)> = Vec::new();
     for label in &duel.runs {
@@ -173,13 +158,7 @@ pub fn duel_command(opts: &CompareOptions, duel: &DuelOptions) -> Result<String>
         }
     }
     let seconds = start.elapsed().as_secs_f64();
-    crate::files::write_atomic(&opts.csv, |w| {
-        let mut csv = csv::Writer::from_writer(w);
-        for row in &rows {
-            csv.serialize(row).map_err(std::io::Error::other)?;
-        }
-        csv.flush()
-    })?;
+    write_csv_whole(&opts.csv, &rows)?;
     let mut text = format!(
         "{name}: {} runs x {} rounds interleaved in {seconds:.1} s (process {})\n",
         n, duel.rounds, opts.replicate

@@ -963,6 +963,39 @@ fn note(scene: &Scene, plans: &[ObjectPlan]) -> String {
     }
 }
 
+/// An input as `compare` measures it: loaded, the command's overrides applied, meshes in the
+/// full layout (`--layout compact` adds compact runs, [`plan`]; the others keep the full one).
+fn load_for_compare(path: &Path, opts: &CompareOptions) -> Result<Scene> {
+    let mut scene = load_input(path, Shading::Smooth)?;
+    opts.overrides.apply(&mut scene);
+    scene.settings.mesh_layout = MeshLayout::Full;
+    Ok(scene)
+}
+
+/// The one input of a single-input mode of `compare` (`flag`: `--duel`, `--check-reference`),
+/// loaded by [`load_for_compare`]: its path, name and class, and the scene. Refuses more than
+/// one input, and an existing `--csv` without `--overwrite` (these modes write their CSV whole).
+fn load_single<'a>(opts: &'a CompareOptions, flag: &str) -> Result<(&'a Path, String, String, Scene)> {
+    let [path] = opts.inputs.as_slice() else {
+        return Err(Error::Usage(format!("{flag} takes one input, got {}", opts.inputs.len())));
+    };
+    if !opts.overwrite && std::fs::symlink_metadata(&opts.csv).is_ok() {
+        return Err(Error::Usage(format!("{}: the CSV exists; --overwrite replaces it", opts.csv.display())));
+    }
+    Ok((path, stem(path), input_class(path), load_for_compare(path, opts)?))
+}
+
+/// Writes `rows` as a CSV with a header to `path`, atomically (all of them or nothing).
+fn write_csv_whole<T: Serialize>(path: &Path, rows: &[T]) -> Result<()> {
+    crate::files::write_atomic(path, |w| {
+        let mut csv = csv::Writer::from_writer(w);
+        for row in rows {
+            csv.serialize(row).map_err(std::io::Error::other)?;
+        }
+        csv.flush()
+    })
+}
+
 /// `toolkit compare`: runs every input in every representation and resolution, appending
 /// rows to the CSV; returns the summary text.
 ///
@@ -988,14 +1021,7 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
                 path.display()
             )));
         }
-        let loaded = catch_panic(|| {
-            let mut scene = load_input(path, Shading::Smooth)?;
-            opts.overrides.apply(&mut scene);
-            // `--layout compact` adds compact runs ([`plan`]); the others keep the full layout.
-            scene.settings.mesh_layout = MeshLayout::Full;
-            Ok(scene)
-        })
-        .and_then(|r| r);
+        let loaded = catch_panic(|| load_for_compare(path, opts)).and_then(|r| r);
         match loaded {
             Ok(scene) => inputs.push((name, input_class(path), scene)),
             // With one input its error is the command's one line; with several, each

@@ -18,14 +18,12 @@ use glam::DVec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::{build, catch_panic, input_class, plan, stem};
+use super::{build, catch_panic, load_single, plan, write_csv_whole};
 use crate::config::CompareOptions;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::geometry::sdf::SdfTree;
 use crate::metrics;
 use crate::scene::camera::RayGenerator;
-use crate::scene::load_input;
-use crate::scene::shape::{MeshLayout, Shading};
 
 /// The smallest step near a surface, pixels at the distance travelled.
 pub const MIN_STEP_PX: f64 = 1e-3;
@@ -116,17 +114,7 @@ fn first_root(
 /// # Errors
 /// The input does not load, the reference cannot be built, the CSV cannot be written.
 pub fn check_reference_command(opts: &CompareOptions) -> Result<String> {
-    let [path] = opts.inputs.as_slice() else {
-        return Err(Error::Usage(format!("--check-reference takes one input, got {}", opts.inputs.len())));
-    };
-    if !opts.overwrite && std::fs::symlink_metadata(&opts.csv).is_ok() {
-        return Err(Error::Usage(format!("{}: the CSV exists; --overwrite replaces it", opts.csv.display())));
-    }
-    let name = stem(path);
-    let class = input_class(path);
-    let mut scene = load_input(path, Shading::Smooth)?;
-    opts.overrides.apply(&mut scene);
-    scene.settings.mesh_layout = MeshLayout::Full;
+    let (_, name, class, scene) = load_single(opts, "--check-reference")?;
     let runs = plan(&scene, opts);
     let reference = &runs[0];
     let label = format!("{}/{}", reference.repr, reference.method());
@@ -205,11 +193,7 @@ pub fn check_reference_command(opts: &CompareOptions) -> Result<String> {
             row.max_px = errors.last().copied();
         }
     }
-    crate::files::write_atomic(&opts.csv, |w| {
-        let mut csv = csv::Writer::from_writer(w);
-        csv.serialize(&row).map_err(std::io::Error::other)?;
-        csv.flush()
-    })?;
+    write_csv_whole(&opts.csv, std::slice::from_ref(&row))?;
     Ok(if row.skipped.is_empty() {
         format!(
             "{name}: reference {label} against f64 root finding on the object trees: {:.3}% of pixels differ in hit/miss, p95 {} px, max {} px ({} undecided rays, {:.0} evaluations per ray, {:.0} ms)\n",

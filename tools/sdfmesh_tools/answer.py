@@ -117,10 +117,7 @@ def bytes_verdicts(rows) -> list[dict]:
     for cls in analysis.classes(rows):
         sub = [r for r in rows if data.class_of(r) == cls]
         for level in analysis.LEVELS:
-            c = analysis.compare_sides(sub, level, "total_bytes")
-            c["too_few"] = 0 < c["n_inputs"] < duel.MIN_INPUTS
-            if c["too_few"]:
-                c["lo"] = c["hi"] = c["within_noise"] = None
+            c = duel.mark_too_few(analysis.compare_sides(sub, level, "total_bytes"))
             out.append({"class": cls, "level": level, "bytes": c})
     return out
 
@@ -178,10 +175,9 @@ def candidates_text(sel) -> str:
     return "Configurations each side chose from per input: " + ", ".join(parts) + "."
 
 
-def caveats(rows, sel, ratios) -> list[str]:
+def caveats(rows) -> list[str]:
     sizes = sorted({(r.get("width"), r.get("height")) for r in rows if r.get("width")})
     threads = sorted({r.get("threads") for r in rows if r.get("threads")})
-    few = sorted({v for v in data.inputs(rows)})
     per_class: dict[str, set] = {}
     for r in rows:
         per_class.setdefault(data.class_of(r), set()).add(r.get("input"))
@@ -197,7 +193,7 @@ def caveats(rows, sel, ratios) -> list[str]:
         f"Frame time excludes build time (build times here span {min(builds):.3g}–{max(builds):.3g} ms)."
         if builds else "Frame time excludes build time.",
         "Classes with fewer than 5 inputs get no interval: " + (", ".join(small) if small else "none") + ".",
-        f"{len(few)} inputs; intervals are 95% t-intervals over inputs, descriptive (not corrected for "
+        f"{len(data.inputs(rows))} inputs; intervals are 95% t-intervals over inputs, descriptive (not corrected for "
         "the number of classes and levels).",
     ]
 
@@ -218,7 +214,7 @@ def bytes_points(rows, level: float = HEADLINE_LEVEL) -> dict:
 FRAME_COUNTS = (1, 100, 10_000)
 
 
-def amortised(rows, sel, ratios, level: float = HEADLINE_LEVEL) -> list[dict]:
+def amortised(rows, ratios, level: float = HEADLINE_LEVEL) -> list[dict]:
     """Per class at `level`: build + N frames of each side's chosen configuration (build time
     the median over the sweep's replicates, frame time the duel median), how many inputs each
     side wins at each of FRAME_COUNTS, and the median break-even frame count where the side
@@ -251,10 +247,10 @@ def amortised(rows, sel, ratios, level: float = HEADLINE_LEVEL) -> list[dict]:
     return list(per_class.values())
 
 
-def amortised_table(rows, sel, ratios, level: float = HEADLINE_LEVEL) -> str:
+def amortised_table(rows, ratios, level: float = HEADLINE_LEVEL) -> str:
     from .report import md_table
 
-    t = amortised(rows, sel, ratios, level)
+    t = amortised(rows, ratios, level)
     if not t:
         return "No duelled input has build times for both sides.\n"
     out = []

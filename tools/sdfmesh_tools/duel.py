@@ -184,6 +184,15 @@ def duel_ratios(sel: list[dict], duel_rows: list[dict], opponent: str = "mesh") 
     return out
 
 
+def mark_too_few(c: dict) -> dict:
+    """A stats.ratio_ci dict with `too_few` set (fewer than MIN_INPUTS inputs) and, then, no
+    interval: "too few inputs" is said, not dressed as an interval."""
+    c["too_few"] = 0 < c["n_inputs"] < MIN_INPUTS
+    if c["too_few"]:
+        c["lo"] = c["hi"] = c["within_noise"] = None
+    return c
+
+
 def duel_verdicts(sel: list[dict], ratios: list[dict], classes: list[str], opponent: str = "mesh") -> list[dict]:
     """One dict per (class, level): stats.ratio_ci over the class's duelled inputs (None
     interval below MIN_INPUTS: `too_few`), and the inputs only one side meets the level on."""
@@ -192,10 +201,7 @@ def duel_verdicts(sel: list[dict], ratios: list[dict], classes: list[str], oppon
         for level in LEVELS:
             logs = OrderedDict((r["input"], r["logs"]) for r in ratios
                                if r["class"] == cls and r["level"] == level)
-            c = stats.ratio_ci(logs)
-            c["too_few"] = 0 < c["n_inputs"] < MIN_INPUTS
-            if c["too_few"]:
-                c["lo"] = c["hi"] = c["within_noise"] = None
+            c = mark_too_few(stats.ratio_ci(logs))
             sides: dict[str, set] = {}
             for s in sel:
                 if s["class"] == cls and s["level"] == level and s["side"] in ("sdf", opponent):

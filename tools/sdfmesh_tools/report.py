@@ -498,7 +498,7 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
     for p in forest:
         L.append(f"\n{_img(p, out)}\n")
     L.append("\n> **Caveats.**\n")
-    for c in answer.caveats(all_rows, sel or [], ratios):
+    for c in answer.caveats(all_rows):
         L.append(f"> - {c}\n")
     if ratios:
         L.append(f"\n## Build time: one-shot, edited and static scenes\n\n")
@@ -506,7 +506,7 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
                  "time: the median over the sweep's replicates; frame time: the duel median). A one-shot "
                  "render is N = 1, an edited scene rebuilds every few frames, a static one renders "
                  "thousands of frames per build.\n\n")
-        L.append(answer.amortised_table(all_rows, sel, ratios))
+        L.append(answer.amortised_table(all_rows, ratios))
     size_rows = data.read_csv(sizes) if sizes else []
     if size_rows:
         L.append("\n## Image size\n\nPixel-relative error makes a mesh's needed resolution grow with the image. "

@@ -198,7 +198,7 @@ def test_build_time_decides_the_one_shot_render():
         r["build_ms"] = 100 if r["repr"] == "mesh" else 1
     sel = duel.select(rows)
     ratios = duel.duel_ratios(sel, duels_for(sel, 2.0, noise=0.0))
-    t = answer.amortised(rows, sel, ratios)
+    t = answer.amortised(rows, ratios)
     [c] = t
     assert c["inputs"] == 6
     assert c["wins"][1] == 6 and c["wins"][100] == 0 and c["wins"][10_000] == 0
