@@ -163,7 +163,8 @@ def machines(shards: list[dict]) -> list[dict]:
 # Columns that measure time or the process (they differ between any two runs); every other
 # column of a compare or scaling CSV is a deterministic function of the input and settings.
 TIMING_COLUMNS = frozenset({"build_ms", "frame_ms_median", "frame_ms_min", "frame_ms_max", "fps_median",
-                            "mrays_per_s", "frame_ms_samples", "timestamp", "peak_rss_bytes"})
+                            "mrays_per_s", "frame_ms_samples", "timestamp", "peak_rss_bytes",
+                            "primary_ms", "shading_ms"})
 # The columns that identify a row of the compare and the scaling CSVs.
 KEY_COLUMNS = ("input", "replicate", "repr", "asked_repr", "method", "resolution", "tolerance_px",
                "relaxation", "primitive", "count")

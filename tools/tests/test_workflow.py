@@ -76,6 +76,24 @@ def test_differences_ignore_timing_columns_only(tmp_path):
     assert any("only in" in x for x in shards.differences(a, b))
 
 
+def test_two_compare_runs_agree_outside_timing_columns(toolkit, tmp_path):
+    """Two processes comparing the same input agree in every column outside TIMING_COLUMNS (what
+    tools/slurm-test checks between a Slurm and a local study), so a new timing column of the
+    compare CSV must be named there."""
+    scene = REPO / "data" / "scenes" / "csg" / "csg_bitten.toml"
+    outs = []
+    for n in range(2):
+        out = tmp_path / f"c{n}.csv"
+        r = subprocess.run([str(toolkit), "compare", str(scene), "--width", "24", "--height", "24",
+                            "--res", "8", "--csv", str(out)], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        outs.append(out)
+    with open(outs[0], newline="") as f:
+        header = next(csv.reader(f))
+    assert {"primary_ms", "shading_ms", "frame_ms_median"} <= set(header)
+    assert shards.differences(*outs, limit=20) == []
+
+
 def _shard_rows_for(rows, host_by_input_rep):
     return [{"input": i, "replicate": r, "host": h, "cpu": f"{h} cpu", "cores": "2", "threads": "2",
              "rows": "1", "slurm_job": ""} for (i, r), h in host_by_input_rep.items()]
