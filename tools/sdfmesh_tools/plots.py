@@ -54,11 +54,14 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
-def _log_axis(axis) -> None:
-    """Log scale labelled 1, 2, 5 per decade with plain numbers (no 2x10^0 pile-ups)."""
+def _log_axis(axis, decades: float | None = None) -> None:
+    """Log scale labelled with plain numbers (no 2x10^0 pile-ups): 1, 2, 5 per decade, or,
+    over `decades` decades, 1 and 3 per decade above 2.5 and only the powers of ten above 4
+    (at most about 8 labels, so they do not overlap on a panel a few inches wide)."""
     from matplotlib import ticker
 
-    axis.set_major_locator(ticker.LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    subs = (1.0, 2.0, 5.0) if decades is None or decades <= 2.5 else (1.0, 3.0) if decades <= 4 else (1.0,)
+    axis.set_major_locator(ticker.LogLocator(base=10, subs=subs, numticks=9))
     axis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))
     axis.set_minor_formatter(ticker.NullFormatter())
 
@@ -597,7 +600,8 @@ def forest_plot(time_v, ratios, bytes_v, bytes_points, out: Path, level: float =
                     ax.plot([c["lo"], c["hi"]], [y, y], "-", color="k", lw=2, zorder=3)
         ax.axvline(1.0, color="k", ls="--", lw=1)
         ax.set_xscale("log")
-        _log_axis(ax.xaxis)
+        lo, hi = ax.get_xlim()
+        _log_axis(ax.xaxis, math.log10(hi / lo) if lo > 0 and hi > lo else None)
         ax.set_yticks(range(len(vs)))
         ax.set_yticklabels([f"{v['class']} ({v[key]['n_inputs']})" for v in vs])
         ax.invert_yaxis()

@@ -1,6 +1,7 @@
 """The report and its plots on a tiny synthetic compare CSV, scaling CSV and artifacts folder."""
 
 import csv
+import math
 import os
 import subprocess
 import sys
@@ -237,3 +238,42 @@ def test_labels_and_sides():
     assert data.meets({"quality_px": "1"}, 1.0) and not data.meets({"quality_px": "2"}, 1.0)
     assert not data.meets({"quality_px": ""}, 2.0)
     assert data.class_of({}) == "unclassified" and data.replicate_of({"replicate": ""}) == "0"
+
+
+def test_forest_plot_tick_labels_do_not_overlap(tmp_path, monkeypatch):
+    """A bytes axis spanning six decades (SDF 1000x smaller in one class, 50x larger in
+    another) and a time axis spanning two: every visible tick label of both panels is clear
+    of its neighbours."""
+    from sdfmesh_tools import plots
+
+    classes = [f"class{i}" for i in range(8)]
+    spread = np.geomspace(1e-3, 50.0, len(classes))
+    time_v, bytes_v, ratios, points = [], [], [], {}
+    for c, b in zip(classes, spread):
+        t = float(np.clip(b, 0.3, 3.0))
+        time_v.append({"class": c, "level": 1.0, "time": {"ratio": t, "lo": t / 1.3, "hi": t * 1.3, "n_inputs": 8}})
+        bytes_v.append({"class": c, "level": 1.0, "bytes": {"ratio": b, "lo": b / 3, "hi": b * 3, "n_inputs": 8}})
+        for k in range(8):
+            ratios.append({"class": c, "input": f"{c}_{k}", "level": 1.0, "logs": [math.log(t) + 0.05 * k]})
+            points[(c, f"{c}_{k}")] = b * (1.5 ** (k - 4))
+    seen = []
+
+    def check(fig, path):
+        fig.tight_layout()
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        for ax in fig.axes:
+            lo, hi = ax.get_xlim()
+            labels = [t for t in ax.xaxis.get_ticklabels()
+                      if t.get_visible() and t.get_text() and lo <= t.get_position()[0] <= hi]
+            seen.append((ax.get_title(), [t.get_text() for t in labels]))
+            assert len(labels) >= 3, seen[-1]
+            boxes = sorted((t.get_window_extent(renderer) for t in labels), key=lambda b: b.x0)
+            for a, b in zip(boxes, boxes[1:]):
+                assert a.x1 <= b.x0, seen[-1]
+        return real_save(fig, path)
+
+    real_save = plots._save
+    monkeypatch.setattr(plots, "_save", check)
+    assert plots.forest_plot(time_v, ratios, bytes_v, points, tmp_path)
+    assert len(seen) == 2 and "bytes" in seen[1][0], seen
