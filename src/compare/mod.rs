@@ -1086,10 +1086,7 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
             let searched =
                 catch_panic(|| search_input(&mut sink, (name, class), scene, opts, max_res, &commit));
             match searched {
-                Ok(Ok(Some(line))) => {
-                    eprintln!("{line}");
-                    lines.push(line);
-                }
+                Ok(Ok(Some(line))) => lines.push(line),
                 Ok(Ok(None)) | Err(_) => failed.push(input_path(name)),
                 Ok(Err(e)) => return Err(e),
             }
