@@ -1082,9 +1082,8 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
         // no progress bar (the total is not known ahead).
         let mut lines = Vec::new();
         for (name, class, scene) in &inputs {
-            let mut sink = Sink { file: &mut file, rows: &mut rows, done: &done };
-            let searched =
-                catch_panic(|| search_input(&mut sink, (name, class), scene, opts, max_res, &commit));
+            let mut sink = Sink { file: &mut file, rows: &mut rows, done: &done, opts, commit: &commit };
+            let searched = catch_panic(|| search_input(&mut sink, (name, class), scene, max_res));
             match searched {
                 Ok(Ok(Some(line))) => lines.push(line),
                 Ok(Ok(None)) | Err(_) => failed.push(input_path(name)),
@@ -1520,6 +1519,8 @@ struct Sink<'a> {
     file: &'a mut File,
     rows: &'a mut Vec<Row>,
     done: &'a HashSet<RowKey>,
+    opts: &'a CompareOptions,
+    commit: &'a str,
 }
 
 /// What became of one run of [`run_one`].
@@ -1539,11 +1540,10 @@ fn run_one(
     input: (&str, &str),
     scene: &Scene,
     run: &Run,
-    opts: &CompareOptions,
-    commit: &str,
     reference: &mut Option<Reference>,
     note: &dyn Fn(Option<f64>) -> String,
 ) -> Result<Ran> {
+    let (opts, commit) = (sink.opts, sink.commit);
     let name = input.0;
     let key = RowKey {
         input: name.to_string(),
@@ -1596,15 +1596,13 @@ fn levels_coarse_first() -> Vec<f64> {
 /// fixed runs without a knob), then each knob family searched ([`families`]), then the raster
 /// twins of the chosen runs. Returns the line that counts its runs, or `None` when the input
 /// failed (its reference, or a panic).
-#[allow(clippy::too_many_arguments)]
 fn search_input(
     sink: &mut Sink<'_>,
     input: (&str, &str),
     scene: &Scene,
-    opts: &CompareOptions,
     max_res: u32,
-    commit: &str,
 ) -> Result<Option<String>> {
+    let opts = sink.opts;
     let mut reference = None;
     let none = |_: Option<f64>| String::new();
     // The fixed runs: the reference, and for a mesh input the original's raster twin.
@@ -1617,7 +1615,7 @@ fn search_input(
     let mut counts: Vec<(String, usize)> = Vec::new();
     let mut failed = false;
     for run in &fixed {
-        if let Ran::Failed = run_one(sink, input, scene, run, opts, commit, &mut reference, &none)? {
+        if let Ran::Failed = run_one(sink, input, scene, run, &mut reference, &none)? {
             if reference.is_none() {
                 return Ok(None);
             }
@@ -1633,7 +1631,7 @@ fn search_input(
         let outcome = search::search(family.spec, &levels, fits, |probe| {
             let run = (family.make)(probe.knob);
             let note = |q: Option<f64>| probe.note(q);
-            match run_one(sink, input, scene, &run, opts, commit, &mut reference, &note) {
+            match run_one(sink, input, scene, &run, &mut reference, &note) {
                 Ok(Ran::Row(row)) => row.quality_px,
                 Ok(Ran::Skipped) => None,
                 Ok(Ran::Failed) | Err(_) => {
@@ -1671,7 +1669,7 @@ fn search_input(
                 let ls: Vec<String> = ls.iter().map(|l| format!("{l}px")).collect();
                 let text = format!("search=twin level={}", ls.join(","));
                 let note = |_: Option<f64>| text.clone();
-                match run_one(sink, input, scene, &run, opts, commit, &mut reference, &note)? {
+                match run_one(sink, input, scene, &run, &mut reference, &note)? {
                     Ran::Failed => failed = true,
                     Ran::Row(_) => raster_side += 1,
                     Ran::Skipped => {}

@@ -192,8 +192,7 @@ pub fn search(
             continue;
         };
         // Bisection between the largest knob below the smallest met one (it failed) and it.
-        while spec.bisect {
-            let Some(lo) = cache.range(..hi).next_back().map(|(k, _)| *k) else { break };
+        while let Some(lo) = cache.range(..hi).next_back().map(|(k, _)| *k).filter(|_| spec.bisect) {
             if hi - lo <= spec.min_gap.max(hi / 10).max(1) {
                 break;
             }
