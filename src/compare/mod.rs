@@ -1649,7 +1649,14 @@ fn search_input(
         counts.push((family.name.clone(), n));
         for (level, found) in &outcome.levels {
             if let search::Found::Unmet { stop, largest } = found {
-                let largest = largest.map_or("none fits".into(), |k| format!("largest tried {k}"));
+                let largest = match largest {
+                    None => "none fits".to_string(),
+                    // The SDF families' knob is the inverse of the hit tolerance.
+                    Some(k) if family.name.starts_with("sdf/") => {
+                        format!("finest tolerance tried {} px", SEARCH_TOLERANCE_PX / f64::from(*k))
+                    }
+                    Some(k) => format!("largest tried {k}"),
+                };
                 unmet.push(format!("{} {level} px: {stop} ({largest})", family.name));
             }
         }
