@@ -94,6 +94,42 @@ fn names(label: &str, run: &Run) -> bool {
     a == b && knob(ka).is_some() && knob(ka) == knob(kb)
 }
 
+/// The run `label` names among those `compare --search` can make of `scene` (its knob
+/// families, [`super::families`], traced or rasterized): the knob is read off the label
+/// (the resolution, the decimation's percentage, the hit tolerance), so a duel re-times
+/// the runs a search chose with the same flags.
+fn searched_run(
+    scene: &crate::scene::Scene,
+    opts: &CompareOptions,
+    max_res: u32,
+    label: &str,
+) -> Option<Run> {
+    let (main, knob) = label.split_once('@').map_or((label, None), |(a, b)| (a, Some(b)));
+    let mut knobs = Vec::new();
+    if let Some(r) = main.rsplit('/').next().and_then(|s| s.parse::<u32>().ok()) {
+        knobs.push(r);
+    }
+    let percent = main.split("decimated-").nth(1).and_then(|s| s.split('%').next());
+    if let Some(p) = percent.and_then(|s| s.parse::<f64>().ok()).filter(|p| p.is_finite() && *p > 0.0) {
+        knobs.push((p * 100.0).round() as u32);
+    }
+    let tolerance = knob.and_then(|k| k.split(':').next()).and_then(|t| t.parse::<f64>().ok());
+    if let Some(t) = tolerance.filter(|t| t.is_finite() && *t > 0.0) {
+        knobs.push((super::SEARCH_TOLERANCE_PX / t).round() as u32);
+    }
+    for family in super::families(scene, opts, max_res) {
+        for &k in &knobs {
+            for primary in [PrimaryVisibility::Trace, PrimaryVisibility::Raster] {
+                let run = Run { primary, ..(family.make)(k) };
+                if names(label, &run) {
+                    return Some(run);
+                }
+            }
+        }
+    }
+    None
+}
+
 /// Runs the duel of `duel.runs` on `opts`' single input and writes its rows to `opts.csv`
 /// (atomically, when every round is done); returns a summary: each run's median frame time.
 ///
@@ -105,7 +141,9 @@ pub fn duel_command(opts: &CompareOptions, duel: &DuelOptions) -> Result<String>
     let planned = plan(&scene, opts);
     let mut chosen: Vec<(String, Run)> = Vec::new();
     for label in &duel.runs {
-        let run = planned.iter().find(|r| names(label, r)).ok_or_else(|| {
+        let searched = || opts.search_max_res.and_then(|max| searched_run(&scene, opts, max, label));
+        let found = planned.iter().find(|r| names(label, r)).cloned().or_else(searched);
+        let run = found.as_ref().ok_or_else(|| {
             let known: Vec<String> = planned.iter().map(run_label).collect();
             Error::Usage(format!(
                 "{}: --duel run `{label}` is not planned with these flags (planned: {})",

@@ -161,6 +161,15 @@ pub enum Command {
         /// that replicates interleave the representations differently.
         #[arg(long)]
         order_seed: Option<u64>,
+        /// Search each knob family to the quality levels instead of the fixed lists (--res,
+        /// --decimate, --sdf-tolerance-px): resolutions double from 8 until a run meets the
+        /// next level, the memory budget or --search-max-res stops them, then bisect; the
+        /// decimation fraction likewise; the hit tolerance halves from 2 px, per --sdf-relax.
+        #[arg(long, conflicts_with = "scaling")]
+        search: bool,
+        /// The largest resolution --search tries.
+        #[arg(long, requires = "search", default_value_t = super::GRID_RESOLUTION.max)]
+        search_max_res: u32,
         /// Run the coursework's scaling experiment instead: frame time against the number of
         /// spheres, cubes, cylinders and cones (image 320x240 unless --width/--height).
         #[arg(long)]

@@ -373,6 +373,10 @@ pub struct CompareOptions {
     pub progress: bool,
     /// Runs whose estimated memory exceeds this are skipped with a message.
     pub budget: MemoryBudget,
+    /// `--search`: the largest resolution the search of each knob family tries (in
+    /// [`GRID_RESOLUTION`]); `None`: the fixed lists (`resolutions`, `decimate`,
+    /// `sdf_tolerances_px`) instead.
+    pub search_max_res: Option<u32>,
 }
 
 /// Options of `toolkit compare --duel` (the study's paired, interleaved re-timing).
@@ -543,6 +547,8 @@ impl Task {
                 sdf_relax,
                 replicate,
                 order_seed,
+                search,
+                search_max_res,
                 scaling: false,
                 counts: _,
                 scaling_res: _,
@@ -563,6 +569,10 @@ impl Task {
                 let march = march_params(&march, COMPARE_EPSILON);
                 check_march(&march)?;
                 BAND_CELLS.check("--band", band)?;
+                let search_max_res = match search {
+                    true => Some(GRID_RESOLUTION.check("--search-max-res", search_max_res)?),
+                    false => None,
+                };
                 if sdf_tolerance_px.is_empty() || sdf_relax.is_empty() {
                     return Err(Error::Usage(
                         "--sdf-tolerance-px and --sdf-relax need at least one value each".into(),
@@ -604,6 +614,7 @@ impl Task {
                     surface_samples,
                     progress: !quiet,
                     budget,
+                    search_max_res,
                 };
                 if check_reference {
                     if options.inputs.len() != 1 {

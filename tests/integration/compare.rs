@@ -515,3 +515,94 @@ fn heap_peak_is_measured_per_run_and_covers_the_declared_bytes() {
     let largest = *peaks.iter().max().unwrap();
     assert!(smallest < largest, "every run reports the same heap peak {smallest}");
 }
+
+/// `compare --search`: each family's knob is searched to the levels, so the smallest mesh
+/// resolution meeting a level is at most (here, for some level, below) what the quick
+/// study's fixed list 16,32,48 finds; every candidate's row says which step ran it; the
+/// candidate counts are reported; a budget stop is recorded as such.
+#[test]
+fn search_finds_smaller_meshes_than_a_fixed_list() {
+    let dir = temp_dir("search");
+    let scene = dir.join("two.toml");
+    std::fs::write(&scene, SCENE).unwrap();
+    let (searched, fixed) = (dir.join("search.csv"), dir.join("fixed.csv"));
+    let out = run_compare(&scene, &searched, &["--search"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    let out = run_compare(&scene, &fixed, &["--res", "16,32,48"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (s, f) = (read_rows(&searched).unwrap(), read_rows(&fixed).unwrap());
+    // The smallest resolution of `method` meeting `level` among `rows`.
+    let smallest = |rows: &[Row], method: &str, level: f64| {
+        rows.iter()
+            .filter(|r| r.method == method && r.quality_px.is_some_and(|q| q <= level))
+            .filter_map(|r| r.resolution)
+            .min()
+    };
+    let mut below = 0;
+    for method in ["parametric", "extracted"] {
+        for level in [2.0, 1.0, 0.5] {
+            let (a, b) = (smallest(&s, method, level), smallest(&f, method, level));
+            if let Some(b) = b {
+                let a =
+                    a.unwrap_or_else(|| panic!("{method} {level} px: the search found none, the list {b}"));
+                assert!(a <= b, "{method} {level} px: search {a}, fixed list {b}");
+                below += usize::from(a < b);
+            }
+        }
+    }
+    assert!(below > 0, "the search found no smaller mesh than the fixed list");
+    // Every searched candidate notes its step and level; no knob is run twice.
+    let candidates: Vec<&Row> =
+        s.iter().filter(|r| r.note.contains("search=double") || r.note.contains("search=bisect")).collect();
+    assert!(candidates.iter().any(|r| r.note.contains("search=bisect level=")));
+    let mut keys: Vec<_> = s.iter().map(Row::key).collect();
+    keys.sort();
+    keys.dedup();
+    assert_eq!(keys.len(), s.len(), "a configuration ran twice");
+    // The count is reported and matches the rows.
+    let line = stdout.lines().find(|l| l.starts_with("search: two: ")).expect("the search's count line");
+    let n: usize = line["search: two: ".len()..].split(' ').next().unwrap().parse().unwrap();
+    assert_eq!(n, candidates.len(), "{line}");
+    // Raster twins of the chosen mesh runs.
+    assert!(s.iter().any(|r| r.method == "parametric-raster" && r.note.contains("search=twin")));
+    // A tight budget stops the mesh search: the report and the last row say so.
+    let tight = dir.join("tight.csv");
+    let out = toolkit(&[
+        "--max-memory",
+        "100KiB",
+        "compare",
+        scene.to_str().unwrap(),
+        "--csv",
+        tight.to_str().unwrap(),
+        "--search",
+        "--frames",
+        "1",
+        "--surface-samples",
+        "2000",
+        "--quiet",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("mesh/parametric 0.5 px: budget"));
+    let rows = read_rows(&tight).unwrap();
+    assert!(rows.iter().any(|r| r.method == "parametric" && r.note.contains("unmet=budget")), "{rows:?}");
+    // A cap stops it likewise.
+    let capped = dir.join("capped.csv");
+    let out = run_compare(&scene, &capped, &["--search", "--search-max-res", "12"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("mesh/parametric 0.5 px: cap (largest tried 12)"));
+    // A duel re-times searched runs by their labels.
+    let duel = dir.join("duel.csv");
+    let out = run_compare(
+        &scene,
+        &duel,
+        &[
+            "--search",
+            "--duel",
+            "mesh/parametric/20,sdf/sphere-trace@0.5:1.6,mesh/extracted-raster/12",
+            "--rounds",
+            "1",
+        ],
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}

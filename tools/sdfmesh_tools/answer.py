@@ -5,6 +5,8 @@ rows; every number is computed here from the study's CSVs."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from . import analysis, data, duel
@@ -173,6 +175,61 @@ def candidates_text(sel) -> str:
         c[s["side"]].append(int(s["candidates"]))
     parts = [f"{side} {int(np.median(v))} (median over inputs)" for side, v in c.items() if v]
     return "Configurations each side chose from per input: " + ", ".join(parts) + "."
+
+
+_SEARCH_NOTE = re.compile(r"search=(double|bisect) level=([0-9.]+)px(?: unmet=(budget|cap))?")
+
+
+def search_text(rows) -> str:
+    """What `toolkit compare --search` evaluated (rows whose `note` says `search=double` or
+    `search=bisect`; empty text when none does): each side's searched candidates per input
+    (median over inputs; SDF: sphere tracing and grids, mesh: meshes ray traced, the raster
+    twins of the chosen meshes apart), and per level and side, the inputs where no run of the
+    side met the level, with what stopped the search there: the memory budget or the cap
+    (the row's `unmet=`, written at the level it probed, also holds for every finer level)."""
+    count: dict[tuple, int] = {}
+    stops: dict[tuple, set] = {}
+    inputs = set()
+    for r in rows:
+        m = _SEARCH_NOTE.search(r.get("note") or "")
+        if not m:
+            continue
+        inp = r.get("input")
+        inputs.add(inp)
+        asked = (r.get("asked_repr") or r.get("repr") or "").strip()
+        side = "sdf" if asked in ("sdf", "grid") else "mesh"
+        count[(inp, side)] = count.get((inp, side), 0) + 1
+        if m.group(3):
+            stops.setdefault((inp, side), set()).add((float(m.group(2)), m.group(3)))
+    if not inputs:
+        return ""
+    parts = []
+    for side in ("sdf", "mesh"):
+        v = [count.get((i, side), 0) for i in sorted(inputs)]
+        parts.append(f"{side} {float(np.median(v)):g}")
+    text = ("Candidates each side's search evaluated per input (median over the "
+            f"{len(inputs)} searched inputs): " + ", ".join(parts) + ".")
+    unmet = []
+    for level in duel.LEVELS:
+        for side in ("sdf", "mesh"):
+            missing = [i for i in sorted(inputs) if count.get((i, side))
+                       and not any(data.meets(r, level) for r in rows if r.get("input") == i
+                                   and duel.side_of(r) == side)]
+            if not missing:
+                continue
+            why = {"budget": 0, "cap": 0, "unknown": 0}
+            for i in missing:
+                # A stop at this level or a coarser one leaves this level unmet.
+                found = {stop for lv, stop in stops.get((i, side), set()) if lv >= level - 1e-12}
+                why["budget" if "budget" in found else "cap" if "cap" in found else "unknown"] += 1
+            said = [f"the memory budget stopped it on {why['budget']}" if why["budget"] else "",
+                    f"the resolution cap on {why['cap']}" if why["cap"] else "",
+                    f"neither on {why['unknown']}" if why["unknown"] else ""]
+            unmet.append(f"at {level:g} px the {side} side met the level on no run for {len(missing)} "
+                         f"input(s) ({', '.join(x for x in said if x)})")
+    if unmet:
+        text += " Where a side met a level nowhere: " + "; ".join(unmet) + "."
+    return text
 
 
 def caveats(rows) -> list[str]:

@@ -228,7 +228,7 @@ def _reference_stem(rows, name: str, folder: Path) -> str | None:
     for r in rows:
         if r.get("input") == name and r.get("reference"):
             return r["reference"].replace("/", "-")
-    for guess in ("analytic-closed-form", "mesh-original"):
+    for guess in ("analytic-closed-form", "analytic-interval-march", "mesh-original"):
         if (folder / f"{guess}.png").is_file():
             return guess
     return None

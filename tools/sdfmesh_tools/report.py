@@ -489,7 +489,8 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
                  "rounds, one frame of each per round in alternating order; an input's ratio is the mean over "
                  "processes of the median within-round log ratio, a class's the geometric mean over inputs "
                  "with a 95% t-interval over inputs. Bytes: the smallest run of each side meeting the level. "
-                 + answer.candidates_text(sel) + " " + answer.optimism_text(ratios) + "\n")
+                 + answer.candidates_text(sel) + " " + answer.search_text(all_rows) + " "
+                 + answer.optimism_text(ratios) + "\n")
     else:
         time_v, ratios = [], []
         L.append("No duels were given (--selection, --duels): the answer below is the selection pass's "

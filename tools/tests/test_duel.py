@@ -276,3 +276,32 @@ def test_rasterized_meshes_are_their_own_side():
     assert 3.5 < r["ratio"] < 4.5 and r["lo"] > 1, r
     s = answer.sentences(traced, answer.bytes_verdicts(rows), 6, 1, "64×64", raster_v=raster)
     assert "rasterized meshes are faster in many (4" in s[2], s[2]
+
+
+def test_search_text_counts_candidates_and_says_what_stopped_a_side():
+    """compare --search rows: each side's searched candidates per input (median), and where a
+    side meets a level on no run, whether the budget or the cap stopped it."""
+    def searched(name, repr_, method, res, quality, note):
+        r = row(name, "blend", 0, repr_, method, res=res, quality=quality)
+        r["note"] = note
+        return r
+    rows = []
+    for i, stop in enumerate(["budget", "cap", "budget"]):
+        name = f"in{i}"
+        rows += [row(name, "blend", 0, "analytic", "closed-form", quality=0.5)]
+        rows += [searched(name, "sdf", "sphere-trace", "", 0.5, "search=double level=2px")]
+        rows += [searched(name, "grid", "dense", 8, 1.0, "search=double level=2px"),
+                 searched(name, "grid", "dense", 16, 0.5, "search=double level=0.5px")]
+        # The mesh meets 2 px at 8, then fails 1 px up to its stop.
+        rows += [searched(name, "mesh", "extracted", 8, 2.0, "search=double level=2px"),
+                 searched(name, "mesh", "extracted", 16, 2.0, "search=double level=1px"),
+                 searched(name, "mesh", "extracted", 32, 2.0, f"search=double level=1px unmet={stop}"),
+                 searched(name, "mesh", "extracted-raster", 8, 2.0, "search=twin level=2px")]
+    text = answer.search_text(rows)
+    assert "per input (median over the 3 searched inputs): sdf 3, mesh 3." in text
+    assert ("at 1 px the mesh side met the level on no run for 3 input(s) (the memory budget "
+            "stopped it on 2, the resolution cap on 1)") in text
+    assert "at 0.5 px the mesh side met the level on no run for 3 input(s)" in text
+    assert "sdf side met the level on no run" not in text
+    # Rows of fixed lists: no text.
+    assert answer.search_text([row("a", "blend", 0, "mesh", "extracted", res=16)]) == ""
