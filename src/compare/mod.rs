@@ -1632,7 +1632,10 @@ fn search_input(
             let run = (family.make)(probe.knob);
             let note = |q: Option<f64>| probe.note(q);
             match run_one(sink, input, scene, &run, &mut reference, &note) {
-                Ok(Ran::Row(row)) => row.quality_px,
+                // A run traced in whole or in part by another representation than the one
+                // asked (an empty extraction sphere traced) counts for no side, so it meets
+                // no level of its family: the search goes on to finer knobs.
+                Ok(Ran::Row(row)) => summary::side(&row).and(row.quality_px),
                 Ok(Ran::Skipped) => None,
                 Ok(Ran::Failed) | Err(_) => {
                     failed_here = true;

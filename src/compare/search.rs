@@ -93,11 +93,15 @@ pub struct Probe {
 impl Probe {
     /// The text the candidate's CSV row carries in its `note` given the quality it met
     /// (`quality_px`): `search=double level=2px`, with ` unmet=cap` or ` unmet=budget` when
-    /// the level is left unmet with this run.
+    /// the level is left unmet with this run, and ` last=cap` or ` last=budget` when this is
+    /// the last knob doubling can try but its run met the level: a finer level this run does
+    /// not meet is then unmet for that reason, though the search asks for no run there (the
+    /// knob is cached).
     pub fn note(&self, quality: Option<f64>) -> String {
         let mut s = format!("search={} level={}px", self.step, self.level);
-        if let Some(stop) = self.last.filter(|_| !meets(quality, self.level)) {
-            s += &format!(" unmet={stop}");
+        if let Some(stop) = self.last {
+            let why = if meets(quality, self.level) { "last" } else { "unmet" };
+            s += &format!(" {why}={stop}");
         }
         s
     }
@@ -320,8 +324,10 @@ mod tests {
         assert_eq!(out.levels[1], (1.0, Found::Unmet { stop: Stop::Cap, largest: Some(48) }));
         let capped = out.tried.iter().find(|(p, _)| p.knob == 48).expect("the cap is tried");
         assert_eq!(capped.0.last, Some(Stop::Cap));
-        // 48 met 2 px, the level it probed: its note says nothing unmet.
-        assert_eq!(capped.0.note(capped.1), "search=double level=2px");
+        // 48 met 2 px, the level it probed, and is the last knob doubling can try: its note
+        // says so, since the 1 px probe that the cap stops asks for no new run.
+        assert_eq!(capped.0.note(capped.1), "search=double level=2px last=cap");
+        assert!(!out.tried.iter().any(|(p, _)| p.level == 1.0 && p.knob == 48));
     }
 
     #[test]

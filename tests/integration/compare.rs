@@ -606,3 +606,25 @@ fn search_finds_smaller_meshes_than_a_fixed_list() {
     );
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+/// A mesh candidate whose extraction came out empty is sphere traced and counts for no side,
+/// so it meets no level of its family: the search goes on to finer resolutions, where the
+/// thin shell (0.02 thick) is extracted and traced as a mesh, instead of stopping at the
+/// sphere-traced stand-in's quality.
+#[test]
+fn search_does_not_stop_at_a_fallback() {
+    let dir = temp_dir("search-fallback");
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/scenes/thin/thin_shell.toml");
+    let csv = dir.join("s.csv");
+    let out =
+        run_compare(&scene, &csv, &["--search", "--search-max-res", "64", "--width", "48", "--height", "48"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let rows = read_rows(&csv).unwrap();
+    let extracted: Vec<&Row> =
+        rows.iter().filter(|r| r.asked_repr == "mesh" && r.method == "extracted").collect();
+    assert!(extracted.iter().any(|r| r.repr != "mesh"), "no fallback at a coarse resolution: {extracted:?}");
+    assert!(
+        extracted.iter().any(|r| r.repr == "mesh" && r.resolution > Some(16)),
+        "the search stopped at the fallback: {extracted:?}"
+    );
+}

@@ -5,6 +5,7 @@ rows; every number is computed here from the study's CSVs."""
 
 from __future__ import annotations
 
+import math
 import re
 
 import numpy as np
@@ -177,7 +178,7 @@ def candidates_text(sel) -> str:
     return "Configurations each side chose from per input: " + ", ".join(parts) + "."
 
 
-_SEARCH_NOTE = re.compile(r"search=(double|bisect) level=([0-9.]+)px(?: unmet=(budget|cap))?")
+_SEARCH_NOTE = re.compile(r"search=(double|bisect) level=([0-9.]+)px(?: (unmet|last)=(budget|cap))?")
 
 
 def search_text(rows) -> str:
@@ -186,7 +187,8 @@ def search_text(rows) -> str:
     (median over inputs; SDF: sphere tracing and grids, mesh: meshes ray traced, the raster
     twins of the chosen meshes apart), and per level and side, the inputs where no run of the
     side met the level, with what stopped the search there: the memory budget or the cap
-    (the row's `unmet=`, written at the level it probed, also holds for every finer level)."""
+    (the row's `unmet=`, written at the level it probed, also holds for every finer level; a
+    `last=` row, the last knob doubling could try, met its level and stops every finer one)."""
     count: dict[tuple, int] = {}
     stops: dict[tuple, set] = {}
     inputs = set()
@@ -199,8 +201,11 @@ def search_text(rows) -> str:
         asked = (r.get("asked_repr") or r.get("repr") or "").strip()
         side = "sdf" if asked in ("sdf", "grid") else "mesh"
         count[(inp, side)] = count.get((inp, side), 0) + 1
-        if m.group(3):
-            stops.setdefault((inp, side), set()).add((float(m.group(2)), m.group(3)))
+        if m.group(3) == "unmet":
+            stops.setdefault((inp, side), set()).add((float(m.group(2)), m.group(4)))
+        elif m.group(3) == "last":
+            # The last knob doubling could try met this level, so it stopped every finer one.
+            stops.setdefault((inp, side), set()).add((math.inf, m.group(4)))
     if not inputs:
         return ""
     parts = []

@@ -297,6 +297,18 @@ def test_search_text_counts_candidates_and_says_what_stopped_a_side():
                  searched(name, "mesh", "extracted", 16, 2.0, "search=double level=1px"),
                  searched(name, "mesh", "extracted", 32, 2.0, f"search=double level=1px unmet={stop}"),
                  searched(name, "mesh", "extracted-raster", 8, 2.0, "search=twin level=2px")]
+    # A fourth input: the cap run met 2 px when it was tried (note `last=cap`), so 1 px and
+    # 0.5 px are unmet for the cap though no row probes them.
+    rows += [row("in3", "blend", 0, "analytic", "closed-form", quality=0.5),
+             searched("in3", "sdf", "sphere-trace", "", 0.5, "search=double level=2px"),
+             searched("in3", "grid", "dense", 8, 0.5, "search=double level=2px"),
+             searched("in3", "mesh", "extracted", 8, None, "search=double level=2px"),
+             searched("in3", "mesh", "extracted", 16, 2.0, "search=double level=2px last=cap")]
+    text = answer.search_text(rows)
+    assert ("at 1 px the mesh side met the level on no run for 4 input(s) (the memory budget "
+            "stopped it on 2, the resolution cap on 2)") in text, text
+    assert "neither" not in text, text
+    rows = [r for r in rows if r["input"] != "in3"]
     text = answer.search_text(rows)
     assert "per input (median over the 3 searched inputs): sdf 3, mesh 3." in text
     assert ("at 1 px the mesh side met the level on no run for 3 input(s) (the memory budget "
