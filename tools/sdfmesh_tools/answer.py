@@ -257,7 +257,26 @@ def caveats(rows) -> list[str]:
         "Classes with fewer than 5 inputs get no interval: " + (", ".join(small) if small else "none") + ".",
         f"{len(data.inputs(rows))} inputs; intervals are 95% t-intervals over inputs, descriptive (not corrected for "
         "the number of classes and levels).",
-    ]
+    ] + _search_and_implicit_caveats(rows, per_class)
+
+
+def _search_and_implicit_caveats(rows, per_class) -> list[str]:
+    """The caveats of a searched study (the largest resolution any search tried bounds "only
+    SDF meets it") and of the implicit class (its SDF side is the safe marcher of fields that
+    are not distances, without the SDF tape's pruning and 8-wide evaluation)."""
+    out = []
+    searched = [int(num(r, "resolution")) for r in rows
+                if _SEARCH_NOTE.search(r.get("note") or "") and num(r, "resolution")]
+    if searched:
+        out.append(f"Each side's knobs are searched up to resolution {max(searched)}: \"only SDF meets it\" "
+                   "means no mesh met the level within that cap (the paragraph under the table counts the "
+                   "stops), not that none can.")
+    if "implicit" in per_class:
+        out.append("Implicit models (class implicit) are fields, not distances: their SDF side is our safe "
+                   "marcher (Lipschitz steps, else interval root isolation), one point at a time, without the "
+                   "pruning and 8-wide evaluation of the SDF tape, so its frame times bound what marching "
+                   "them can do from above; Fidget's 3D renderer was not measured against it.")
+    return out
 
 
 def bytes_points(rows, level: float = HEADLINE_LEVEL) -> dict:

@@ -317,3 +317,18 @@ def test_search_text_counts_candidates_and_says_what_stopped_a_side():
     assert "sdf side met the level on no run" not in text
     # Rows of fixed lists: no text.
     assert answer.search_text([row("a", "blend", 0, "mesh", "extracted", res=16)]) == ""
+
+
+def test_caveats_name_the_search_cap_and_the_implicit_marcher():
+    """A searched study's caveats give the largest resolution searched; a study with the
+    implicit class says its SDF side is the safe marcher; neither appears without them."""
+    def text_row(*a, **k):  # as read from a CSV: every value a string
+        return {c: str(v) for c, v in row(*a, **k).items()}
+    rows = [text_row(f"in{i}", "blend", 0, "mesh", "extracted", res=r) for i, r in enumerate([16, 48])]
+    plain = answer.caveats(rows)
+    assert not any("searched up to" in c or "Implicit models" in c for c in plain), plain
+    rows[1]["note"] = "search=double level=1px unmet=cap"
+    rows.append(text_row("geode", "implicit", 0, "sdf", "sphere-trace"))
+    got = answer.caveats(rows)
+    assert any("searched up to resolution 48" in c for c in got), got
+    assert any(c.startswith("Implicit models (class implicit)") for c in got), got
