@@ -115,9 +115,9 @@ fn searched_run(
     }
     let tolerance = knob.and_then(|k| k.split(':').next()).and_then(|t| t.parse::<f64>().ok());
     if let Some(t) = tolerance.filter(|t| t.is_finite() && *t > 0.0) {
-        knobs.push((super::SEARCH_TOLERANCE_PX / t).round() as u32);
+        knobs.push((super::searched::SEARCH_TOLERANCE_PX / t).round() as u32);
     }
-    for family in super::families(scene, opts, max_res) {
+    for family in super::searched::families(scene, opts, max_res) {
         for &k in &knobs {
             for primary in [PrimaryVisibility::Trace, PrimaryVisibility::Raster] {
                 let run = Run { primary, ..(family.make)(k) };
