@@ -95,7 +95,7 @@ fn names(label: &str, run: &Run) -> bool {
 }
 
 /// The run `label` names among those `compare --search` can make of `scene` (its knob
-/// families, [`super::families`], traced or rasterized): the knob is read off the label
+/// families, [`super::searched::families`], traced or rasterized): the knob is read off the label
 /// (the resolution, the decimation's percentage, the hit tolerance), so a duel re-times
 /// the runs a search chose with the same flags.
 fn searched_run(
