@@ -36,9 +36,9 @@ fn main() -> ExitCode {
         return ExitCode::from(2);
     }
     let budget = cli.max_memory.unwrap_or_else(MemoryBudget::machine_default);
-    // `compare` without inputs (and without --scaling) runs every bundled scene: found once,
-    // here, so that the checks below see them.
-    if let Command::Compare { inputs, scaling: false, .. } = &mut cli.command
+    // `compare` without inputs (and without --scaling or --summarize, which read none) runs
+    // every bundled scene: found once, here, so that the checks below see them.
+    if let Command::Compare { inputs, scaling: false, summarize: false, .. } = &mut cli.command
         && inputs.is_empty()
     {
         match sdfmesh::compare::default_inputs() {
@@ -75,6 +75,7 @@ fn main() -> ExitCode {
             sdfmesh::compare::scaling::scaling_command(&options, &csv).map(|t| print!("{t}"))
         }
         Task::Compare(opts) => sdfmesh::compare::compare_command(&opts).map(|t| print!("{t}")),
+        Task::Summarize(opts) => sdfmesh::compare::summarize_command(&opts).map(|t| print!("{t}")),
         Task::CheckReference(options) => {
             sdfmesh::compare::refcheck::check_reference_command(&options).map(|t| print!("{t}"))
         }

@@ -1157,6 +1157,14 @@ pub fn compare_command(opts: &CompareOptions) -> Result<String> {
     finish(opts, &rows, Vec::new(), failed)
 }
 
+/// `compare --summarize`: the summary of every row already in `opts.csv` (all inputs and
+/// replicates: [`summary::summarize`] merges replicates), printed and written to
+/// `--summary-json`. The study's merge step makes its summary.json this way.
+pub fn summarize_command(opts: &CompareOptions) -> Result<String> {
+    let rows = read_rows(&opts.csv)?;
+    finish(opts, &rows, Vec::new(), Vec::new())
+}
+
 /// The end of `compare`: the summary of `rows` (after `lines`, `--search`'s counts), its
 /// JSON where asked, and the batch error naming the `failed` inputs.
 fn finish(

@@ -196,6 +196,11 @@ pub enum Command {
         /// on the object trees (no tape, no SIMD, no pruning), one row to --csv.
         #[arg(long, conflicts_with_all = ["scaling", "resume", "duel"])]
         check_reference: bool,
+        /// Summarise the rows already in --csv instead (every input and replicate in it: per
+        /// quality level the fastest and smallest run, as compare prints at its end), to stdout
+        /// and --summary-json; nothing is run, the inputs are not read and --csv is only read.
+        #[arg(long, conflicts_with_all = ["scaling", "resume", "duel", "check_reference", "overwrite", "search"])]
+        summarize: bool,
         /// Overrides of the scene's settings.
         #[command(flatten)]
         settings: SettingArgs,
@@ -328,6 +333,10 @@ impl Command {
         match self {
             Command::Render { scene, output, .. } => (vec![scene.clone()], vec![output]),
             Command::Convert { input, output, .. } => (vec![input.clone()], vec![output]),
+            // --summarize reads the CSV and writes only the summary.
+            Command::Compare { csv, summary_json, summarize: true, .. } => {
+                (vec![csv.clone()], summary_json.iter().map(PathBuf::as_path).collect())
+            }
             Command::Compare { inputs, csv, summary_json, .. } => {
                 (inputs.clone(), std::iter::once(csv).chain(summary_json).map(PathBuf::as_path).collect())
             }

@@ -422,6 +422,8 @@ pub enum Task {
     },
     /// `toolkit compare`.
     Compare(CompareOptions),
+    /// `toolkit compare --summarize`: the summary of the rows already in `--csv`.
+    Summarize(CompareOptions),
     /// `toolkit compare --duel`: the compare flags plan the runs the duel picks from.
     Duel {
         /// The compare options (one input).
@@ -556,6 +558,7 @@ impl Task {
                 duel,
                 rounds,
                 check_reference,
+                summarize,
                 settings,
                 march,
             } => {
@@ -616,7 +619,9 @@ impl Task {
                     budget,
                     search_max_res,
                 };
-                if check_reference {
+                if summarize {
+                    Task::Summarize(options)
+                } else if check_reference {
                     if options.inputs.len() != 1 {
                         return Err(Error::Usage(format!(
                             "--check-reference checks one input, got {} inputs",

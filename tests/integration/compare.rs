@@ -628,3 +628,49 @@ fn search_does_not_stop_at_a_fallback() {
         "the search stopped at the fallback: {extracted:?}"
     );
 }
+
+/// `compare --summarize` summarises every row already in the CSV: two replicates written by
+/// two processes give one summary over both (`replicates: 2`), and a missing CSV is a one-line
+/// error naming it.
+#[test]
+fn summarize_covers_every_replicate_in_the_csv() {
+    let dir = temp_dir("summarize");
+    let scene = dir.join("two.toml");
+    std::fs::write(&scene, SCENE).unwrap();
+    let csv = dir.join("c.csv");
+    for rep in ["0", "1"] {
+        let out = run_compare(&scene, &csv, &["--replicate", rep, "--resume"]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    }
+    let json = dir.join("s.json");
+    let out = toolkit(&[
+        "compare",
+        "--summarize",
+        "--csv",
+        csv.to_str().unwrap(),
+        "--summary-json",
+        json.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let inputs = v["inputs"].as_array().unwrap();
+    assert_eq!(inputs.len(), 1, "{v}");
+    assert_eq!(inputs[0]["replicates"], 2, "{v}");
+    // The CSV is an input: --summary-json may not overwrite it.
+    let out = toolkit(&[
+        "compare",
+        "--summarize",
+        "--csv",
+        csv.to_str().unwrap(),
+        "--summary-json",
+        csv.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(read_rows(&csv).unwrap().len() > 2, "the CSV was overwritten");
+    let missing = dir.join("none.csv");
+    let out = toolkit(&["compare", "--summarize", "--csv", missing.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("none.csv") && err.trim().lines().count() == 1, "{err}");
+}
