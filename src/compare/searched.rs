@@ -165,8 +165,8 @@ enum Ran {
     Failed,
 }
 
-/// Runs `run` of input `input` (name, class), appending its row with `note(quality_px)`
-/// added to its note, unless the CSV has it already (`--resume`: that row is answered).
+/// Runs `run` of input `input` (name, class), appending its row with
+/// `note(`[`counted_quality`]`)` added to its note, unless the CSV has it already (`--resume`: that row is answered).
 fn run_one(
     sink: &mut Sink<'_>,
     input: (&str, &str),
@@ -208,7 +208,7 @@ fn run_one(
             return Ok(Ran::Skipped);
         }
     };
-    let extra = note(row.quality_px);
+    let extra = note(counted_quality(&row));
     if !extra.is_empty() {
         row.note = if row.note.is_empty() { extra } else { format!("{}; {extra}", row.note) };
     }
@@ -217,6 +217,14 @@ fn run_one(
         sink.rows.push(row.clone());
     }
     Ok(Ran::Row(Box::new(row)))
+}
+
+/// The quality a search counts for `row`: its `quality_px` where the run counts for the side
+/// it was asked on; `None` for a run traced in whole or in part by another representation
+/// (an empty extraction sphere traced), which meets no level of its family, so the search
+/// goes on to finer knobs. Also what a candidate's `note` is written from.
+fn counted_quality(row: &Row) -> Option<f64> {
+    summary::side(row).and(row.quality_px)
 }
 
 /// The quality levels, coarsest first (the order [`search::search`] goes through them).
@@ -264,10 +272,7 @@ pub(super) fn search_input(
             let run = (family.make)(probe.knob);
             let note = |q: Option<f64>| probe.note(q);
             match run_one(sink, input, scene, &run, &mut reference, &note) {
-                // A run traced in whole or in part by another representation than the one
-                // asked (an empty extraction sphere traced) counts for no side, so it meets
-                // no level of its family: the search goes on to finer knobs.
-                Ok(Ran::Row(row)) => summary::side(&row).and(row.quality_px),
+                Ok(Ran::Row(row)) => counted_quality(&row),
                 Ok(Ran::Skipped) => None,
                 Ok(Ran::Failed) | Err(_) => {
                     failed_here = true;
