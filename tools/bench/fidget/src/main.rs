@@ -21,15 +21,17 @@
 //! OURS.png` counts the pixels where that mask and our render's hits differ.
 //!
 //! The Prospero challenge's 2D image (`prospero`, `reference`, `differ`): see [`prospero`].
+//! A `.vm` model's orthographic 3D view (`voxel`, `reference3d`, `differ3d`): see [`voxel`].
 
 mod prospero;
+mod voxel;
 
 use std::io::Write;
 use std::time::Instant;
 
 use fidget::context::Tree;
 use fidget::eval::{Function, MathFunction};
-use fidget::raster::voxel::{self, EvalConfig, RenderConfig, RenderSize};
+use fidget::raster::voxel::{self as fidget_voxel, EvalConfig, RenderConfig, RenderSize};
 use fidget::render::{RenderHints, ThreadPool};
 use fidget::shape::{Shape, ShapeVars};
 use nalgebra::{Matrix4, Vector3, Vector4};
@@ -226,7 +228,7 @@ fn bench<F: Function + MathFunction + RenderHints + Clone>(
     let mut image = None;
     for i in 0..=runs {
         let t = Instant::now();
-        let out = voxel::render(bound.clone(), &cfg, &eval_cfg).ok_or("render cancelled")?;
+        let out = fidget_voxel::render(bound.clone(), &cfg, &eval_cfg).ok_or("render cancelled")?;
         let ms = t.elapsed().as_secs_f64() * 1e3;
         if i == 0 {
             cold_ms = ms;
@@ -308,6 +310,23 @@ fn run() -> Result<(), String> {
         Ok(v) if v > 0 => Ok(v),
         _ => Err(format!("{what} must be a positive integer, not {s:?}")),
     };
+    if args.len() == 6 && args[1] == "reference3d" {
+        let (n, s) = (positive(&args[3], "N")?, positive(&args[4], "STRIDE")?);
+        return voxel::reference(&args[2], n, s, &args[5]);
+    }
+    if args.len() == 6 && args[1] == "differ3d" {
+        let (s, n) = (positive(&args[3], "STRIDE")?, positive(&args[5], "N")?);
+        return voxel::differ(&args[2], s, &args[4], n);
+    }
+    if args.len() == 8 && args[1] == "voxel" {
+        let (n, t, r) =
+            (positive(&args[3], "N")?, positive(&args[4], "THREADS")?, positive(&args[5], "RUNS")?);
+        return match args[6].as_str() {
+            "jit" => voxel::bench::<fidget::jit::JitFunction>("jit", &args[2], n, t, r, &args[7]),
+            "vm" => voxel::bench::<fidget::vm::VmFunction>("vm", &args[2], n, t, r, &args[7]),
+            other => Err(format!("unknown evaluator {other:?} (jit or vm)")),
+        };
+    }
     if args.len() == 5 && args[1] == "reference" {
         return prospero::reference(&args[2], positive(&args[3], "SIZE")?, &args[4]);
     }
@@ -323,7 +342,9 @@ fn run() -> Result<(), String> {
     if args.len() != 7 {
         return Err("usage: bench-fidget metaballs|menger SIZE THREADS RUNS jit|vm MASK.pgm | \
                     prospero MODEL.vm SIZE THREADS RUNS jit|vm OUT.pgm | reference MODEL.vm SIZE OUT.pgm | \
-                    differ REF.pgm IMAGE | compare MASK.pgm OURS.png"
+                    differ REF.pgm IMAGE | compare MASK.pgm OURS.png | \
+                    voxel MODEL.vm N THREADS RUNS jit|vm PREFIX | reference3d MODEL.vm N STRIDE PREFIX | \
+                    differ3d REF_PREFIX STRIDE IMAGE_PREFIX N"
             .into());
     }
     let (tree, v) = view(&args[1]).ok_or_else(|| format!("unknown scene {:?}", args[1]))?;

@@ -26,15 +26,96 @@ use rayon::prelude::*;
 
 use crate::median;
 
-/// One clause of the reference evaluator: opcode name, argument indices, constant.
-struct Clause {
-    op: String,
-    args: Vec<usize>,
+/// The opcodes of a `.vm` file the reference evaluator knows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Op {
+    X,
+    Y,
+    Z,
+    Const,
+    Copy,
+    Neg,
+    Abs,
+    Recip,
+    Sqrt,
+    Square,
+    Floor,
+    Ceil,
+    Round,
+    Sin,
+    Cos,
+    Tan,
+    Asin,
+    Acos,
+    Atan,
+    Exp,
+    Ln,
+    Not,
+    Add,
+    Sub,
+    Mul,
+    Div,
+    Min,
+    Max,
+    Atan2,
+    Mod,
+    Compare,
+    And,
+    Or,
+}
+
+impl Op {
+    fn parse(name: &str) -> Option<Op> {
+        Some(match name {
+            "var-x" => Op::X,
+            "var-y" => Op::Y,
+            "var-z" => Op::Z,
+            "const" => Op::Const,
+            "copy" => Op::Copy,
+            "neg" => Op::Neg,
+            "abs" => Op::Abs,
+            "recip" => Op::Recip,
+            "sqrt" => Op::Sqrt,
+            "square" => Op::Square,
+            "floor" => Op::Floor,
+            "ceil" => Op::Ceil,
+            "round" => Op::Round,
+            "sin" => Op::Sin,
+            "cos" => Op::Cos,
+            "tan" => Op::Tan,
+            "asin" => Op::Asin,
+            "acos" => Op::Acos,
+            "atan" => Op::Atan,
+            "exp" => Op::Exp,
+            "ln" => Op::Ln,
+            "not" => Op::Not,
+            "add" => Op::Add,
+            "sub" => Op::Sub,
+            "mul" => Op::Mul,
+            "div" => Op::Div,
+            "min" => Op::Min,
+            "max" => Op::Max,
+            "atan2" => Op::Atan2,
+            "mod" => Op::Mod,
+            "compare" => Op::Compare,
+            "and" => Op::And,
+            "or" => Op::Or,
+            _ => return None,
+        })
+    }
+}
+
+/// One clause of the reference evaluator: opcode, argument indices (0 where absent),
+/// constant.
+pub(crate) struct Clause {
+    op: Op,
+    a: usize,
+    b: usize,
     value: f64,
 }
 
 /// The clauses of a `.vm` file (its own small reader: `ID OPCODE ARGS...`, `#` comments).
-fn read_clauses(path: &str) -> Result<Vec<Clause>, String> {
+pub(crate) fn read_clauses(path: &str) -> Result<Vec<Clause>, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
     let mut ids = std::collections::HashMap::new();
     let mut out = Vec::new();
@@ -42,9 +123,10 @@ fn read_clauses(path: &str) -> Result<Vec<Clause>, String> {
         let body = line.split('#').next().unwrap_or("");
         let mut t = body.split_whitespace();
         let Some(id) = t.next() else { continue };
-        let op = t.next().ok_or_else(|| format!("{path}:{}: no opcode", n + 1))?.to_string();
+        let name = t.next().ok_or_else(|| format!("{path}:{}: no opcode", n + 1))?;
+        let op = Op::parse(name).ok_or_else(|| format!("{path}:{}: unknown opcode {name:?}", n + 1))?;
         let rest: Vec<&str> = t.collect();
-        let (args, value) = if op == "const" {
+        let (args, value) = if op == Op::Const {
             let v = rest.first().and_then(|s| s.parse::<f64>().ok());
             (Vec::new(), v.ok_or_else(|| format!("{path}:{}: bad constant", n + 1))?)
         } else {
@@ -55,7 +137,9 @@ fn read_clauses(path: &str) -> Result<Vec<Clause>, String> {
             (a, 0.0)
         };
         ids.insert(id.to_string(), out.len());
-        out.push(Clause { op, args, value });
+        let a = args.first().copied().unwrap_or(0);
+        let b = args.get(1).copied().unwrap_or(0);
+        out.push(Clause { op, a, b, value });
     }
     if out.is_empty() {
         return Err(format!("{path}: no clauses"));
@@ -63,63 +147,62 @@ fn read_clauses(path: &str) -> Result<Vec<Clause>, String> {
     Ok(out)
 }
 
-/// The f64 value of the program at (x, y, 0); `v` is scratch.
-fn eval_f64(clauses: &[Clause], x: f64, y: f64, v: &mut Vec<f64>) -> f64 {
+/// The f64 value of the program at (x, y, z); `v` is scratch.
+pub(crate) fn eval_f64(clauses: &[Clause], x: f64, y: f64, z: f64, v: &mut Vec<f64>) -> f64 {
     v.clear();
     for c in clauses {
-        let a = c.args.first().map(|&i| v[i]).unwrap_or(0.0);
-        let b = c.args.get(1).map(|&i| v[i]).unwrap_or(0.0);
+        let a = v.get(c.a).copied().unwrap_or(0.0);
+        let b = v.get(c.b).copied().unwrap_or(0.0);
         let nan2 = a.is_nan() || b.is_nan();
-        let r = match c.op.as_str() {
-            "var-x" => x,
-            "var-y" => y,
-            "var-z" => 0.0,
-            "const" => c.value,
-            "copy" => a,
-            "neg" => -a,
-            "abs" => a.abs(),
-            "recip" => 1.0 / a,
-            "sqrt" => a.sqrt(),
-            "square" => a * a,
-            "floor" => a.floor(),
-            "ceil" => a.ceil(),
-            "round" => a.round(),
-            "sin" => a.sin(),
-            "cos" => a.cos(),
-            "tan" => a.tan(),
-            "asin" => a.asin(),
-            "acos" => a.acos(),
-            "atan" => a.atan(),
-            "exp" => a.exp(),
-            "ln" => a.ln(),
-            "not" => (a == 0.0) as u8 as f64,
-            "add" => a + b,
-            "sub" => a - b,
-            "mul" => a * b,
-            "div" => a / b,
-            "min" if nan2 => f64::NAN,
-            "min" => a.min(b),
-            "max" if nan2 => f64::NAN,
-            "max" => a.max(b),
-            "atan2" => a.atan2(b),
-            "mod" => a.rem_euclid(b),
-            "compare" if nan2 => f64::NAN,
-            "compare" => (a > b) as i32 as f64 - (a < b) as i32 as f64,
-            "and" => {
+        let r = match c.op {
+            Op::X => x,
+            Op::Y => y,
+            Op::Z => z,
+            Op::Const => c.value,
+            Op::Copy => a,
+            Op::Neg => -a,
+            Op::Abs => a.abs(),
+            Op::Recip => 1.0 / a,
+            Op::Sqrt => a.sqrt(),
+            Op::Square => a * a,
+            Op::Floor => a.floor(),
+            Op::Ceil => a.ceil(),
+            Op::Round => a.round(),
+            Op::Sin => a.sin(),
+            Op::Cos => a.cos(),
+            Op::Tan => a.tan(),
+            Op::Asin => a.asin(),
+            Op::Acos => a.acos(),
+            Op::Atan => a.atan(),
+            Op::Exp => a.exp(),
+            Op::Ln => a.ln(),
+            Op::Not => (a == 0.0) as u8 as f64,
+            Op::Add => a + b,
+            Op::Sub => a - b,
+            Op::Mul => a * b,
+            Op::Div => a / b,
+            Op::Min if nan2 => f64::NAN,
+            Op::Min => a.min(b),
+            Op::Max if nan2 => f64::NAN,
+            Op::Max => a.max(b),
+            Op::Atan2 => a.atan2(b),
+            Op::Mod => a.rem_euclid(b),
+            Op::Compare if nan2 => f64::NAN,
+            Op::Compare => (a > b) as i32 as f64 - (a < b) as i32 as f64,
+            Op::And => {
                 if a == 0.0 {
                     a
                 } else {
                     b
                 }
             }
-            "or" => {
+            Op::Or => {
                 if a != 0.0 {
                     a
                 } else {
                     b
                 }
             }
-            _ => f64::NAN,
         };
         v.push(r);
     }
@@ -142,7 +225,7 @@ pub fn reference(model: &str, n: usize, out: &str) -> Result<(), String> {
             let (i, j) = (k / n, k % n);
             let x = -1.0 + (2 * j + 1) as f64 / n as f64;
             let y = 1.0 - (2 * i + 1) as f64 / n as f64;
-            eval_f64(&clauses, x, y, v) < 0.0
+            eval_f64(&clauses, x, y, 0.0, v) < 0.0
         })
         .collect();
     write_pgm(out, n, &inside)?;
