@@ -8,7 +8,8 @@
 //! x = -1 + 2j/N, y = 1 - 2(i+1)/N, z = -1 + 2k/N (a voxel corner; y flipped), so the
 //! world-to-model matrix is a translation by (1/N, 1/N, 1/N). Fidget's gradients are taken
 //! with respect to screen coordinates, whose y axis points down: the model-space normal is
-//! (gx, -gy, gz). Fidget reports any pixel whose top filled voxel is N-2 or N-1 as
+//! (gx, -gy, gz); where Fidget's gradient is NaN (it is on most of bolt.vm) the normal
+//! is written as (0, 0, 1) and counted in `nan_normal_px`. Fidget reports any pixel whose top filled voxel is N-2 or N-1 as
 //! saturated (depth N, normal (0, 0, 1)).
 //!
 //! Images for a prefix P: `P.depth.png`, 16-bit grey, 0 = no surface, otherwise
@@ -146,7 +147,11 @@ fn config(n: usize) -> RenderConfig {
 
 /// Fidget's image in the shared convention: depth d > 0 is voxel d - 1 (z = 1 where
 /// saturated, d = n); the normal is the gradient with screen y flipped back, normalised.
-fn geometry(image: &voxel::Image, n: usize) -> Geometry {
+/// Also returns the number of hit pixels whose gradient is zero or not finite (Fidget's
+/// automatic differentiation gives NaN where, e.g., a `sqrt` argument is 0): their normal is
+/// written as (0, 0, 1).
+fn geometry(image: &voxel::Image, n: usize) -> (Geometry, usize) {
+    let mut bad = 0;
     let mut out = Geometry { width: n, height: n, depth: vec![0; n * n], normal: vec![[0; 3]; n * n] };
     for (o, p) in image.iter().enumerate() {
         let d = p.depth as usize;
@@ -157,12 +162,14 @@ fn geometry(image: &voxel::Image, n: usize) -> Geometry {
             (1.0, [0.0, 0.0, 1.0])
         } else {
             let [gx, gy, gz] = p.normal.map(f64::from);
-            (-1.0 + (2 * d - 1) as f64 / n as f64, unit([gx, -gy, gz]).unwrap_or([0.0, 0.0, 1.0]))
+            let nrm = unit([gx, -gy, gz]);
+            bad += nrm.is_none() as usize;
+            (-1.0 + (2 * d - 1) as f64 / n as f64, nrm.unwrap_or([0.0, 0.0, 1.0]))
         };
         out.depth[o] = depth_code(z);
         out.normal[o] = normal_code(nrm);
     }
-    out
+    (out, bad)
 }
 
 /// `voxel MODEL.vm N THREADS RUNS EVAL PREFIX` with evaluator `F`.
@@ -207,12 +214,12 @@ pub fn bench<F: Function + MathFunction + RenderHints + Clone>(
         image = Some(img);
     }
     let image = image.ok_or("no image")?;
-    let out = geometry(&image, n);
+    let (out, bad_normals) = geometry(&image, n);
     out.write(prefix)?;
     let med = median(&mut times);
     println!(
         "tool=fidget-{eval} size={n} threads={threads} median_ms={med:.2} cold_ms={cold_ms:.2} \
-         shape_build_ms={build_ms:.2} hit_px={}",
+         shape_build_ms={build_ms:.2} hit_px={} nan_normal_px={bad_normals}",
         out.depth.iter().filter(|&&d| d > 0).count()
     );
     Ok(())
@@ -377,7 +384,8 @@ mod tests {
         let vars = ShapeVars::<f32>::new();
         let eval_cfg = EvalConfig { threads: None, ..Default::default() };
         let image = voxel::render(shape.bind(&vars).unwrap(), &config(n), &eval_cfg).unwrap();
-        let g = geometry(&image, n);
+        let (g, bad) = geometry(&image, n);
+        assert_eq!(bad, 0);
         let mut v = Vec::new();
         let mut hits = 0;
         for i in 0..n {
