@@ -63,6 +63,13 @@ pub enum Command {
         /// Sphere tracing flags.
         #[command(flatten)]
         march: MarchArgs,
+        /// With a 3D implicit model (.vm): render instead the view Fidget's voxel renderer
+        /// makes, the cube [-1, 1]^3 seen from +z (orthographic, pixel centres x = -1 +
+        /// (2j+1)/W, y = 1 - (2i+1)/H, 512 x 512 unless --width/--height): the height of the
+        /// first surface from above as a 16-bit PNG to this path (0: none, else
+        /// round((z+1)/2 * 65535)), its unit normal as RGB (n * 127.5 + 127.5) to --output.
+        #[arg(long, value_name = "DEPTH_PNG")]
+        heightmap: Option<PathBuf>,
     },
     /// Convert a mesh file (OBJ, glTF, GLB, PLY, STL) to a signed distance grid (.sdf, .npy,
     /// .vti), a scene file's SDF objects to a triangle mesh (.obj, .ply, .glb), or a mesh
@@ -331,7 +338,10 @@ impl Command {
     /// `NAME.REPR.png` files of its own naming and has none here).
     pub fn files(&self) -> (Vec<PathBuf>, Vec<&Path>) {
         match self {
-            Command::Render { scene, output, .. } => (vec![scene.clone()], vec![output]),
+            Command::Render { scene, output, heightmap, .. } => (
+                vec![scene.clone()],
+                std::iter::once(output).chain(heightmap).map(PathBuf::as_path).collect(),
+            ),
             Command::Convert { input, output, .. } => (vec![input.clone()], vec![output]),
             // --summarize reads the CSV and writes only the summary.
             Command::Compare { csv, summary_json, summarize: true, .. } => {

@@ -292,6 +292,8 @@ pub struct RenderOptions {
     pub shading: Shading,
     /// Memory the geometry may need (checked before it is built).
     pub budget: MemoryBudget,
+    /// `--heightmap`: the 16-bit height image of a 3D implicit model's view from +z.
+    pub heightmap: Option<PathBuf>,
 }
 
 /// What `toolkit convert` produces.
@@ -468,7 +470,7 @@ impl Task {
     /// [`Error::Usage`] (one line, exit code 2) for the first flag out of its range.
     pub fn new(command: Command, budget: MemoryBudget) -> Result<Task> {
         Ok(match command {
-            Command::Render { scene, output, repr, mesh, primary, settings, march } => {
+            Command::Render { scene, output, repr, mesh, primary, settings, march, heightmap } => {
                 let repr = representation(repr, &mesh, march_params(&march, MarchParams::default().epsilon))?;
                 let primary = match primary {
                     Primary::Trace => PrimaryVisibility::Trace,
@@ -480,6 +482,14 @@ impl Task {
                         )));
                     }
                 };
+                let is_vm = scene.extension().is_some_and(|e| e.eq_ignore_ascii_case("vm"));
+                if heightmap.is_some() && (!is_vm || repr.kind() != ReprKind::Analytic) {
+                    return Err(Error::Usage(format!(
+                        "--heightmap needs a 3D implicit model (.vm) rendered directly (no --repr), not {} as {}",
+                        scene.display(),
+                        repr.name()
+                    )));
+                }
                 Task::Render(RenderOptions {
                     scene,
                     output,
@@ -488,6 +498,7 @@ impl Task {
                     overrides: overrides(&settings)?,
                     shading: shading(&mesh),
                     budget,
+                    heightmap,
                 })
             }
             Command::Convert { input, output, to, res, margin, method, fill, band, decimate } => {

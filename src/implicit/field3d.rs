@@ -47,10 +47,10 @@ pub const EXTENT: f64 = 1.0;
 
 /// Cells are evaluated over their box grown by this much, so that a point computed just
 /// outside its cell by rounding is still covered by the cell's shortened program.
-const PAD: f64 = 1e-9;
+pub(super) const PAD: f64 = 1e-9;
 
-const OUTSIDE: u32 = u32::MAX;
-const INSIDE: u32 = u32::MAX - 1;
+pub(super) const OUTSIDE: u32 = u32::MAX;
+pub(super) const INSIDE: u32 = u32::MAX - 1;
 
 /// A surface cell: the program shortened for it and its Lipschitz bound, if proven.
 #[derive(Clone, Debug, PartialEq)]
@@ -143,9 +143,9 @@ pub struct Field3 {
     /// Cells per axis.
     pub n: usize,
     /// Per cell (x fastest): [`OUTSIDE`], [`INSIDE`] or an index into `regions`.
-    cells: Vec<u32>,
+    pub(super) cells: Vec<u32>,
     /// The surface cells' programs.
-    regions: Vec<Region>,
+    pub(super) regions: Vec<Region>,
     /// The census.
     pub summary: FieldSummary,
 }
@@ -176,7 +176,7 @@ impl RayWork {
 /// Scratch storage of one thread (reused: no allocation per ray once warm).
 #[derive(Default)]
 pub struct Scratch {
-    iv: Vec<Interval>,
+    pub(super) iv: Vec<Interval>,
     v: Vec<f64>,
     stack: Vec<(f64, f64)>,
 }
@@ -291,7 +291,7 @@ impl Field3 {
         }
     }
 
-    fn cell_of(&self, p: DVec3) -> Option<usize> {
+    pub(super) fn cell_of(&self, p: DVec3) -> Option<usize> {
         let h = 2.0 * EXTENT / self.n as f64;
         let mut idx = [0usize; 3];
         for a in 0..3 {
@@ -342,6 +342,32 @@ impl Field3 {
         s: &mut Scratch,
         w: &mut RayWork,
     ) -> Option<RootHit> {
+        self.first_root_hinted(o, d, t_min, t_max, tol0, tol1, f64::INFINITY, false, s, w)
+    }
+
+    /// [`Self::first_root`] where a surface, if any, is expected within `hint` of `t_min`
+    /// (a ray bundle's pre-pass proved the ray empty up to `t_min` and could not prove the
+    /// next `hint` of it empty): the interval isolation of the first cell starts with that
+    /// piece instead of halving the cell's whole piece down to it. The result is the
+    /// same root up to the tolerance; only the work differs. With `outside` the caller
+    /// knows the ray is outside the solid just before `t_min` (proven empty up to there, or
+    /// sampled outside at `t_min`): a value `<= 0` at `t_min` is then a root there, not a
+    /// start inside the solid.
+    #[allow(clippy::too_many_arguments)]
+    pub fn first_root_hinted(
+        &self,
+        o: DVec3,
+        d: DVec3,
+        t_min: f64,
+        t_max: f64,
+        tol0: f64,
+        tol1: f64,
+        hint: f64,
+        outside: bool,
+        s: &mut Scratch,
+        w: &mut RayWork,
+    ) -> Option<RootHit> {
+        let hint_end = t_min + hint;
         // The ray's piece in the cube, and the faces it enters and leaves by.
         let (mut tin, mut tout) = (f64::NEG_INFINITY, f64::INFINITY);
         let (mut in_face, mut out_face) = (DVec3::ZERO, DVec3::ZERO);
@@ -380,6 +406,10 @@ impl Field3 {
         if f_start < 0.0 && entering {
             // The solid reaches the cube's face: the cut face is the surface here.
             return Some(RootHit { t: t0, error: 0.0, face: Some(in_face), region: None });
+        }
+        if outside && f_start <= 0.0 {
+            let region = self.cell_of(start).map(|c| self.cells[c]).filter(|&r| r < INSIDE);
+            return Some(RootHit { t: t0, error: 0.0, face: None, region });
         }
         let sign = if f_start < 0.0 { -1.0 } else { 1.0 };
         // 3D DDA over the cells.
@@ -420,7 +450,10 @@ impl Field3 {
                 let region = &self.regions[code as usize];
                 let found = match region.lipschitz {
                     Some(l) => self.lipschitz_walk(region, o, d, t, seg_end, sign, l * dn, &tol, s, w),
-                    None => self.isolate(region, o, d, t, seg_end, sign, &tol, s, w),
+                    None => {
+                        let first = if hint_end > t { hint_end - t } else { f64::INFINITY };
+                        self.isolate(region, o, d, t, seg_end, sign, first, &tol, s, w)
+                    }
                 };
                 if let Some((t, error)) = found {
                     return Some(RootHit { t, error, face: None, region: Some(code) });
@@ -508,10 +541,11 @@ impl Field3 {
             t = next;
             g = gn;
         }
-        self.isolate(r, o, d, t, tb, sign, tol, s, w)
+        self.isolate(r, o, d, t, tb, sign, f64::INFINITY, tol, s, w)
     }
 
-    /// The first root in `[ta, tb]` by interval subdivision (see the module header).
+    /// The first root in `[ta, tb]` by interval subdivision (see the module header); its
+    /// first piece is `[ta, ta + first]` when that is shorter than the whole.
     #[allow(clippy::too_many_arguments)]
     fn isolate(
         &self,
@@ -521,13 +555,19 @@ impl Field3 {
         ta: f64,
         tb: f64,
         sign: f64,
+        first: f64,
         tol: &impl Fn(f64) -> f64,
         s: &mut Scratch,
         w: &mut RayWork,
     ) -> Option<(f64, f64)> {
         let mut stack = std::mem::take(&mut s.stack);
         stack.clear();
-        stack.push((ta, tb));
+        if ta + first < tb {
+            stack.push((ta + first, tb));
+            stack.push((ta, ta + first));
+        } else {
+            stack.push((ta, tb));
+        }
         // The last point value computed (pieces are visited in order along the ray).
         let mut last = (f64::NAN, f64::NAN);
         let mut found = None;

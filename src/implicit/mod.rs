@@ -10,8 +10,10 @@
 //! The value of such a model is not a distance: negative inside, positive outside, and
 //! nothing more is promised.
 
+pub mod bundle;
 pub mod field3d;
 pub mod gradient;
+pub mod heightmap;
 pub mod image2d;
 pub mod interval;
 pub mod ops;
