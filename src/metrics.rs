@@ -273,7 +273,8 @@ pub fn flip_mean(test: &RgbImage, reference: &RgbImage) -> f64 {
 
 /// One grade of `quality_px`: a run meets it when its 95th-percentile pixel error is at most
 /// `px` pixels, at most `max_silhouette_pct` percent of the pixels differ in silhouette, and
-/// its mean FLIP is at most `max_flip_mean`. The bounds are [`QUALITY_LEVELS`].
+/// its mean FLIP is at most `max_flip_mean`. The bounds depend on the image size
+/// ([`quality_levels`]); [`QUALITY_LEVELS`] are those at 256 x 256.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct QualityLevel {
     /// Largest `px_err_p95`, pixels (the level's name).
@@ -284,23 +285,69 @@ pub struct QualityLevel {
     pub max_flip_mean: f64,
 }
 
-/// The quality levels, finest first. The silhouette and FLIP bounds were calibrated on the
-/// bundled scenes at 256x256 pixels (the study's image size) with `--res 16,64`: every
+/// The quality levels at 256 x 256 pixels, finest first. The silhouette and FLIP bounds were
+/// chosen on the bundled scenes at 256x256 pixels with `--res 16,64`: every
 /// sphere-traced run at 0.25 px that looks like the reference meets 0.5 px or 1 px (FLIP
 /// 0.007-0.047, silhouette <= 0.5%); runs with a visible defect fail every level: grids of
 /// `coursework_mirrors` that lost both thin mirrors (silhouette 23.6%), grids of `showcase`
 /// with a garbled mirror (FLIP 0.12-0.13), `showcase` sphere traced at 1 px with speckles
 /// on edges (FLIP 0.124), a radius-5000 ground sphere tessellated into facets (`thesis_rt`,
 /// p95 16-10^4 px). A tolerance of L pixels fattens silhouettes by up to L pixels, so the
-/// silhouette bound grows with L; its share of the image halves when the image's side
-/// doubles, so at much smaller images the bounds are stricter than intended. Not caught: a
-/// wrong colour on a small part of the image (a CSG part given its parent's material in
-/// `thesis_sdf_csg` meshes and grids, FLIP 0.05).
+/// silhouette bound grows with L. Not caught: a wrong colour on a small part of the image (a
+/// CSG part given its parent's material in `thesis_sdf_csg` meshes and grids, FLIP 0.05).
+/// Other sizes scale these bounds by [`GATE_TABLE`].
 pub const QUALITY_LEVELS: [QualityLevel; 3] = [
     QualityLevel { px: 0.5, max_silhouette_pct: 0.5, max_flip_mean: 0.05 },
     QualityLevel { px: 1.0, max_silhouette_pct: 1.5, max_flip_mean: 0.08 },
     QualityLevel { px: 2.0, max_silhouette_pct: 4.0, max_flip_mean: 0.1 },
 ];
+
+/// The image sides (square images) the gates are calibrated at.
+pub const GATE_SIZES: [u32; 4] = [128, 256, 512, 1024];
+
+/// The silhouette and FLIP bounds per level ([`QUALITY_LEVELS`]' order) and image side
+/// ([`GATE_SIZES`]' order), as `(max_silhouette_pct, max_flip_mean)`: the 256 x 256 bounds
+/// scaled by how much the same sphere-traced runs' silhouette mismatch and mean FLIP change
+/// with the image size (`tools/calibrate-gates`, on 9 scenes of the smooth, CSG and CAD
+/// generators with seeds outside the study; reports/bench/gates.txt has the data). An
+/// outline off by L pixels is a share of the image that halves when its side doubles, and
+/// the measured ratios follow that.
+pub const GATE_TABLE: [[(f64, f64); 4]; 3] = GATE_TABLE_VALUES;
+
+/// `GATE_TABLE`'s numbers as tools/calibrate-gates wrote them (reports/bench/gates.csv).
+const GATE_TABLE_VALUES: [[(f64, f64); 4]; 3] = [
+    [(0.895, 0.0821), (0.5, 0.05), (0.25, 0.0287), (0.129, 0.0162)],
+    [(3.004, 0.1298), (1.5, 0.08), (0.773, 0.0469), (0.4, 0.0272)],
+    [(7.964, 0.161), (4.0, 0.1), (2.026, 0.0583), (1.033, 0.0341)],
+];
+
+/// The quality levels for a `width` x `height` image: [`GATE_TABLE`] interpolated linearly
+/// in log(bound) against log(side) (side: the geometric mean of width and height), clamped
+/// to the calibrated sides at either end.
+pub fn quality_levels(width: u32, height: u32) -> [QualityLevel; 3] {
+    let side = ((width.max(1) as f64) * (height.max(1) as f64)).sqrt();
+    let ls: Vec<f64> = GATE_SIZES.iter().map(|&s| (s as f64).ln()).collect();
+    let x = side.ln().clamp(ls[0], ls[ls.len() - 1]);
+    let k = (1..ls.len()).find(|&k| x <= ls[k]).unwrap_or(ls.len() - 1);
+    let f = (x - ls[k - 1]) / (ls[k] - ls[k - 1]);
+    let lerp = |a: f64, b: f64| {
+        if f <= 0.0 {
+            a
+        } else if f >= 1.0 {
+            b
+        } else {
+            (a.ln() + f * (b.ln() - a.ln())).exp()
+        }
+    };
+    std::array::from_fn(|i| {
+        let (a, b) = (GATE_TABLE[i][k - 1], GATE_TABLE[i][k]);
+        QualityLevel {
+            px: QUALITY_LEVELS[i].px,
+            max_silhouette_pct: lerp(a.0, b.0),
+            max_flip_mean: lerp(a.1, b.1),
+        }
+    })
+}
 
 impl QualityLevel {
     /// Whether a run with these errors meets this level (`px_err_p95` `None`: no pixel hit by
@@ -312,9 +359,19 @@ impl QualityLevel {
     }
 }
 
-/// `quality_px`: the finest of [`QUALITY_LEVELS`] that a run meets (its `px`), or `None`.
-pub fn quality_px(px_err_p95: Option<f64>, silhouette_mismatch_pct: f64, flip_mean: f64) -> Option<f64> {
-    QUALITY_LEVELS.iter().find(|l| l.met(px_err_p95, silhouette_mismatch_pct, flip_mean)).map(|l| l.px)
+/// `quality_px`: the finest of the levels of a `width` x `height` image
+/// ([`quality_levels`]) that a run meets (its `px`), or `None`.
+pub fn quality_px(
+    px_err_p95: Option<f64>,
+    silhouette_mismatch_pct: f64,
+    flip_mean: f64,
+    width: u32,
+    height: u32,
+) -> Option<f64> {
+    quality_levels(width, height)
+        .iter()
+        .find(|l| l.met(px_err_p95, silhouette_mismatch_pct, flip_mean))
+        .map(|l| l.px)
 }
 
 /// The bounding-box diagonal of the points that lie on bounded objects of `objects` (the

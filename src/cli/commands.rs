@@ -141,12 +141,9 @@ fn render_vm_heightmap(
     let time = start.elapsed();
     let depth_image = map.depth_png();
     let image = map.normal_png();
+    let depth_image = image::DynamicImage::ImageLuma16(depth_image);
     crate::files::write_atomic(depth, |w| {
-        use image::ImageEncoder;
-        let bytes: Vec<u8> = depth_image.as_raw().iter().flat_map(|v| v.to_be_bytes()).collect();
-        image::codecs::png::PngEncoder::new(w)
-            .write_image(&bytes, width as u32, height as u32, image::ExtendedColorType::L16)
-            .map_err(std::io::Error::other)
+        depth_image.write_with_encoder(image::codecs::png::PngEncoder::new(w)).map_err(std::io::Error::other)
     })?;
     write_png(&image, &opts.output)?;
     let rays = (width * height).max(1) as f64;

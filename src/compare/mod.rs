@@ -1271,7 +1271,7 @@ fn measure(
     let quality = if is_reference {
         Some(metrics::QUALITY_LEVELS[0].px)
     } else {
-        metrics::quality_px(px_p95, silhouette, flip)
+        metrics::quality_px(px_p95, silhouette, flip, frame.image.width(), frame.image.height())
     };
     let knob = run.knob().filter(|_| marches(&built.plans));
     let census = built.geometry.census();

@@ -1,4 +1,4 @@
-//! The compare summary: per input and quality level ([`crate::metrics::QUALITY_LEVELS`]:
+//! The compare summary: per input and quality level ([`crate::metrics::quality_levels`] of its image size:
 //! 0.5, 1 and 2 pixels of geometric error with their silhouette and FLIP bounds), the fastest
 //! and the smallest run that meets it (`quality_px <= level`), the time and memory ratio of
 //! the best ray-marched run (SDF or grid) to the best mesh run, and the resolutions at which
@@ -16,7 +16,7 @@ use std::fmt::Write as _;
 use serde::Serialize;
 
 use super::Row;
-use crate::metrics::{QUALITY_LEVELS, median};
+use crate::metrics::{median, quality_levels};
 use crate::plan::ReprKind;
 
 /// A run named in the summary.
@@ -202,7 +202,9 @@ pub fn summarize(rows: &[Row]) -> Summary {
             let merged = merge_replicates(&by_input[name]);
             let rows: Vec<&Row> = merged.iter().collect();
             let rows = &rows;
-            let levels = QUALITY_LEVELS
+            // The gates of the input's image size (every run of an input has the same).
+            let (w, h) = rows.first().map_or((256, 256), |r| (r.width, r.height));
+            let levels = quality_levels(w, h)
                 .iter()
                 .map(|level| {
                     let l = level.px;

@@ -11,8 +11,8 @@ use sdfmesh::compare::{input_class, run_order};
 use sdfmesh::geometry::march::MarchParams;
 use sdfmesh::geometry::scene::SceneGeometry;
 use sdfmesh::metrics::{
-    Probe, QUALITY_LEVELS, bounded_diagonal, flip_mean, pixel_angle, pixel_error, probe, quality_px,
-    silhouette_mismatch_pct,
+    GATE_SIZES, GATE_TABLE, Probe, QUALITY_LEVELS, bounded_diagonal, flip_mean, pixel_angle, pixel_error,
+    probe, quality_levels, quality_px, silhouette_mismatch_pct,
 };
 use sdfmesh::plan::{Representation, build_scene};
 use sdfmesh::scene::shape::Primitive;
@@ -139,22 +139,58 @@ fn flip_is_zero_on_identical_images_and_grows_with_the_difference() {
 
 #[test]
 fn quality_is_the_finest_level_met() {
-    let [fine, mid, coarse] = QUALITY_LEVELS;
-    assert!(fine.px < mid.px && mid.px < coarse.px);
-    assert!(fine.max_silhouette_pct <= mid.max_silhouette_pct && fine.max_flip_mean <= mid.max_flip_mean);
-    assert_eq!(quality_px(Some(0.0), 0.0, 0.0), Some(fine.px));
-    assert_eq!(quality_px(Some(fine.px), fine.max_silhouette_pct, fine.max_flip_mean), Some(fine.px));
-    // Any one error just over the fine level's bound drops the run to the next level.
-    let over = |v: f64| v * 1.01 + 1e-9;
-    assert_eq!(quality_px(Some(over(fine.px)), 0.0, 0.0), Some(mid.px));
-    assert_eq!(quality_px(Some(0.0), over(fine.max_silhouette_pct), 0.0), Some(mid.px));
-    assert_eq!(quality_px(Some(0.0), 0.0, over(fine.max_flip_mean)), Some(mid.px));
-    assert_eq!(quality_px(Some(coarse.px), 0.0, 0.0), Some(coarse.px));
-    assert_eq!(quality_px(Some(over(coarse.px)), 0.0, 0.0), None);
-    assert_eq!(quality_px(Some(0.0), over(coarse.max_silhouette_pct), 0.0), None);
-    assert_eq!(quality_px(Some(0.0), 0.0, over(coarse.max_flip_mean)), None);
-    // No pixel hit by both: no level.
-    assert_eq!(quality_px(None, 0.0, 0.0), None);
+    for side in GATE_SIZES.into_iter().chain([32, 200, 700, 4096]) {
+        let [fine, mid, coarse] = quality_levels(side, side);
+        let q = |p: Option<f64>, s: f64, f: f64| quality_px(p, s, f, side, side);
+        assert!(fine.px < mid.px && mid.px < coarse.px);
+        assert!(fine.max_silhouette_pct <= mid.max_silhouette_pct && fine.max_flip_mean <= mid.max_flip_mean);
+        assert!(
+            mid.max_silhouette_pct <= coarse.max_silhouette_pct && mid.max_flip_mean <= coarse.max_flip_mean
+        );
+        assert_eq!(q(Some(0.0), 0.0, 0.0), Some(fine.px));
+        assert_eq!(q(Some(fine.px), fine.max_silhouette_pct, fine.max_flip_mean), Some(fine.px));
+        // Any one error just over the fine level's bound drops the run to the next level.
+        let over = |v: f64| v * 1.01 + 1e-9;
+        assert_eq!(q(Some(over(fine.px)), 0.0, 0.0), Some(mid.px));
+        assert_eq!(q(Some(0.0), over(fine.max_silhouette_pct), 0.0), Some(mid.px));
+        assert_eq!(q(Some(0.0), 0.0, over(fine.max_flip_mean)), Some(mid.px));
+        assert_eq!(q(Some(coarse.px), 0.0, 0.0), Some(coarse.px));
+        assert_eq!(q(Some(over(coarse.px)), 0.0, 0.0), None);
+        assert_eq!(q(Some(0.0), over(coarse.max_silhouette_pct), 0.0), None);
+        assert_eq!(q(Some(0.0), 0.0, over(coarse.max_flip_mean)), None);
+        // No pixel hit by both: no level.
+        assert_eq!(q(None, 0.0, 0.0), None);
+    }
+}
+
+/// The gates per image size: at 256 x 256 the bounds chosen there, at the calibrated sides
+/// the table, in between between their neighbours, beyond the ends clamped; as calibrated,
+/// the silhouette bound shrinks as the image grows (an outline error is a smaller share).
+#[test]
+fn gates_follow_the_image_size_as_calibrated() {
+    assert_eq!(quality_levels(256, 256), QUALITY_LEVELS);
+    for (i, level) in QUALITY_LEVELS.iter().enumerate() {
+        for (k, &side) in GATE_SIZES.iter().enumerate() {
+            let at = quality_levels(side, side)[i];
+            let (sil, flip) = GATE_TABLE[i][k];
+            assert!((at.max_silhouette_pct - sil).abs() < 1e-9 && (at.max_flip_mean - flip).abs() < 1e-9);
+            assert_eq!(at.px, level.px);
+        }
+        for k in 1..GATE_SIZES.len() {
+            let (a, b) = (GATE_SIZES[k - 1], GATE_SIZES[k]);
+            assert!(GATE_TABLE[i][k].0 < GATE_TABLE[i][k - 1].0, "level {}: {a} -> {b}", level.px);
+            let mid = quality_levels((a + b) / 2, (a + b) / 2)[i];
+            let (lo, hi) = (
+                GATE_TABLE[i][k].0.min(GATE_TABLE[i][k - 1].0),
+                GATE_TABLE[i][k].0.max(GATE_TABLE[i][k - 1].0),
+            );
+            assert!(mid.max_silhouette_pct > lo && mid.max_silhouette_pct < hi);
+        }
+        assert_eq!(quality_levels(16, 16)[i], quality_levels(128, 128)[i]);
+        assert_eq!(quality_levels(8192, 8192)[i], quality_levels(1024, 1024)[i]);
+    }
+    // A non-square image: the geometric mean of its sides.
+    assert_eq!(quality_levels(128, 512), quality_levels(256, 256));
 }
 
 /// The scale of relative surface errors ignores infinite planes and a radius-5000 ground

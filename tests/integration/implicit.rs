@@ -39,6 +39,73 @@ fn two_d_images_agree_with_brute_force_f64() {
     }
 }
 
+/// `toolkit render MODEL.vm --heightmap`: the 16-bit height image holds the encoded height
+/// of the first surface from above (a sphere of radius 0.5 at the origin: 1 at the centre
+/// pixel's z = 0.5), the RGB image its normal; a 2D model, a scene file and a --repr are
+/// refused with one line and no image.
+#[test]
+fn render_writes_a_heightmap_and_refuses_what_has_none() {
+    let dir = tempfile::tempdir().unwrap();
+    let exe = env!("CARGO_BIN_EXE_toolkit");
+    let model = dir.path().join("ball.vm");
+    std::fs::write(
+        &model,
+        "x var-x\ny var-y\nz var-z\na square x\nb square y\nc square z\nd add a b\ne add d c\nr const 0.25\no sub e r\n",
+    )
+    .unwrap();
+    let (depth, normal) = (dir.path().join("h.png"), dir.path().join("n.png"));
+    let run = |args: &[&str]| Command::new(exe).args(args).output().unwrap();
+    let out = run(&[
+        "render",
+        model.to_str().unwrap(),
+        "--heightmap",
+        depth.to_str().unwrap(),
+        "-o",
+        normal.to_str().unwrap(),
+        "--width",
+        "33",
+        "--height",
+        "33",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let h = image::open(&depth).unwrap().to_luma16();
+    // Pixel 16 of 33 is the centre: z = 0.5 there, encoded as round(0.75 * 65535), within the
+    // bisection's bracket (a thousandth of the half-pixel tolerance: 2 codes).
+    let centre = h.get_pixel(16, 16)[0] as i32;
+    assert!((centre - (0.75f64 * 65535.0).round() as i32).abs() <= 2, "{centre}");
+    assert_eq!(h.get_pixel(0, 0)[0], 0);
+    let n = image::open(&normal).unwrap().to_rgb8();
+    assert_eq!(n.get_pixel(16, 16).0, [128, 128, 255]);
+    // A pixel right of the centre leans to +x.
+    assert!(n.get_pixel(24, 16)[0] > 160, "{:?}", n.get_pixel(24, 16));
+
+    let flat = dir.path().join("disc.vm");
+    std::fs::write(&flat, "x var-x\ny var-y\na square x\nb square y\nc add a b\nr const 0.25\no sub c r\n")
+        .unwrap();
+    let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/scenes/thesis_sdf_csg.toml");
+    let d2 = dir.path().join("h2.png");
+    for args in [
+        vec!["render", flat.to_str().unwrap(), "--heightmap", d2.to_str().unwrap(), "-o", "n2.png"],
+        vec!["render", scene.to_str().unwrap(), "--heightmap", d2.to_str().unwrap(), "-o", "n2.png"],
+        vec![
+            "render",
+            model.to_str().unwrap(),
+            "--repr",
+            "grid",
+            "--heightmap",
+            d2.to_str().unwrap(),
+            "-o",
+            "n2.png",
+        ],
+    ] {
+        let out = run(&args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(!d2.exists());
+    }
+}
+
 #[test]
 fn render_writes_the_prospero_image_and_refuses_bad_files() {
     let dir = tempfile::tempdir().unwrap();

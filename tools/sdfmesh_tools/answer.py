@@ -345,15 +345,44 @@ def amortised_table(rows, ratios, level: float = HEADLINE_LEVEL) -> str:
                      *(f"SDF cheaper, N = {n}" for n in FRAME_COUNTS), "break-even N (median)"], out)
 
 
-# The gates of `quality_px` (src/metrics.rs QUALITY_LEVELS; tools/tests/test_duel.py checks
-# that the two agree): level px -> (largest px_err_p95, largest silhouette %, largest FLIP).
+# The gates of `quality_px` (src/metrics.rs QUALITY_LEVELS, GATE_SIZES, GATE_TABLE and
+# quality_levels; tools/tests/test_duel.py checks that the two agree). GATES: the bounds at
+# 256x256, level px -> (largest px_err_p95, largest silhouette %, largest FLIP); GATE_TABLE:
+# per level, per side of GATE_SIZES, (largest silhouette %, largest FLIP), calibrated per image
+# size by tools/calibrate-gates (reports/bench/gates.txt).
 GATES = {0.5: (0.5, 0.5, 0.05), 1.0: (1.0, 1.5, 0.08), 2.0: (2.0, 4.0, 0.1)}
+GATE_SIZES = (128, 256, 512, 1024)
+GATE_TABLE = {
+    0.5: ((0.895, 0.0821), (0.5, 0.05), (0.25, 0.0287), (0.129, 0.0162)),
+    1.0: ((3.004, 0.1298), (1.5, 0.08), (0.773, 0.0469), (0.4, 0.0272)),
+    2.0: ((7.964, 0.161), (4.0, 0.1), (2.026, 0.0583), (1.033, 0.0341)),
+}
 GATE_NAMES = ("p95 pixel error", "silhouette mismatch", "mean FLIP")
 
 
+def gates_at(level: float, width: float = 256, height: float = 256) -> tuple[float, float, float] | None:
+    """The gates of `level` for a width x height image, as src/metrics.rs quality_levels: the
+    table interpolated linearly in log(bound) against log(side), side the geometric mean of
+    width and height, clamped to the calibrated sides."""
+    if level not in GATES:
+        return None
+    side = math.sqrt(max(float(width), 1.0) * max(float(height), 1.0))
+    ls = [math.log(s) for s in GATE_SIZES]
+    x = min(max(math.log(side), ls[0]), ls[-1])
+    k = next((k for k in range(1, len(ls)) if x <= ls[k]), len(ls) - 1)
+    f = (x - ls[k - 1]) / (ls[k] - ls[k - 1])
+    (a0, a1), (b0, b1) = GATE_TABLE[level][k - 1], GATE_TABLE[level][k]
+
+    def lerp(a, b):
+        return a if f <= 0 else b if f >= 1 else math.exp(math.log(a) + f * (math.log(b) - math.log(a)))
+
+    return level, lerp(a0, b0), lerp(a1, b1)
+
+
 def binding_gate(row, level: float) -> str | None:
-    """The gate a run meeting `level` is closest to failing: the largest of value / bound."""
-    bounds = GATES.get(level)
+    """The gate a run meeting `level` is closest to failing: the largest of value / bound, the
+    bounds those of the run's image size."""
+    bounds = gates_at(level, num(row, "width") or 256, num(row, "height") or 256)
     vals = (num(row, "px_err_p95"), num(row, "silhouette_mismatch_pct"), num(row, "flip_mean"))
     if bounds is None or any(v is None for v in vals):
         return None
@@ -363,8 +392,18 @@ def binding_gate(row, level: float) -> str | None:
 def gates_section(rows, sel) -> str:
     from .report import md_table
 
-    defs = md_table(["level", "p95 pixel error ≤", "silhouette mismatch ≤ (% of pixels)", "mean FLIP ≤"],
-                    [(f"{lv:g} px", f"{g[0]:g} px", f"{g[1]:g}%", f"{g[2]:g}") for lv, g in GATES.items()])
+    sizes = sorted({int(w) for r in rows if (w := num(r, "width"))} | {256})
+    head = ["level", "p95 pixel error ≤"]
+    for side in sizes:
+        head += [f"silhouette ≤ at {side}² (% of pixels)", f"mean FLIP ≤ at {side}²"]
+    defs_rows = []
+    for lv in GATES:
+        cells = [f"{lv:g} px", f"{lv:g} px"]
+        for side in sizes:
+            g = gates_at(lv, side, side)
+            cells += [f"{g[1]:.3g}%", f"{g[2]:.3g}"]
+        defs_rows.append(cells)
+    defs = md_table(head, defs_rows)
     by_key = {}
     for r in rows:
         if data.side(r):
@@ -381,9 +420,11 @@ def gates_section(rows, sel) -> str:
     return ("`quality_px` is the finest level whose three gates a run passes, all measured against the "
             "input's reference image and hit points: the 95th percentile of the geometric error in "
             "pixels of the surface both hit, the share of pixels where exactly one of the two hits a "
-            "surface, and the mean FLIP of the shaded images. The gates (src/metrics.rs; calibrated at "
-            "256×256 on the bundled scenes, applied here at the study's image size without "
-            "recalibration, which makes the silhouette gate stricter at smaller images):\n\n" + defs
+            "surface, and the mean FLIP of the shaded images. The silhouette and FLIP bounds were chosen "
+            "at 256×256 on the bundled scenes and are scaled per image size by tools/calibrate-gates "
+            "(src/metrics.rs GATE_TABLE; measured on seeded scenes outside the study: how the same "
+            "sphere-traced runs' silhouette mismatch and FLIP change with the image size; "
+            "reports/bench/gates.txt). The bounds at 256² and at this study's sizes:\n\n" + defs
             + "\nWhich gate bound the chosen runs (the gate closest to failing: the largest value / bound), "
             "counted over inputs:\n\n" + table)
 

@@ -213,6 +213,39 @@ def test_the_gates_match_the_toolkits():
     src = (REPO / "src" / "metrics.rs").read_text()
     found = re.findall(r"QualityLevel \{ px: ([\d.]+), max_silhouette_pct: ([\d.]+), max_flip_mean: ([\d.]+) \}", src)
     assert {float(a): (float(a), float(b), float(c)) for a, b, c in found} == answer.GATES
+    sizes = re.search(r"pub const GATE_SIZES: \[u32; \d+\] = \[([\d, ]+)\];", src)
+    assert tuple(int(v) for v in sizes.group(1).split(",")) == answer.GATE_SIZES
+    body = re.search(r"const GATE_TABLE_VALUES: [^=]+= \[(.*?)\];\n", src, re.S).group(1)
+    levels = re.findall(r"\[((?:\s*\([\d.]+, [\d.]+\),?)+)\s*\]", body)
+    table = [[(float(a), float(b)) for a, b in re.findall(r"\(([\d.]+), ([\d.]+)\)", lv)] for lv in levels]
+    assert table == [list(answer.GATE_TABLE[lv]) for lv in sorted(answer.GATES)]
+    # At 256x256 the table holds the bounds chosen there; at every side, the 256 bounds
+    # come back at 256 and the table's at its sizes.
+    for lv, (_, sil, flip) in answer.GATES.items():
+        assert answer.gates_at(lv, 256, 256) == (lv, sil, flip)
+        for k, side in enumerate(answer.GATE_SIZES):
+            assert answer.gates_at(lv, side, side) == (lv, *answer.GATE_TABLE[lv][k])
+
+
+def test_gates_between_sizes_agree_with_the_toolkits_summary(toolkit, tmp_path):
+    """At a size between the calibrated ones (200x200) the toolkit's summary.json states the
+    bounds it applied; the report's interpolation gives the same."""
+    import json
+    import subprocess
+    from conftest import REPO
+
+    scene = REPO / "data" / "scenes" / "smooth" / "smooth_spheres.toml"
+    r = subprocess.run([str(toolkit), "compare", str(scene), "--width", "200", "--height", "200", "--res", "8",
+                        "--frames", "1", "--sdf-tolerance-px", "2", "--sdf-relax", "1", "--no-decimate",
+                        "--csv", str(tmp_path / "c.csv"), "--summary-json", str(tmp_path / "s.json"), "--quiet"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    [entry] = json.loads((tmp_path / "s.json").read_text())["inputs"]
+    assert len(entry["levels"]) == 3
+    for lv in entry["levels"]:
+        _, sil, flip = answer.gates_at(lv["quality_px"], 200, 200)
+        assert abs(lv["max_silhouette_pct"] - sil) < 1e-9 and abs(lv["max_flip_mean"] - flip) < 1e-9
+        assert lv["max_silhouette_pct"] != answer.GATES[lv["quality_px"]][1]
 
 
 def test_binding_gate_is_the_one_closest_to_its_bound():
