@@ -275,7 +275,10 @@ def _search_and_implicit_caveats(rows, per_class) -> list[str]:
         out.append("Implicit models (class implicit) are fields, not distances: their SDF side is our safe "
                    "marcher (Lipschitz steps, else interval root isolation), one point at a time, without the "
                    "pruning and 8-wide evaluation of the SDF tape, so its frame times bound what marching "
-                   "them can do from above; Fidget's 3D renderer was not measured against it.")
+                   "them can do from above. Fidget 0.5.1's CPU voxel renderer was raced against a different "
+                   "path of ours, the orthographic heightmap view cast as ray bundles (tools/bench-implicit3d, "
+                   "reports/bench/implicit3d.txt: on bear, colonnade and bolt Fidget is 2.6x to 11x faster), "
+                   "not against this marcher.")
     return out
 
 
