@@ -32,7 +32,7 @@ use glam::DVec3;
 
 use super::field3d::{EXTENT, Field3, INSIDE, OUTSIDE, PAD, RayWork, RootHit, Scratch};
 use super::interval::Interval;
-use super::tape::{LANES, Ssa, Tape};
+use super::tape::{LANES, ShortenScratch, Ssa, Tape};
 
 /// Halvings of a leaf's sign change (from at most the hit tolerance to 1/1024 of it).
 const BISECTIONS: usize = 10;
@@ -61,9 +61,8 @@ pub struct BundleScratch {
     outside: Vec<bool>,
     /// A leaf's program, shortened over its box, and its registers.
     short: Ssa,
+    shorten: ShortenScratch,
     tape: Tape,
-    alias: Vec<u32>,
-    live: Vec<bool>,
     last_use: Vec<u32>,
     reg_of: Vec<u32>,
     free: Vec<u32>,
@@ -257,9 +256,10 @@ impl Field3 {
         };
         let iv = |k: usize| Interval::new(blo[k], bhi[k]);
         w.interval_evals += 1;
-        prog.eval_interval(iv(0), iv(1), iv(2), &mut s.iv);
-        prog.shorten(&s.iv, &mut b.short, &mut b.alias, &mut b.live);
-        b.tape.allocate_into(&b.short, &mut b.last_use, &mut b.reg_of, &mut b.free);
+        prog.eval_interval_fast(iv(0), iv(1), iv(2), &mut s.iv);
+        // Where the box decides no clause the program stays as it is (no copy).
+        let src = if prog.shorten_decided(&s.iv, &mut b.short, &mut b.shorten) { &b.short } else { prog };
+        b.tape.allocate_into(src, &mut b.last_use, &mut b.reg_of, &mut b.free);
         b.samples.clear();
         for (k, &(_, d)) in rays.iter().enumerate().take(hi).skip(lo) {
             let (t0, t1) = b.span[k];
@@ -378,7 +378,7 @@ impl Field3 {
         let iv = |a: f64, b: f64| Interval::new(a, b);
         if count > MAX_BOX_CELLS {
             w.interval_evals += 1;
-            let v = self.ssa.eval_interval(iv(lo.x, hi.x), iv(lo.y, hi.y), iv(lo.z, hi.z), &mut s.iv);
+            let v = self.ssa.eval_interval_fast(iv(lo.x, hi.x), iv(lo.y, hi.y), iv(lo.z, hi.z), &mut s.iv);
             return if !v.nan && v.lo > 0.0 { BoxState::Empty } else { BoxState::Maybe };
         }
         for k in k0..=k1 {
@@ -395,7 +395,7 @@ impl Field3 {
                     let c = |a: usize| -EXTENT + a as f64 * h;
                     let clip = |l: f64, u: f64, a: usize| iv(l.max(c(a) - PAD), u.min(c(a + 1) + PAD));
                     w.interval_evals += 1;
-                    let v = self.regions[code as usize].ssa.eval_interval(
+                    let v = self.regions[code as usize].ssa.eval_interval_fast(
                         clip(lo.x, hi.x, i),
                         clip(lo.y, hi.y, j),
                         clip(lo.z, hi.z, k),
