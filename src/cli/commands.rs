@@ -149,9 +149,8 @@ fn render_vm_heightmap(
     let rays = (width * height).max(1) as f64;
     let w = &map.work;
     let text = format!(
-        "  {}
-  heightmap {width}x{height} in {:.1} ms (cells prepared in {:.1} ms); {} pixels hit; per ray {:.2} point evaluations, {:.2} interval evaluations, {:.2} Lipschitz steps
-",
+        "  {}\n  heightmap {width}x{height} in {:.1} ms (cells prepared in {:.1} ms); {} pixels hit; per ray \
+         {:.2} point evaluations, {:.2} interval evaluations, {:.2} Lipschitz steps\n",
         field.summary.describe(),
         time.as_secs_f64() * 1e3,
         prepared.as_secs_f64() * 1e3,
