@@ -32,7 +32,7 @@ use glam::DVec3;
 
 use super::field3d::{EXTENT, Field3, INSIDE, OUTSIDE, PAD, RayWork, RootHit, Scratch};
 use super::interval::Interval;
-use super::tape::{LANES, ShortenScratch, Ssa, Tape};
+use super::tape::{LANES, ShortenScratch, Ssa, TapeRunner};
 
 /// Halvings of a leaf's sign change (from at most the hit tolerance to 1/1024 of it).
 const BISECTIONS: usize = 10;
@@ -59,14 +59,10 @@ pub struct BundleScratch {
     hint: Vec<f64>,
     /// Whether the ray is known to be outside the solid at `start`.
     outside: Vec<bool>,
-    /// A leaf's program, shortened over its box, and its registers.
+    /// A leaf's program, shortened over its box, and its tape.
     short: Ssa,
     shorten: ShortenScratch,
-    tape: Tape,
-    last_use: Vec<u32>,
-    reg_of: Vec<u32>,
-    free: Vec<u32>,
-    regs: Vec<f32>,
+    tape: TapeRunner,
     /// A leaf's sample points: (ray, t) and the f32 value there.
     samples: Vec<(u32, f64)>,
     values: Vec<f32>,
@@ -259,7 +255,7 @@ impl Field3 {
         prog.eval_interval_fast(iv(0), iv(1), iv(2), &mut s.iv);
         // Where the box decides no clause the program stays as it is (no copy).
         let src = if prog.shorten_decided(&s.iv, &mut b.short, &mut b.shorten) { &b.short } else { prog };
-        b.tape.allocate_into(src, &mut b.last_use, &mut b.reg_of, &mut b.free);
+        b.tape.load(src);
         b.samples.clear();
         for (k, &(_, d)) in rays.iter().enumerate().take(hi).skip(lo) {
             let (t0, t1) = b.span[k];
@@ -281,7 +277,7 @@ impl Field3 {
                 let p = rays[k as usize].0 + rays[k as usize].1 * t;
                 (xs[i], ys[i], zs[i]) = (p.x as f32, p.y as f32, p.z as f32);
             }
-            b.tape.eval(&xs, &ys, &zs, &mut b.regs, &mut out);
+            b.tape.eval(&xs, &ys, &zs, &mut out);
             b.values.extend_from_slice(&out[..chunk.len()]);
         }
         w.point_evals += b.samples.len() as u64;
@@ -337,7 +333,7 @@ impl Field3 {
                     let p = rays[k as usize].0 + rays[k as usize].1 * (0.5 * (lo + hi));
                     (xs[i], ys[i], zs[i]) = (p.x as f32, p.y as f32, p.z as f32);
                 }
-                b.tape.eval(xs, ys, zs, &mut b.regs, &mut out);
+                b.tape.eval(xs, ys, zs, &mut out);
                 w.point_evals += chunk.len() as u64;
                 for (br, &v) in chunk.iter_mut().zip(&out) {
                     let m = 0.5 * (br.1 + br.2);

@@ -16,7 +16,7 @@ use std::sync::Mutex;
 use rayon::prelude::*;
 
 use super::interval::Interval;
-use super::tape::{LANES, ShortenScratch, Ssa, Tape};
+use super::tape::{LANES, ShortenScratch, Ssa, TapeRunner};
 
 /// Tile edges of the levels of interval pruning, pixels, each a multiple of the next; the
 /// last level's tiles are evaluated pixel by pixel in [`BLOCK`] x [`BLOCK`] blocks.
@@ -84,11 +84,7 @@ struct Scratch {
     choices: Vec<Vec<u8>>,
     tapes: Vec<Ssa>,
     shorten: ShortenScratch,
-    tape: Tape,
-    last_use: Vec<u32>,
-    reg_of: Vec<u32>,
-    free: Vec<u32>,
-    regs: Vec<f32>,
+    tape: TapeRunner,
 }
 
 /// The image being rendered and its levels.
@@ -325,7 +321,7 @@ fn leaf(
     out: &mut TileOut,
     census: &mut Census,
 ) {
-    s.tape.allocate_into(tape, &mut s.last_use, &mut s.reg_of, &mut s.free);
+    s.tape.load(tape);
     let (mut xs, mut ys, zs) = ([0f32; LANES], [0f32; LANES], [0f32; LANES]);
     let mut values = [0f32; LANES];
     for bi in (i0..i1).step_by(BLOCK) {
@@ -338,7 +334,7 @@ fn leaf(
                 xs[k] = pixel_x(j, f.w) as f32;
                 ys[k] = pixel_y(i, f.h) as f32;
             }
-            s.tape.eval(&xs, &ys, &zs, &mut s.regs, &mut values);
+            s.tape.eval(&xs, &ys, &zs, &mut values);
             for i in bi..bi1 {
                 let o = (i - out.i0) * out.stride;
                 for j in bj..bj1 {

@@ -521,6 +521,29 @@ impl Tape {
     }
 }
 
+/// A [`Tape`] with the storage its allocation and evaluation reuse (per thread: loading a
+/// program and evaluating it allocate nothing once the vectors have grown).
+#[derive(Clone, Debug, Default)]
+pub struct TapeRunner {
+    tape: Tape,
+    last_use: Vec<u32>,
+    reg_of: Vec<u32>,
+    free: Vec<u32>,
+    regs: Vec<f32>,
+}
+
+impl TapeRunner {
+    /// Allocates `ssa`'s registers; [`Self::eval`] evaluates it from now on.
+    pub fn load(&mut self, ssa: &Ssa) {
+        self.tape.allocate_into(ssa, &mut self.last_use, &mut self.reg_of, &mut self.free);
+    }
+
+    /// [`Tape::eval`] of the loaded program.
+    pub fn eval(&mut self, xs: &[f32; LANES], ys: &[f32; LANES], zs: &[f32; LANES], out: &mut [f32; LANES]) {
+        self.tape.eval(xs, ys, zs, &mut self.regs, out);
+    }
+}
+
 /// `op` lane by lane; the common arithmetic written out so that it vectorizes.
 #[inline(always)]
 fn lanes(op: Opcode, a: &[f32; LANES], b: &[f32; LANES], d: &mut [f32; LANES]) {
