@@ -190,6 +190,40 @@ fn world_to_model(v: &View, n: u32) -> Matrix4<f32> {
         Vector4::new(col_1.x, col_1.y, col_1.z, b),
     ])
 }
+/// Fidget's thread pool for `threads` threads: `None` (its single-threaded path) for 1.
+pub(crate) fn pool(threads: usize) -> Result<Option<ThreadPool>, String> {
+    if threads <= 1 {
+        return Ok(None);
+    }
+    let p = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| format!("thread pool: {e}"))?;
+    Ok(Some(ThreadPool::Custom(p)))
+}
+
+/// One cold call of `render`, then `runs` timed ones: the last result, the cold call's ms and
+/// the timed calls' ms. `None` from `render` (a cancelled render) is an error.
+pub(crate) fn time_renders<T>(
+    runs: usize,
+    mut render: impl FnMut() -> Option<T>,
+) -> Result<(T, f64, Vec<f64>), String> {
+    let mut times = Vec::with_capacity(runs);
+    let mut cold_ms = 0.0;
+    let mut last = None;
+    for i in 0..=runs {
+        let t = Instant::now();
+        let out = render().ok_or("render cancelled")?;
+        let ms = t.elapsed().as_secs_f64() * 1e3;
+        if i == 0 {
+            cold_ms = ms;
+        } else {
+            times.push(ms);
+        }
+        last = Some(out);
+    }
+    Ok((last.ok_or("no image")?, cold_ms, times))
+}
 
 pub(crate) fn median(v: &mut [f64]) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
@@ -213,31 +247,10 @@ fn bench<F: Function + MathFunction + RenderHints + Clone>(
     let vars = ShapeVars::<f32>::new();
     let bound = shape.bind(&vars).map_err(|e| format!("binding the shape: {e}"))?;
     let cfg = RenderConfig { image_size: RenderSize::from(n), world_to_model: world_to_model(v, n) };
-    let pool = if threads > 1 {
-        let p = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .map_err(|e| format!("thread pool: {e}"))?;
-        Some(ThreadPool::Custom(p))
-    } else {
-        None
-    };
+    let pool = pool(threads)?;
     let eval_cfg = EvalConfig { threads: pool.as_ref(), ..Default::default() };
-    let mut times = Vec::with_capacity(runs);
-    let mut cold_ms = 0.0;
-    let mut image = None;
-    for i in 0..=runs {
-        let t = Instant::now();
-        let out = fidget_voxel::render(bound.clone(), &cfg, &eval_cfg).ok_or("render cancelled")?;
-        let ms = t.elapsed().as_secs_f64() * 1e3;
-        if i == 0 {
-            cold_ms = ms;
-        } else {
-            times.push(ms);
-        }
-        image = Some(out);
-    }
-    let image = image.ok_or("no image")?;
+    let (image, cold_ms, mut times) =
+        time_renders(runs, || fidget_voxel::render(bound.clone(), &cfg, &eval_cfg))?;
     let hits = image.iter().filter(|p| p.depth > 0).count();
     let saturated = image.iter().filter(|p| p.depth > n).count();
     let med = median(&mut times);

@@ -19,7 +19,7 @@ use std::time::Instant;
 use fidget::context::Context;
 use fidget::eval::{Function, MathFunction};
 use fidget::raster::pixel::{self, EvalConfig, RenderConfig, RenderSize};
-use fidget::render::{RenderHints, ThreadPool};
+use fidget::render::RenderHints;
 use fidget::shape::{Shape, ShapeVars};
 use nalgebra::Matrix3;
 use rayon::prelude::*;
@@ -306,31 +306,10 @@ pub fn bench<F: Function + MathFunction + RenderHints + Clone>(
         world_to_model: Matrix3::new_translation(&nalgebra::Vector2::new(shift, shift)),
         ..RenderConfig::from_size(RenderSize::from(n as u32))
     };
-    let pool = if threads > 1 {
-        let p = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .map_err(|e| format!("thread pool: {e}"))?;
-        Some(ThreadPool::Custom(p))
-    } else {
-        None
-    };
+    let pool = crate::pool(threads)?;
     let eval_cfg = EvalConfig { threads: pool.as_ref(), ..Default::default() };
-    let mut times = Vec::with_capacity(runs);
-    let mut cold_ms = 0.0;
-    let mut image = None;
-    for i in 0..=runs {
-        let t = Instant::now();
-        let img = pixel::render(bound.clone(), &cfg, &eval_cfg).ok_or("render cancelled")?;
-        let ms = t.elapsed().as_secs_f64() * 1e3;
-        if i == 0 {
-            cold_ms = ms;
-        } else {
-            times.push(ms);
-        }
-        image = Some(img);
-    }
-    let image = image.ok_or("no image")?;
+    let (image, cold_ms, mut times) =
+        crate::time_renders(runs, || pixel::render(bound.clone(), &cfg, &eval_cfg))?;
     let inside: Vec<bool> = image.iter().map(|p| p.inside()).collect();
     write_pgm(out, n, &inside)?;
     let med = median(&mut times);
