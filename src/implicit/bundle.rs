@@ -72,6 +72,16 @@ pub struct BundleScratch {
     found: Vec<Option<RootHit>>,
 }
 
+impl BundleScratch {
+    /// Ray `k`'s part of `[a, bnd]` within its span, while the ray is still open (its march
+    /// has no start yet); `None` when it is not open or has no part there.
+    fn open_piece(&self, k: usize, a: f64, bnd: f64) -> Option<(f64, f64)> {
+        let (t0, t1) = self.span[k];
+        let (ta, tb) = (a.max(t0), bnd.min(t1));
+        (self.start[k].is_nan() && ta <= tb).then_some((ta, tb))
+    }
+}
+
 /// Whether a box was proven to hold no surface.
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum BoxState {
@@ -147,11 +157,8 @@ impl Field3 {
         let mut bmax = DVec3::splat(f64::NEG_INFINITY);
         let mut any = false;
         for (k, &(o, d)) in rays.iter().enumerate().take(hi).skip(lo) {
-            let (t0, t1) = b.span[k];
-            if !b.start[k].is_nan() || t0 > t1 || t > t1 {
-                continue;
-            }
-            let p = o + d * t.max(t0);
+            let Some((ta, _)) = b.open_piece(k, t, f64::INFINITY) else { continue };
+            let p = o + d * ta;
             bmin = bmin.min(p);
             bmax = bmax.max(p);
             any = true;
@@ -178,11 +185,7 @@ impl Field3 {
         let mut bmax = DVec3::splat(f64::NEG_INFINITY);
         let mut open = 0usize;
         for (k, &(o, d)) in rays.iter().enumerate().take(hi).skip(lo) {
-            let (t0, t1) = b.span[k];
-            let (ta, tb) = (a.max(t0), bnd.min(t1));
-            if !b.start[k].is_nan() || ta > tb {
-                continue;
-            }
+            let Some((ta, tb)) = b.open_piece(k, a, bnd) else { continue };
             for p in [o + d * ta, o + d * tb] {
                 bmin = bmin.min(p);
                 bmax = bmax.max(p);
@@ -210,10 +213,9 @@ impl Field3 {
             self.refine(rays, b, mid, hi, a, bnd, tol0, tol1, s, w);
         } else {
             for k in lo..hi {
-                let (t0, t1) = b.span[k];
-                if b.start[k].is_nan() && a.max(t0) <= bnd.min(t1) {
-                    b.start[k] = a.max(t0);
-                    b.hint[k] = bnd - b.start[k];
+                if let Some((ta, _)) = b.open_piece(k, a, bnd) {
+                    b.start[k] = ta;
+                    b.hint[k] = bnd - ta;
                 }
             }
         }
@@ -258,11 +260,7 @@ impl Field3 {
         b.tape.load(src);
         b.samples.clear();
         for (k, &(_, d)) in rays.iter().enumerate().take(hi).skip(lo) {
-            let (t0, t1) = b.span[k];
-            let (ta, tb) = (a.max(t0), bnd.min(t1));
-            if !b.start[k].is_nan() || ta > tb {
-                continue;
-            }
+            let Some((ta, tb)) = b.open_piece(k, a, bnd) else { continue };
             let tol = tol0 + tol1 * ta.abs();
             let m = (((tb - ta) * d.length() / tol).ceil() as usize).max(1);
             for i in 0..=m {
