@@ -175,7 +175,29 @@ def candidates_text(sel) -> str:
     for s in sel:
         c[s["side"]].append(int(s["candidates"]))
     parts = [f"{side} {int(np.median(v))} (median over inputs)" for side, v in c.items() if v]
-    return "Configurations each side chose from per input: " + ", ".join(parts) + "."
+    text = "Configurations each side chose from per input: " + ", ".join(parts) + "."
+    per_class = class_candidates(sel)
+    if per_class:
+        text += (f" Per class (SDF/mesh, median over inputs at {HEADLINE_LEVEL:g} px): "
+                 + ", ".join(f"{cls} {a:g}/{b:g}" for cls, (a, b) in per_class.items())
+                 + ". A count is how many configurations the side's search ran on the input; each "
+                 "family's search stops at the first knob that meets the finest level, so a side that "
+                 "meets the levels early runs fewer. The duels re-time the chosen pair, so the counts decide which configuration is "
+                 "chosen, not the ratio measured.")
+    return text
+
+
+def class_candidates(sel) -> dict:
+    """Per class, the median over its inputs of the SDF and the mesh side's candidate count at
+    the headline level (classes where both sides chose at that level), in class order."""
+    by: dict = {}
+    for s in sel:
+        if float(s["level"]) != HEADLINE_LEVEL or s["side"] not in ("sdf", "mesh"):
+            continue
+        by.setdefault(s["class"], {"sdf": [], "mesh": []})[s["side"]].append(int(s["candidates"]))
+    return {cls: (float(np.median(by[cls]["sdf"])), float(np.median(by[cls]["mesh"])))
+            for cls in [c for c in analysis.CLASS_ORDER if c in by] + sorted(set(by) - set(analysis.CLASS_ORDER))
+            if by[cls]["sdf"] and by[cls]["mesh"]}
 
 
 _SEARCH_NOTE = re.compile(r"search=(double|bisect) level=([0-9.]+)px(?: (unmet|last)=(budget|cap))?")
@@ -442,6 +464,8 @@ def size_table(size_rows, size_duel_rows, level: float = HEADLINE_LEVEL) -> str:
         return str(r.get("width", "")).strip()
 
     out, notes = [], []
+    by_size: dict[int, list[float]] = {}
+    caps: dict[int, list[int]] = {}
     for inp in data.inputs(size_rows):
         sub = [r for r in size_rows if r.get("input") == inp]
         sizes = sorted({int(width(r)) for r in sub if width(r)})
@@ -461,6 +485,12 @@ def size_table(size_rows, size_duel_rows, level: float = HEADLINE_LEVEL) -> str:
                 winners.append(None)
                 cell = "only SDF meets it" if sides == {"sdf"} else "only mesh meets it" if sides == {
                     "mesh"} else "neither meets it"
+                why = _size_stops(rows, level)
+                if why:
+                    cell += f" ({why})"
+            if ratios:
+                by_size.setdefault(px, []).append(float(np.mean(ratios[0]["logs"])))
+            caps.setdefault(px, []).append(_largest_knob(rows))
             out.append((f"`{inp}`" if px == sizes[0] else "", data.class_of(rows[0]) if px == sizes[0] else "",
                         f"{px}×{px}", cell, f"{b:.3g}" if b else "–"))
         seen = [(px, w) for px, w in zip(sizes, winners) if w]
@@ -469,10 +499,41 @@ def size_table(size_rows, size_duel_rows, level: float = HEADLINE_LEVEL) -> str:
             notes.append(f"`{inp}`: " + "; ".join(changes))
     if not out:
         return "No image-size runs.\n"
+    means = "; ".join(f"{px}×{px}: {math.exp(np.mean(v)):.3g} ({len(v)} inputs, largest resolution tried "
+                      f"{max(caps[px])})" for px, v in sorted(by_size.items()))
     return (md_table(["input", "class", "image", f"SDF/mesh frame time at {level:g} px (duel)",
                       "SDF/mesh bytes"], out)
             + "\n" + ("Frame-time winner changes with image size: " + "; ".join(notes) + ".\n" if notes else
-                      "The frame-time winner does not change with image size on these inputs.\n"))
+                      "The frame-time winner does not change with image size on these inputs.\n")
+            + (f"\nGeometric mean of the duelled SDF/mesh frame-time ratio over the inputs both sides met "
+               f"at each size (one input per class: descriptive, no interval): {means}.\n" if means else ""))
+
+
+def _size_stops(rows, level: float) -> str:
+    """Why a side met `level` on no run of an image size's sweep, from the search notes
+    (`unmet=cap` or `unmet=budget` at that level or a coarser one): "mesh: cap", or ""."""
+    out = []
+    for side in ("sdf", "mesh"):
+        if any(data.side(r) == side and data.meets(r, level) for r in rows):
+            continue
+        stops = set()
+        for r in rows:
+            m = _SEARCH_NOTE.search(r.get("note") or "")
+            if not m or data.side(r) != side:
+                continue
+            probed = float(m.group(2))
+            # unmet= holds at the probed level and every finer one; last= (the last knob met
+            # the probed level) stops every finer one.
+            if (m.group(3) == "unmet" and probed >= level) or (m.group(3) == "last" and probed > level):
+                stops.add(m.group(4))
+        if stops:
+            out.append(f"{'SDF' if side == 'sdf' else side}: {' and '.join(sorted(stops))}")
+    return "; ".join(out)
+
+
+def _largest_knob(rows) -> int:
+    """The largest grid or mesh resolution an image size's sweep ran (0: none)."""
+    return max((int(v) for r in rows if (v := num(r, "resolution")) is not None), default=0)
 
 
 def refcheck_section(ref_rows) -> str:

@@ -511,8 +511,9 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
     size_rows = data.read_csv(sizes) if sizes else []
     if size_rows:
         L.append("\n## Image size\n\nPixel-relative error makes a mesh's needed resolution grow with the image. "
-                 "On the first input of each class, the sweep at each image size, its own selection and one "
-                 "duel process (SDF/mesh below 1: SDF faster):\n\n")
+                 "On the first input of each class, the sweep at each image size (the workflow scales the "
+                 "search cap with the image side: the largest resolution each size's sweeps ran is under "
+                 "the table), its own selection and one duel process (SDF/mesh below 1: SDF faster):\n\n")
         L.append(answer.size_table(size_rows, duel_mod.read_duels(Path(sizes_duels)) if sizes_duels and
                                    Path(sizes_duels).is_file() else []))
     pareto = plots.pareto_plot(all_rows, out)

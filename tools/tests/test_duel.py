@@ -88,6 +88,42 @@ def test_selection_takes_the_best_median_over_replicates_not_the_luckiest_run():
     assert mesh["run"] == "mesh/extracted/32"  # the only mesh meeting 0.5 px
 
 
+def test_candidate_counts_are_given_per_class_at_the_headline_level():
+    sel = [
+        {"input": "a", "class": "smooth", "level": 1.0, "side": "sdf", "candidates": 4},
+        {"input": "b", "class": "smooth", "level": 1.0, "side": "sdf", "candidates": 8},
+        {"input": "a", "class": "smooth", "level": 1.0, "side": "mesh", "candidates": 20},
+        {"input": "a", "class": "smooth", "level": 0.5, "side": "mesh", "candidates": 99},
+        {"input": "c", "class": "scan", "level": 1.0, "side": "mesh", "candidates": 7},
+        {"input": "c", "class": "scan", "level": 1.0, "side": "raster", "candidates": 3},
+        {"input": "d", "class": "csg", "level": 1.0, "side": "mesh", "candidates": 5},
+        {"input": "d", "class": "csg", "level": 1.0, "side": "sdf", "candidates": 6},
+    ]
+    # The median of 4 and 8; another level's count does not enter; a class without both
+    # sides at the level is left out; classes in report order (csg after smooth).
+    assert answer.class_candidates(sel) == {"smooth": (6.0, 20.0), "csg": (6.0, 5.0)}
+    assert "smooth 6/20, csg 6/5." in answer.candidates_text(sel)
+
+
+def test_the_size_table_finds_the_winner_per_size_and_says_what_stopped_a_side():
+    small = sweep("smooth", 1, n_rep=1)
+    big = [dict(r, width=256, height=256) for r in sweep("smooth", 1, n_rep=1, seed=3)]
+    for r in big:
+        if r["repr"] == "mesh":  # no mesh meets a level at 256: the cap stopped its search
+            r["quality_px"] = ""
+            r["note"] = "search=double level=2px unmet=cap" if r["resolution"] == 32 else "search=double level=2px"
+    sel_small = duel.select(small)
+    duels = duels_for([s for s in sel_small if s["level"] == 1.0], 0.5)
+    table = answer.size_table(small + big, [dict(d, width="64") for d in duels])
+    lines = [ln for ln in table.splitlines() if "smooth_00" in ln or "256×256" in ln]
+    assert "64×64" in lines[0] and 0.45 < float(lines[0].split("|")[4].split()[0]) < 0.55  # planted 2x
+    assert "only SDF meets it (mesh: cap)" in lines[1]
+    # The mean line covers the size both sides met, and the largest resolution each sweep ran.
+    assert "64×64: 0.4" in table or "64×64: 0.5" in table
+    assert "largest resolution tried 32" in table and "256×256:" not in table
+    assert "winner changes" not in table
+
+
 def test_a_side_planted_twice_as_fast_is_found_twice_as_fast():
     rows = sweep("blend", 8)
     sel = duel.select(rows)
