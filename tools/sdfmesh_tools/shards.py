@@ -1,10 +1,11 @@
 """The study's shards (workflow/Snakefile): one `toolkit compare` CSV per input and replicate,
 each with a manifest (JSON) naming the machine it ran on. This module merges them into the one
-compare.csv the analysis reads, a shards.csv (input, replicate, host, cpu, ...) and the
-toolkit summary of replicate 0, and maps rows to their machine for the report.
+compare.csv the analysis reads and a shards.csv (input, replicate, host, cpu, ...), and maps
+rows to their machine for the report. (The toolkit's summary.json covers every replicate: the
+workflow's merge rule runs `toolkit compare --summarize` on the merged CSV.)
 
     python -m sdfmesh_tools.shards merge --out-csv compare.csv --out-shards shards.csv
-        --out-summary summary.json --manifests shards/*/r*.json [--summaries ...]
+        --manifests shards/*/r*.json
 
 Every output is written to a temporary file and renamed, so a merge killed halfway leaves
 the old file or none, never a torn one; a shard CSV with a row of the wrong width, or rows
@@ -91,8 +92,7 @@ def read_shard(path: Path, manifest: dict) -> tuple[list[str], list[list[str]], 
     return header, rows, text.split("\n", 1)[1]
 
 
-def merge(manifests: list[str | Path], out_csv, out_shards, out_summary=None,
-          summaries: list[str | Path] = ()) -> int:
+def merge(manifests: list[str | Path], out_csv, out_shards) -> int:
     """Merges the shards named by `manifests` (in that order); returns the number of rows."""
     header: list[str] | None = None
     first = None
@@ -115,16 +115,6 @@ def merge(manifests: list[str | Path], out_csv, out_shards, out_summary=None,
     dw = csv.DictWriter(s, fieldnames=SHARD_COLUMNS, lineterminator="\n")
     dw.writeheader()
     dw.writerows(shard_rows)
-    if out_summary is not None:
-        merged = {"schema_version": None, "inputs": []}
-        for sp in summaries:
-            try:
-                one = json.loads(Path(sp).read_text())
-            except (OSError, ValueError) as e:
-                raise ShardError(f"{sp}: cannot read the shard summary: {e}") from e
-            merged["schema_version"] = merged["schema_version"] or one.get("schema_version")
-            merged["inputs"] += one.get("inputs", [])
-        write_atomic(out_summary, json.dumps(merged, indent=2) + "\n")
     write_atomic(out_shards, s.getvalue())
     write_atomic(out_csv, merged_csv)
     return n_rows
@@ -215,9 +205,7 @@ def main(argv=None) -> int:
     m = sub.add_parser("merge", help="merge shard CSVs into one compare CSV")
     m.add_argument("--out-csv", required=True)
     m.add_argument("--out-shards", required=True)
-    m.add_argument("--out-summary")
     m.add_argument("--manifests", nargs="+", required=True)
-    m.add_argument("--summaries", nargs="*", default=[])
     same = sub.add_parser("same", help="two CSVs of the same runs agree in every non-timing column")
     same.add_argument("a")
     same.add_argument("b")
@@ -229,7 +217,7 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     try:
         if a.cmd == "merge":
-            n = merge(a.manifests, a.out_csv, a.out_shards, a.out_summary, a.summaries)
+            n = merge(a.manifests, a.out_csv, a.out_shards)
             print(f"merged {len(a.manifests)} shards, {n} rows into {a.out_csv}")
         elif a.cmd == "same":
             diff = differences(a.a, a.b)

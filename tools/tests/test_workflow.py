@@ -28,7 +28,6 @@ def make_shard(root: Path, name: str, rep: int, host: str, rows: list[str], tail
     m.write_text(json.dumps({"input": name, "replicate": rep, "host": host, "cpu": f"{host} CPU",
                              "cores": 2, "threads": 2, "mem_mb": 1024, "slurm_job": "",
                              "started": "t0", "finished": "t1", "mode": "--overwrite"}))
-    (d / f"r{rep}.summary.json").write_text(json.dumps({"schema_version": 2, "inputs": [{"input": name}]}))
     return m
 
 
@@ -36,15 +35,13 @@ def test_merge_keeps_rows_byte_for_byte_and_records_hosts(tmp_path):
     a = make_shard(tmp_path, "a", 0, "h1", ['a,x,0,sdf,sphere-trace,1.5,T1,"quoted, note"', "a,x,0,mesh,p,2.0,T2,"])
     b = make_shard(tmp_path, "b", 1, "h2", ["b,x,1,sdf,sphere-trace,1.0,T3,"])
     out = tmp_path / "compare.csv"
-    n = shards.merge([a, b], out, tmp_path / "shards.csv", tmp_path / "summary.json",
-                     [a.with_suffix(".summary.json")])
+    n = shards.merge([a, b], out, tmp_path / "shards.csv")
     assert n == 3
     assert out.read_text() == (HEADER + 'a,x,0,sdf,sphere-trace,1.5,T1,"quoted, note"\n'
                                "a,x,0,mesh,p,2.0,T2,\nb,x,1,sdf,sphere-trace,1.0,T3,\n")
     s = shards.read_shards(tmp_path / "shards.csv")
     assert [(r["input"], r["replicate"], r["host"], r["rows"]) for r in s] == [("a", "0", "h1", "2"), ("b", "1", "h2", "1")]
     assert shards.host_of(s) == {("a", "0"): "h1", ("b", "1"): "h2"}
-    assert json.loads((tmp_path / "summary.json").read_text())["inputs"] == [{"input": "a"}]
     ms = shards.machines(s)
     assert [(m["host"], m["shards"], m["rows"]) for m in ms] == [("h1", 1, 2), ("h2", 1, 1)]
 
