@@ -49,7 +49,7 @@ use crate::plan::{
 };
 use crate::render::{Frame, PrimaryVisibility, render_with, write_png};
 use crate::scene::shape::{MeshLayout, ObjectKind, Shading};
-use crate::scene::{Scene, load_input};
+use crate::scene::{Scene, load_input, prepared_heap};
 
 /// Version of the CSV schema; bumped whenever a column changes meaning or order.
 pub const SCHEMA_VERSION: u32 = 5;
@@ -1233,7 +1233,8 @@ fn measure(
     let built = build(scene, run.build, &opts.budget)?;
     let (timing, frame) = time_frames(scene, &built.geometry, run.primary, opts.frames);
     let peak = peak_rss_bytes();
-    let peak_heap = heap::peak();
+    // The input's prepared implicit models count as if this run had prepared them.
+    let peak_heap = heap::peak().map(|p| prepared_heap(scene).map_or(p, |h| h.peak.max(h.live + p)));
     let probe = metrics::probe(&scene.camera, &built.geometry, scene.settings.max_distance);
     let points = metrics::subsample(&probe.points, opts.surface_samples);
     let origin = scene.camera.position.as_dvec3();

@@ -148,6 +148,20 @@ pub struct Field3 {
     pub(super) regions: Vec<Region>,
     /// The census.
     pub summary: FieldSummary,
+    /// The heap its preparation measured ([`super::load_field`]; `None` where it was not
+    /// measured).
+    pub prepared_heap: Option<PreparedHeap>,
+}
+
+/// What preparing a model took on the heap, measured by the counting allocator when the
+/// model is loaded: the runs of an input share the prepared model, so `compare` adds it to
+/// each run's measured peak as if the run had prepared the model itself.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PreparedHeap {
+    /// The most heap the preparation held at once (its scratch included).
+    pub peak: u64,
+    /// The heap the prepared model keeps (a copy of it, allocated and counted).
+    pub live: u64,
 }
 
 /// Work of one ray, added to by [`Field3::first_root`].
@@ -262,7 +276,7 @@ impl Field3 {
             summary.lipschitz_max = bounds[bounds.len() - 1];
         }
         summary.mean_region_clauses = region_clauses as f64 / summary.surface.max(1) as f64;
-        Field3 { ssa, n, cells, regions, summary }
+        Field3 { ssa, n, cells, regions, summary, prepared_heap: None }
     }
 
     /// Bytes held (the model and the cells' programs).

@@ -24,11 +24,25 @@ pub use tape::Ssa;
 pub use vm::{load_vm, parse_vm};
 
 /// Reads the 3D `.vm` model at `path` and prepares it for ray casting
-/// ([`field3d::Field3`], [`field3d::CELLS`] cells per axis).
+/// ([`field3d::Field3`], [`field3d::CELLS`] cells per axis), measuring the preparation's heap
+/// where the counting allocator is installed ([`field3d::PreparedHeap`]).
 ///
 /// # Errors
 /// The reader's errors.
 pub fn load_field(path: &std::path::Path) -> crate::error::Result<std::sync::Arc<field3d::Field3>> {
+    use crate::base::heap;
     let ssa = load_vm(path)?;
-    Ok(std::sync::Arc::new(field3d::Field3::new(ssa, field3d::CELLS)))
+    heap::reset();
+    let mut field = field3d::Field3::new(ssa, field3d::CELLS);
+    let peak = heap::peak();
+    // What the prepared model keeps: a copy of it allocates exactly that, and nothing is freed
+    // meanwhile, so the peak since the reset is its size.
+    heap::reset();
+    let copy = field.clone();
+    let live = heap::peak();
+    drop(copy);
+    if let (Some(peak), Some(live)) = (peak, live) {
+        field.prepared_heap = Some(field3d::PreparedHeap { peak: peak.max(live), live });
+    }
+    Ok(std::sync::Arc::new(field))
 }

@@ -12,7 +12,7 @@ use crate::base::transform::TransformDesc;
 use crate::error::Result;
 use crate::grid::SdfGrid;
 use crate::grid::io::load_grid;
-use crate::implicit::field3d::Field3;
+use crate::implicit::field3d::{Field3, PreparedHeap};
 use crate::mesh::{MeshFormat, TriangleMesh, load_mesh};
 use crate::scene::shape::{Object, ObjectKind, Shading};
 use crate::scene::{Camera, Light, Material, Scene, Settings, load_scene};
@@ -111,4 +111,26 @@ fn preview_scene(kind: ObjectKind, lo: Vec3, hi: Vec3) -> Scene {
         }],
         objects: vec![Object { kind, transform: TransformDesc::default(), material: 0, label }],
     }
+}
+
+/// What the scene's implicit models took on the heap when they were prepared (each model
+/// once: the largest preparation peak, and the sum of what they keep), `None` where the scene
+/// has none or they were not measured. The runs of an input share its prepared models, so
+/// `compare` counts this in each run's measured peak: `max(peak, live + the run's own)`.
+pub fn prepared_heap(scene: &Scene) -> Option<PreparedHeap> {
+    let mut seen: Vec<*const Field3> = Vec::new();
+    let mut out: Option<PreparedHeap> = None;
+    for o in &scene.objects {
+        let ObjectKind::Implicit { field, .. } = &o.kind else { continue };
+        if seen.contains(&Arc::as_ptr(field)) {
+            continue;
+        }
+        seen.push(Arc::as_ptr(field));
+        let h = field.prepared_heap?;
+        out = Some(match out {
+            None => h,
+            Some(o) => PreparedHeap { peak: o.peak.max(o.live + h.peak), live: o.live + h.live },
+        });
+    }
+    out
 }

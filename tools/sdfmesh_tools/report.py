@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import analysis, answer, data, plots, shards as shard_info, stats
+from . import analysis, answer, data, memory, plots, shards as shard_info, stats
 from . import duel as duel_mod
 from .data import num
 
@@ -508,6 +508,9 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
                  "render is N = 1, an edited scene rebuilds every few frames, a static one renders "
                  "thousands of frames per build.\n\n")
         L.append(answer.amortised_table(all_rows, ratios))
+    mem = memory.section(all_rows, answer.HEADLINE_LEVEL)
+    if mem:
+        L.append("\n## Memory: declared and measured\n\n" + mem)
     size_rows = data.read_csv(sizes) if sizes else []
     if size_rows:
         L.append("\n## Image size\n\nPixel-relative error makes a mesh's needed resolution grow with the image. "
