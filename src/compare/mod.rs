@@ -49,7 +49,7 @@ use crate::plan::{
 };
 use crate::render::{Frame, PrimaryVisibility, render_with, write_png};
 use crate::scene::shape::{MeshLayout, ObjectKind, Shading};
-use crate::scene::{Scene, load_input, prepared_heap};
+use crate::scene::{Scene, load_input, preparation};
 
 /// Version of the CSV schema; bumped whenever a column changes meaning or order.
 pub const SCHEMA_VERSION: u32 = 5;
@@ -1234,7 +1234,8 @@ fn measure(
     let (timing, frame) = time_frames(scene, &built.geometry, run.primary, opts.frames);
     let peak = peak_rss_bytes();
     // The input's prepared implicit models count as if this run had prepared them.
-    let peak_heap = heap::peak().map(|p| prepared_heap(scene).map_or(p, |h| h.peak.max(h.live + p)));
+    let prep = preparation(scene);
+    let peak_heap = heap::peak().map(|p| prep.and_then(|q| q.heap).map_or(p, |h| h.peak.max(h.live + p)));
     let probe = metrics::probe(&scene.camera, &built.geometry, scene.settings.max_distance);
     let points = metrics::subsample(&probe.points, opts.surface_samples);
     let origin = scene.camera.position.as_dvec3();
@@ -1293,7 +1294,7 @@ fn measure(
         geometry_bytes: total - census.accel_bytes.min(total),
         accel_bytes: census.accel_bytes,
         total_bytes: total,
-        build_ms: built.build_ms,
+        build_ms: built.build_ms + prep.map_or(0.0, |q| q.ms),
         frame_ms_median: timing.median,
         frame_ms_min: timing.min,
         frame_ms_max: timing.max,

@@ -148,14 +148,22 @@ pub struct Field3 {
     pub(super) regions: Vec<Region>,
     /// The census.
     pub summary: FieldSummary,
-    /// The heap its preparation measured ([`super::load_field`]; `None` where it was not
-    /// measured).
-    pub prepared_heap: Option<PreparedHeap>,
+    /// What its preparation took ([`super::load_field`]; `None` where it was not measured).
+    pub preparation: Option<Preparation>,
 }
 
-/// What preparing a model took on the heap, measured by the counting allocator when the
-/// model is loaded: the runs of an input share the prepared model, so `compare` adds it to
-/// each run's measured peak as if the run had prepared the model itself.
+/// What preparing a model took, measured when the model is loaded: the runs of an input
+/// share the prepared model, so `compare` counts it in each run's build time and heap peak as
+/// if the run had prepared the model itself.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Preparation {
+    /// Wall time, milliseconds.
+    pub ms: f64,
+    /// The heap, where the counting allocator is installed.
+    pub heap: Option<PreparedHeap>,
+}
+
+/// The heap of a [`Preparation`], in bytes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PreparedHeap {
     /// The most heap the preparation held at once (its scratch included).
@@ -276,7 +284,7 @@ impl Field3 {
             summary.lipschitz_max = bounds[bounds.len() - 1];
         }
         summary.mean_region_clauses = region_clauses as f64 / summary.surface.max(1) as f64;
-        Field3 { ssa, n, cells, regions, summary, prepared_heap: None }
+        Field3 { ssa, n, cells, regions, summary, preparation: None }
     }
 
     /// Bytes held (the model and the cells' programs).

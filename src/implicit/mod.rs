@@ -24,8 +24,8 @@ pub use tape::Ssa;
 pub use vm::{load_vm, parse_vm};
 
 /// Reads the 3D `.vm` model at `path` and prepares it for ray casting
-/// ([`field3d::Field3`], [`field3d::CELLS`] cells per axis), measuring the preparation's heap
-/// where the counting allocator is installed ([`field3d::PreparedHeap`]).
+/// ([`field3d::Field3`], [`field3d::CELLS`] cells per axis), measuring the preparation's time
+/// and, where the counting allocator is installed, its heap ([`field3d::Preparation`]).
 ///
 /// # Errors
 /// The reader's errors.
@@ -33,7 +33,9 @@ pub fn load_field(path: &std::path::Path) -> crate::error::Result<std::sync::Arc
     use crate::base::heap;
     let ssa = load_vm(path)?;
     heap::reset();
+    let start = std::time::Instant::now();
     let mut field = field3d::Field3::new(ssa, field3d::CELLS);
+    let ms = start.elapsed().as_secs_f64() * 1e3;
     let peak = heap::peak();
     // What the prepared model keeps: a copy of it allocates exactly that, and nothing is freed
     // meanwhile, so the peak since the reset is its size.
@@ -41,8 +43,7 @@ pub fn load_field(path: &std::path::Path) -> crate::error::Result<std::sync::Arc
     let copy = field.clone();
     let live = heap::peak();
     drop(copy);
-    if let (Some(peak), Some(live)) = (peak, live) {
-        field.prepared_heap = Some(field3d::PreparedHeap { peak: peak.max(live), live });
-    }
+    let heap = peak.zip(live).map(|(peak, live)| field3d::PreparedHeap { peak: peak.max(live), live });
+    field.preparation = Some(field3d::Preparation { ms, heap });
     Ok(std::sync::Arc::new(field))
 }

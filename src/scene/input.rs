@@ -12,7 +12,7 @@ use crate::base::transform::TransformDesc;
 use crate::error::Result;
 use crate::grid::SdfGrid;
 use crate::grid::io::load_grid;
-use crate::implicit::field3d::{Field3, PreparedHeap};
+use crate::implicit::field3d::{Field3, Preparation, PreparedHeap};
 use crate::mesh::{MeshFormat, TriangleMesh, load_mesh};
 use crate::scene::shape::{Object, ObjectKind, Shading};
 use crate::scene::{Camera, Light, Material, Scene, Settings, load_scene};
@@ -113,23 +113,30 @@ fn preview_scene(kind: ObjectKind, lo: Vec3, hi: Vec3) -> Scene {
     }
 }
 
-/// What the scene's implicit models took on the heap when they were prepared (each model
-/// once: the largest preparation peak, and the sum of what they keep), `None` where the scene
-/// has none or they were not measured. The runs of an input share its prepared models, so
-/// `compare` counts this in each run's measured peak: `max(peak, live + the run's own)`.
-pub fn prepared_heap(scene: &Scene) -> Option<PreparedHeap> {
+/// What preparing the scene's implicit models took (each model once, one after the other:
+/// the times added, the largest heap peak over what the earlier ones keep, the sum of what
+/// they keep), `None` where the scene has none or one was not measured. The runs of an input
+/// share its prepared models, so `compare` counts this in each run: build time + `ms`, heap
+/// peak `max(peak, live + the run's own)`.
+pub fn preparation(scene: &Scene) -> Option<Preparation> {
     let mut seen: Vec<*const Field3> = Vec::new();
-    let mut out: Option<PreparedHeap> = None;
+    let mut out: Option<Preparation> = None;
     for o in &scene.objects {
         let ObjectKind::Implicit { field, .. } = &o.kind else { continue };
         if seen.contains(&Arc::as_ptr(field)) {
             continue;
         }
         seen.push(Arc::as_ptr(field));
-        let h = field.prepared_heap?;
+        let p = field.preparation?;
         out = Some(match out {
-            None => h,
-            Some(o) => PreparedHeap { peak: o.peak.max(o.live + h.peak), live: o.live + h.live },
+            None => p,
+            Some(o) => Preparation {
+                ms: o.ms + p.ms,
+                heap: o
+                    .heap
+                    .zip(p.heap)
+                    .map(|(a, b)| PreparedHeap { peak: a.peak.max(a.live + b.peak), live: a.live + b.live }),
+            },
         });
     }
     out

@@ -15,7 +15,7 @@ use glam::Vec3;
 use crate::scene::shape::{MeshLayout, Object};
 
 pub use file::{load_scene, parse_scene};
-pub use input::{grid_preview_scene, implicit_preview_scene, load_input, mesh_preview_scene, prepared_heap};
+pub use input::{grid_preview_scene, implicit_preview_scene, load_input, mesh_preview_scene, preparation};
 
 /// A pinhole camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
