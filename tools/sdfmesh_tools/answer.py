@@ -167,7 +167,9 @@ def optimism_text(ratios) -> str:
     return ("Selection optimism, selected time / re-measured time (the selected configuration's best "
             "frame-time median over the sweep's replicates against its median in the duels; below 1: "
             "the sweep made that side look faster than it re-measures): " + one("sdf") + "; "
-            + one("mesh") + ".")
+            + one("mesh") + "; of the SDF/mesh ratio itself (selected / duelled; a drift of the machine between "
+            "the sweep and the duels moves each side's figure but cancels from this one): "
+            + one("ratio").replace("ratio ", "", 1) + ".")
 
 
 def candidates_text(sel) -> str:

@@ -217,13 +217,20 @@ def duel_verdicts(sel: list[dict], ratios: list[dict], classes: list[str], oppon
 
 def optimism(ratios: list[dict]) -> dict:
     """Per side, the median over (input, level) of selected time / duel time (> 1: the
-    selection pass made that side look slower; < 1: faster than it re-measures)."""
+    selection pass made that side look slower; < 1: faster than it re-measures); and under
+    `ratio`, the same of the SDF/mesh ratio (selected ratio / duelled ratio: what the selection
+    did to the answer itself; a drift of the machine between the sweep and the duels that
+    slows both sides alike cancels from it, while it moves each side's own optimism)."""
+    def stats_of(v):
+        return {"median": float(np.median(v)) if v else None,
+                "p10": float(np.quantile(v, 0.1)) if v else None,
+                "p90": float(np.quantile(v, 0.9)) if v else None, "n": len(v)}
+
     out = {}
     for side in ("sdf", "mesh"):
-        v = [r[f"{side}_selected_ms"] / r[f"{side}_ms"] for r in ratios if r[f"{side}_ms"] > 0]
-        out[side] = {"median": float(np.median(v)) if v else None,
-                     "p10": float(np.quantile(v, 0.1)) if v else None,
-                     "p90": float(np.quantile(v, 0.9)) if v else None, "n": len(v)}
+        out[side] = stats_of([r[f"{side}_selected_ms"] / r[f"{side}_ms"] for r in ratios if r[f"{side}_ms"] > 0])
+    out["ratio"] = stats_of([(r["sdf_selected_ms"] / r["sdf_ms"]) / (r["mesh_selected_ms"] / r["mesh_ms"])
+                             for r in ratios if r["sdf_ms"] > 0 and r["mesh_ms"] > 0 and r["mesh_selected_ms"] > 0])
     return out
 
 

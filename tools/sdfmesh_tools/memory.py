@@ -89,9 +89,19 @@ def _b(x: float) -> str:
     return f"{x:.3g} B"
 
 
-def section(rows, level: float) -> str:
+def family_markdown(rows) -> str:
+    """family_table as a markdown table (the memory appendix)."""
+    from .report import md_table
+
+    return md_table(["representation", "runs", "declared (median)", "measured (median)",
+                     "measured / declared (median, p10–p90)"],
+                    [(f"`{f}`", n, _b(d), _b(m), f"{q:.3g} ({lo:.3g}–{hi:.3g})")
+                     for f, n, d, m, q, lo, hi in family_table(rows)])
+
+
+def section(rows, level: float, appendix: str | None = None) -> str:
     """The report's "Memory: declared and measured" section (empty text when no run has a
-    measured peak heap)."""
+    measured peak heap); `appendix` names the file with the per-representation table."""
     from .report import md_table
 
     if not _measured(rows):
@@ -107,10 +117,10 @@ def section(rows, level: float) -> str:
                      [(v["class"], _cell(v["declared"]), _cell(v["measured"])) for v in verdicts(rows, level)])
     fl = floor_bytes(rows)
     fams = family_table(rows)
-    text += "\nPer representation, over every run:\n\n"
-    text += md_table(["representation", "runs", "declared (median)", "measured (median)",
-                      "measured / declared (median, p10–p90)"],
-                     [(f"`{f}`", n, _b(d), _b(m), f"{q:.3g} ({lo:.3g}–{hi:.3g})") for f, n, d, m, q, lo, hi in fams])
+    if appendix:
+        text += f"\nPer representation, over every run: [{appendix}]({appendix}).\n"
+    else:
+        text += "\nPer representation, over every run:\n\n" + family_markdown(rows)
     why = []
     if fl is not None:
         why.append(f"**A floor every run pays.** The closed-form reference runs, which keep almost nothing, "

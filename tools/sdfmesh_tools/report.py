@@ -29,6 +29,7 @@ from .data import num
 THRESHOLDS = (1e-2, 3e-3, 1e-3)
 APPENDIX = "appendix-inputs.md"
 DUEL_APPENDIX = "appendix-duels.md"
+MEMORY_APPENDIX = "appendix-memory.md"
 
 HYPOTHESIS = (
     "- **H1:** for scenes made of few smooth analytic primitives, sphere tracing the analytic "
@@ -508,9 +509,13 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
                  "render is N = 1, an edited scene rebuilds every few frames, a static one renders "
                  "thousands of frames per build.\n\n")
         L.append(answer.amortised_table(all_rows, ratios))
-    mem = memory.section(all_rows, answer.HEADLINE_LEVEL)
+    mem = memory.section(all_rows, answer.HEADLINE_LEVEL, MEMORY_APPENDIX)
     if mem:
         L.append("\n## Memory: declared and measured\n\n" + mem)
+        (out / MEMORY_APPENDIX).write_text(
+            "# Appendix: memory per representation\n\n[Back to the report](REPORT.md).\n\n"
+            "Declared bytes (`total_bytes`) and measured heap peak (`peak_heap_bytes`) of every run, per "
+            "representation (`repr/method`, decimations as one):\n\n" + memory.family_markdown(all_rows))
     size_rows = data.read_csv(sizes) if sizes else []
     if size_rows:
         L.append("\n## Image size\n\nPixel-relative error makes a mesh's needed resolution grow with the image. "
@@ -608,6 +613,8 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
 
     L.append(f"\n## Appendices\n\n- [{APPENDIX}]({APPENDIX}): the results of every input (replicate "
              f"{reps[0] if reps else '–'}), the per-input frame-time test and the per-input plots.\n")
+    if mem:
+        L.append(f"- [{MEMORY_APPENDIX}]({MEMORY_APPENDIX}): declared and measured memory per representation.\n")
     if duel_rows:
         L.append(f"- [{DUEL_APPENDIX}]({DUEL_APPENDIX}): every input's duelled pair and ratio.\n")
         write_duel_appendix(out / DUEL_APPENDIX, ratios)

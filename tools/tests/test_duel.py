@@ -156,6 +156,17 @@ def test_selection_luck_does_not_leak_into_the_verdict():
     assert o["sdf"]["median"] < 0.6 < o["mesh"]["median"], o
 
 
+def test_a_drift_between_sweep_and_duels_moves_each_side_but_not_the_ratios_optimism():
+    rows = sweep("cad", 8)
+    sel = duel.select(rows)
+    # The machine runs the duels 1.5x slower than the sweep, both sides alike.
+    slow = [dict(d, frame_ms=f"{float(d['frame_ms']) * 1.5:.6f}") for d in duels_for(sel, 1.0, noise=0.01)]
+    o = duel.optimism(duel.duel_ratios(sel, slow))
+    assert o["sdf"]["median"] < 0.8 and o["mesh"]["median"] < 0.8, o
+    assert 0.85 < o["ratio"]["median"] < 1.15, o
+    assert "of the SDF/mesh ratio itself" in answer.optimism_text(duel.duel_ratios(sel, slow))
+
+
 def test_few_inputs_get_no_interval():
     rows = sweep("thin", 3)
     sel = duel.select(rows)

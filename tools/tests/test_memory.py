@@ -42,6 +42,10 @@ def test_the_measured_verdict_the_floor_the_scratch_and_the_shared_data_are_foun
     # (400 kB - the 100 kB floor) / 100 kB declared; the SDF run measures the floor only.
     assert "`mesh/extracted` 3×" in text and "`sdf/sphere-trace` " not in text.split("build scratch")[1].split(".")[0]
     assert "implicit: `sdf/sphere-trace`" in text and "prepared cells" in text
+    # With an appendix the per-representation table goes there and the section links it.
+    short = memory.section(rows, 1.0, "appendix-memory.md")
+    assert "[appendix-memory.md](appendix-memory.md)" in short and "`mesh/extracted` | " not in short
+    assert "`mesh/extracted` | " in text and "`mesh/extracted` | " in memory.family_markdown(rows)
 
 
 def test_no_measured_heap_gives_no_section():
