@@ -394,6 +394,18 @@ fn malformed_models_get_one_line_with_the_line_number() {
     assert_eq!(err.trim().lines().count(), 1, "{err}");
 }
 
+/// Writes `ball.vm` into `dir`: |p|^2 - 0.36, not a distance (a sphere of radius 0.6).
+fn write_ball(dir: &Path) -> PathBuf {
+    let model = dir.join("ball.vm");
+    std::fs::write(
+        &model,
+        "x var-x\ny var-y\nz var-z\na square x\nb square y\nc square z\nd add a b\ne add d c\nr const 0.36\n\
+         o sub e r\n",
+    )
+    .unwrap();
+    model
+}
+
 /// A 3D model end to end: `toolkit render` draws it in the preview scene, `convert` makes a
 /// closed mesh and a grid of it (saying what the grid stores), and a scene file places it
 /// with a transform and a material.
@@ -401,14 +413,7 @@ fn malformed_models_get_one_line_with_the_line_number() {
 fn three_d_models_render_convert_and_sit_in_scenes() {
     let dir = tempfile::tempdir().unwrap();
     let exe = env!("CARGO_BIN_EXE_toolkit");
-    // |p|^2 - 0.36: not a distance (a sphere of radius 0.6).
-    let model = dir.path().join("ball.vm");
-    std::fs::write(
-        &model,
-        "x var-x\ny var-y\nz var-z\na square x\nb square y\nc square z\nd add a b\ne add d c\nr const 0.36\n\
-         o sub e r\n",
-    )
-    .unwrap();
+    let model = write_ball(dir.path());
     let run = |args: &[&str]| {
         let out = Command::new(exe).args(args).output().unwrap();
         assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
@@ -483,13 +488,7 @@ fn three_d_models_render_convert_and_sit_in_scenes() {
 #[test]
 fn a_marched_models_heap_peak_counts_its_prepared_cells() {
     let dir = tempfile::tempdir().unwrap();
-    let model = dir.path().join("ball.vm");
-    std::fs::write(
-        &model,
-        "x var-x\ny var-y\nz var-z\na square x\nb square y\nc square z\nd add a b\ne add d c\nr const 0.36\n\
-         o sub e r\n",
-    )
-    .unwrap();
+    let model = write_ball(dir.path());
     let csv = dir.path().join("rows.csv");
     let out = Command::new(env!("CARGO_BIN_EXE_toolkit"))
         .args(["compare", "--csv"])
