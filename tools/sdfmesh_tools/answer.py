@@ -184,8 +184,8 @@ def candidates_text(sel) -> str:
                  + ", ".join(f"{cls} {a:g}/{b:g}" for cls, (a, b) in per_class.items())
                  + ". A count is how many configurations the side's search ran on the input; each "
                  "family's search stops at the first knob that meets the finest level, so a side that "
-                 "meets the levels early runs fewer. The duels re-time the chosen pair, so the counts decide which configuration is "
-                 "chosen, not the ratio measured.")
+                 "meets the levels early runs fewer. The duels re-time the chosen pair, so the counts "
+                 "decide which configuration is chosen, not the ratio measured.")
     return text
 
 

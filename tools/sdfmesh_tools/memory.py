@@ -135,10 +135,9 @@ def section(rows, level: float, appendix: str | None = None) -> str:
     if above:
         why.append("**Measured above declared: build scratch.** A run's peak includes what its build held and "
                    "freed before the frame (the sample grid an extraction or a re-extraction contours, the "
-                   "tessellated or decimated mesh before the BVH reorders it, the BVH of an input mesh a grid is sampled "
-                   "against, the builder's working arrays). "
-                   "Median measured peak above the floor, in multiples of the declared bytes, where it is over "
-                   "2: " + ", ".join(f"`{f}` {q:.3g}×" for f, q in above[:8]) + ".")
+                   "tessellated or decimated mesh before the BVH reorders it, the BVH of an input mesh a "
+                   "grid is sampled against, the builder's working arrays). Median measured peak above the "
+                   "floor, in multiples of the declared bytes, where it is over 2: " + ", ".join(f"`{f}` {q:.3g}×" for f, q in above[:8]) + ".")
     below = below_declared(rows)
     if below:
         why.append("**Measured below declared: what the runs share.** "
