@@ -36,14 +36,14 @@ pub fn load_field(path: &std::path::Path) -> crate::error::Result<std::sync::Arc
     let start = std::time::Instant::now();
     let mut field = field3d::Field3::new(ssa, field3d::CELLS);
     let ms = start.elapsed().as_secs_f64() * 1e3;
-    let peak = heap::peak();
     // What the prepared model keeps: a copy of it allocates exactly that, and nothing is freed
-    // meanwhile, so the peak since the reset is its size.
-    heap::reset();
-    let copy = field.clone();
-    let live = heap::peak();
-    drop(copy);
-    let heap = peak.zip(live).map(|(peak, live)| field3d::PreparedHeap { peak: peak.max(live), live });
+    // meanwhile, so the peak since the reset is its size (copied only where a meter counts).
+    let heap = heap::peak().map(|peak| {
+        heap::reset();
+        drop(field.clone());
+        let live = heap::peak().unwrap_or(0);
+        field3d::PreparedHeap { peak: peak.max(live), live }
+    });
     field.preparation = Some(field3d::Preparation { ms, heap });
     Ok(std::sync::Arc::new(field))
 }

@@ -113,19 +113,20 @@ def time_verdicts(rows, sel, duel_rows, opponent: str = "mesh") -> tuple[list[di
     return duel.duel_verdicts(sel, ratios, analysis.classes(rows), opponent), ratios
 
 
-def bytes_verdicts(rows) -> list[dict]:
-    """Per class and level: the bytes of the smallest run of each side meeting the level,
-    per input (stats.ratio_ci over inputs; fewer than duel.MIN_INPUTS inputs: no interval)."""
+def bytes_verdicts(rows, key: str = "total_bytes", levels=analysis.LEVELS) -> list[dict]:
+    """Per class and level: the bytes (`key`: declared `total_bytes`, or the measured
+    `peak_heap_bytes`) of the smallest run of each side meeting the level, per input
+    (stats.ratio_ci over inputs; fewer than duel.MIN_INPUTS inputs: no interval)."""
     out = []
     for cls in analysis.classes(rows):
         sub = [r for r in rows if data.class_of(r) == cls]
-        for level in analysis.LEVELS:
-            c = duel.mark_too_few(analysis.compare_sides(sub, level, "total_bytes"))
+        for level in levels:
+            c = duel.mark_too_few(analysis.compare_sides(sub, level, key))
             out.append({"class": cls, "level": level, "bytes": c})
     return out
 
 
-def _bytes_cell(c: dict) -> str:
+def bytes_cell(c: dict) -> str:
     if c["ratio"] is None:
         return analysis.verdict_text(c, "bytes")
     r = c["ratio"]
@@ -149,7 +150,7 @@ def table(time_v, bytes_v, raster_v=None) -> str:
         last = v["class"]
         rt = rmap.get((v["class"], v["level"]))
         rows.append((cls, f"≤ {v['level']:g} px", t["n_inputs"], duel.verdict_cell(t),
-                     _bytes_cell(b) if b else "–",
+                     bytes_cell(b) if b else "–",
                      duel.verdict_cell(rt).replace("mesh", "raster") if rt else "–"))
     return md_table(["class", "quality", "inputs duelled", "frame time vs ray-traced meshes (paired duels)",
                      "bytes", "frame time vs rasterized meshes"], rows)
@@ -205,6 +206,29 @@ def class_candidates(sel) -> dict:
 _SEARCH_NOTE = re.compile(r"search=(double|bisect) level=([0-9.]+)px(?: (unmet|last)=(budget|cap))?")
 
 
+def _search_side(r: dict) -> str:
+    """The side whose search ran a `--search` row: its asked representation's."""
+    return "sdf" if (r.get("asked_repr") or r.get("repr") or "").strip() in ("sdf", "grid") else "mesh"
+
+
+def _search_stops(rows) -> dict[tuple, set]:
+    """{(input, side): {(level, stop)}} from the `--search` rows' notes: an `unmet=` row at the
+    level it probed (which also holds for every finer level); a `last=` row, the last knob
+    doubling could try, met its level and stopped every finer one (level inf)."""
+    stops: dict[tuple, set] = {}
+    for r in rows:
+        m = _SEARCH_NOTE.search(r.get("note") or "")
+        if m and m.group(3) in ("unmet", "last"):
+            level = float(m.group(2)) if m.group(3) == "unmet" else math.inf
+            stops.setdefault((r.get("input"), _search_side(r)), set()).add((level, m.group(4)))
+    return stops
+
+
+def _stopped(stops: set, level: float) -> set:
+    """What stopped a side's search short of `level`: a stop at this level or a coarser one."""
+    return {stop for lv, stop in stops if lv >= level - 1e-12}
+
+
 def search_text(rows) -> str:
     """What `toolkit compare --search` evaluated (rows whose `note` says `search=double` or
     `search=bisect`; empty text when none does): each side's searched candidates per input
@@ -214,22 +238,14 @@ def search_text(rows) -> str:
     (the row's `unmet=`, written at the level it probed, also holds for every finer level; a
     `last=` row, the last knob doubling could try, met its level and stops every finer one)."""
     count: dict[tuple, int] = {}
-    stops: dict[tuple, set] = {}
     inputs = set()
     for r in rows:
-        m = _SEARCH_NOTE.search(r.get("note") or "")
-        if not m:
+        if not _SEARCH_NOTE.search(r.get("note") or ""):
             continue
-        inp = r.get("input")
-        inputs.add(inp)
-        asked = (r.get("asked_repr") or r.get("repr") or "").strip()
-        side = "sdf" if asked in ("sdf", "grid") else "mesh"
-        count[(inp, side)] = count.get((inp, side), 0) + 1
-        if m.group(3) == "unmet":
-            stops.setdefault((inp, side), set()).add((float(m.group(2)), m.group(4)))
-        elif m.group(3) == "last":
-            # The last knob doubling could try met this level, so it stopped every finer one.
-            stops.setdefault((inp, side), set()).add((math.inf, m.group(4)))
+        key = (r.get("input"), _search_side(r))
+        inputs.add(key[0])
+        count[key] = count.get(key, 0) + 1
+    stops = _search_stops(rows)
     if not inputs:
         return ""
     parts = []
@@ -248,8 +264,7 @@ def search_text(rows) -> str:
                 continue
             why = {"budget": 0, "cap": 0, "unknown": 0}
             for i in missing:
-                # A stop at this level or a coarser one leaves this level unmet.
-                found = {stop for lv, stop in stops.get((i, side), set()) if lv >= level - 1e-12}
+                found = _stopped(stops.get((i, side), set()), level)
                 why["budget" if "budget" in found else "cap" if "cap" in found else "unknown"] += 1
             said = [f"the memory budget stopped it on {why['budget']}" if why["budget"] else "",
                     f"the resolution cap on {why['cap']}" if why["cap"] else "",
@@ -515,19 +530,13 @@ def _size_stops(rows, level: float) -> str:
     """Why a side met `level` on no run of an image size's sweep, from the search notes
     (`unmet=cap` or `unmet=budget` at that level or a coarser one): "mesh: cap", or ""."""
     out = []
+    per_side: dict[str, set] = {}
+    for (_inp, side), s in _search_stops(rows).items():
+        per_side.setdefault(side, set()).update(s)
     for side in ("sdf", "mesh"):
         if any(data.side(r) == side and data.meets(r, level) for r in rows):
             continue
-        stops = set()
-        for r in rows:
-            m = _SEARCH_NOTE.search(r.get("note") or "")
-            if not m or data.side(r) != side:
-                continue
-            probed = float(m.group(2))
-            # unmet= holds at the probed level and every finer one; last= (the last knob met
-            # the probed level) stops every finer one.
-            if (m.group(3) == "unmet" and probed >= level) or (m.group(3) == "last" and probed > level):
-                stops.add(m.group(4))
+        stops = _stopped(per_side.get(side, set()), level)
         if stops:
             out.append(f"{'SDF' if side == 'sdf' else side}: {' and '.join(sorted(stops))}")
     return "; ".join(out)

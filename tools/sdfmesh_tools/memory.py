@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import analysis, data, duel
+from . import answer, data
 from .data import num
 
 
@@ -63,23 +63,12 @@ def below_declared(rows) -> dict[str, set]:
 
 
 def verdicts(rows, level: float) -> list[dict]:
-    """Per class at `level`: the bytes verdict on declared bytes and on measured peak heap, each
-    from the smallest run of each side by that column (stats.ratio_ci over inputs; fewer than
-    duel.MIN_INPUTS inputs: no interval)."""
-    out = []
-    for cls in analysis.classes(rows):
-        sub = [r for r in rows if data.class_of(r) == cls]
-        out.append({"class": cls,
-                    "declared": duel.mark_too_few(analysis.compare_sides(sub, level, "total_bytes")),
-                    "measured": duel.mark_too_few(analysis.compare_sides(sub, level, "peak_heap_bytes"))})
-    return out
-
-
-def _cell(c: dict) -> str:
-    if c["ratio"] is not None and c["too_few"]:
-        r = c["ratio"]
-        return f"{'SDF' if r < 1 else 'mesh'} {max(r, 1 / r):.3g}× smaller, too few inputs ({c['n_inputs']})"
-    return analysis.verdict_text(c, "bytes")
+    """Per class at `level`: answer.bytes_verdicts on declared bytes and on measured peak heap,
+    each from the smallest run of each side by that column."""
+    declared = answer.bytes_verdicts(rows, "total_bytes", (level,))
+    measured = answer.bytes_verdicts(rows, "peak_heap_bytes", (level,))
+    return [{"class": d["class"], "declared": d["bytes"], "measured": m["bytes"]}
+            for d, m in zip(declared, measured)]
 
 
 def _b(x: float) -> str:
@@ -89,14 +78,14 @@ def _b(x: float) -> str:
     return f"{x:.3g} B"
 
 
-def family_markdown(rows) -> str:
-    """family_table as a markdown table (the memory appendix)."""
+def family_markdown(table: list[tuple]) -> str:
+    """A family_table as a markdown table (the memory appendix)."""
     from .report import md_table
 
     return md_table(["representation", "runs", "declared (median)", "measured (median)",
                      "measured / declared (median, p10–p90)"],
                     [(f"`{f}`", n, _b(d), _b(m), f"{q:.3g} ({lo:.3g}–{hi:.3g})")
-                     for f, n, d, m, q, lo, hi in family_table(rows)])
+                     for f, n, d, m, q, lo, hi in table])
 
 
 def section(rows, level: float, appendix: str | None = None) -> str:
@@ -114,13 +103,14 @@ def section(rows, level: float, appendix: str | None = None) -> str:
             "before it began. The bytes verdict on each column, from the smallest run of each side by that "
             f"column meeting {level:g} px:\n\n")
     text += md_table(["class", "declared bytes (the answer)", "measured peak heap"],
-                     [(v["class"], _cell(v["declared"]), _cell(v["measured"])) for v in verdicts(rows, level)])
+                     [(v["class"], answer.bytes_cell(v["declared"]), answer.bytes_cell(v["measured"]))
+                      for v in verdicts(rows, level)])
     fl = floor_bytes(rows)
     fams = family_table(rows)
     if appendix:
         text += f"\nPer representation, over every run: [{appendix}]({appendix}).\n"
     else:
-        text += "\nPer representation, over every run:\n\n" + family_markdown(rows)
+        text += "\nPer representation, over every run:\n\n" + family_markdown(fams)
     why = []
     if fl is not None:
         why.append(f"**A floor every run pays.** The closed-form reference runs, which keep almost nothing, "
@@ -137,11 +127,13 @@ def section(rows, level: float, appendix: str | None = None) -> str:
                    "freed before the frame (the sample grid an extraction or a re-extraction contours, the "
                    "tessellated or decimated mesh before the BVH reorders it, the BVH of an input mesh a "
                    "grid is sampled against, the builder's working arrays). Median measured peak above the "
-                   "floor, in multiples of the declared bytes, where it is over 2: " + ", ".join(f"`{f}` {q:.3g}×" for f, q in above[:8]) + ".")
+                   "floor, in multiples of the declared bytes, where it is over 2: "
+                   + ", ".join(f"`{f}` {q:.3g}×" for f, q in above[:8]) + ".")
     below = below_declared(rows)
     if below:
         why.append("**Measured below declared: what the runs share.** "
-                   + "; ".join(f"{cls}: " + ", ".join(f"`{f}`" for f in sorted(v)) for cls, v in sorted(below.items()))
+                   + "; ".join(f"{cls}: " + ", ".join(f"`{f}`" for f in sorted(v))
+                               for cls, v in sorted(below.items()))
                    + ". What a run shares with the input's other runs is allocated once before them and is "
                    "live at the reset, so the meter does not count it again; the declared bytes do, since the "
                    "run needs it to render"

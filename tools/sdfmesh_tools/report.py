@@ -515,7 +515,8 @@ def write_report(csv_path, out, scaling=None, summary=None, artifacts=None, comm
         (out / MEMORY_APPENDIX).write_text(
             "# Appendix: memory per representation\n\n[Back to the report](REPORT.md).\n\n"
             "Declared bytes (`total_bytes`) and measured heap peak (`peak_heap_bytes`) of every run, per "
-            "representation (`repr/method`, decimations as one):\n\n" + memory.family_markdown(all_rows))
+            "representation (`repr/method`, decimations as one):\n\n"
+            + memory.family_markdown(memory.family_table(all_rows)))
     size_rows = data.read_csv(sizes) if sizes else []
     if size_rows:
         L.append("\n## Image size\n\nPixel-relative error makes a mesh's needed resolution grow with the image. "

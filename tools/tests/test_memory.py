@@ -45,7 +45,7 @@ def test_the_measured_verdict_the_floor_the_scratch_and_the_shared_data_are_foun
     # With an appendix the per-representation table goes there and the section links it.
     short = memory.section(rows, 1.0, "appendix-memory.md")
     assert "[appendix-memory.md](appendix-memory.md)" in short and "`mesh/extracted` | " not in short
-    assert "`mesh/extracted` | " in text and "`mesh/extracted` | " in memory.family_markdown(rows)
+    assert "`mesh/extracted` | " in text and "`mesh/extracted` | " in memory.family_markdown(memory.family_table(rows))
 
 
 def test_no_measured_heap_gives_no_section():
